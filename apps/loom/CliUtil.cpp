@@ -1,0 +1,60 @@
+#include "CliUtil.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <regex>
+
+#include "loom/Error.h"
+
+namespace loom::cli {
+
+void parseSize(const std::string& text, const std::string& option, uint32_t& width, uint32_t& height) {
+    std::smatch m;
+    static const std::regex re(R"((\d{1,5})[xX](\d{1,5}))");
+    if (!std::regex_match(text, m, re))
+        throwBadInput(option, "'" + text + "' is not a size", "WIDTHxHEIGHT, e.g. 1280x720");
+    width = uint32_t(std::stoul(m[1]));
+    height = uint32_t(std::stoul(m[2]));
+    if (width == 0 || height == 0 || width > 16384 || height > 16384)
+        throwBadInput(option, "size '" + text + "' is out of range", "each side between 1 and 16384");
+}
+
+std::set<uint64_t> parseFrameList(const std::string& text, const std::string& option) {
+    std::set<uint64_t> frames;
+    static const std::regex item(R"((\d{1,9})(?:-(\d{1,9}))?)");
+    size_t start = 0;
+    while (start <= text.size()) {
+        size_t comma = text.find(',', start);
+        std::string part = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        std::smatch m;
+        if (!std::regex_match(part, m, item))
+            throwBadInput(option, "'" + part + "' in '" + text + "' is not a frame or range",
+                          "a list like 3,10-12");
+        uint64_t a = std::stoull(m[1]), b = m[2].matched ? std::stoull(m[2]) : a;
+        if (b < a) throwBadInput(option, "range '" + part + "' runs backwards", "FIRST-LAST with FIRST <= LAST");
+        if (b - a > 1000000) throwBadInput(option, "range '" + part + "' is too long", "at most 10^6 frames");
+        for (uint64_t f = a; f <= b; ++f) frames.insert(f);
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    return frames;
+}
+
+PluginRegistry makeRegistry() { return PluginRegistry(PluginRegistry::defaultDirs()); }
+
+void ensureWritableDir(const std::string& dir, const std::string& option) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+        throwBadInput(option, "'" + dir + "' exists and is not a folder", "a folder to write images into");
+    fs::create_directories(dir, ec);
+    if (ec)
+        throwBadInput(option, "cannot create folder '" + dir + "': " + ec.message(), "a writable location",
+                      "choose another --out folder");
+    if (access(dir.c_str(), W_OK) != 0)
+        throwBadInput(option, "folder '" + dir + "' is not writable", "a writable folder",
+                      "choose another --out folder or fix its permissions");
+}
+
+}  // namespace loom::cli

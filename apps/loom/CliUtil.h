@@ -1,0 +1,26 @@
+#pragma once
+// Helpers shared by the loom subcommands.
+#include <cstdint>
+#include <set>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "loom/Plugin.h"
+
+namespace loom::cli {
+
+/// "1280x720" -> width, height. Throws loom::Error naming the option.
+void parseSize(const std::string& text, const std::string& option, uint32_t& width, uint32_t& height);
+/// "3,10-12" -> {3, 10, 11, 12}. Throws loom::Error naming the option.
+std::set<uint64_t> parseFrameList(const std::string& text, const std::string& option);
+/// The registry every command uses (default folders + LOOM_PLUGIN_PATH).
+PluginRegistry makeRegistry();
+/// Fails with a clear error when `dir` cannot be created or written.
+void ensureWritableDir(const std::string& dir, const std::string& option);
+
+void addRenderCommand(CLI::App& app);
+void addCheckCommand(CLI::App& app);
+void addPassesCommand(CLI::App& app);
+
+}  // namespace loom::cli

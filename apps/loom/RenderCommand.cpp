@@ -1,0 +1,154 @@
+// loom render: run a graph headless for N frames, writing marked outputs and dumps.
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "CliUtil.h"
+#include "loom/Error.h"
+#include "loom/ImageIO.h"
+#include "loom/Parallel.h"
+#include "loom/RenderGraph.h"
+
+namespace loom::cli {
+
+namespace {
+
+struct RenderOptions {
+    std::string graph;
+    uint64_t frames = 1;
+    uint64_t startFrame = 0;
+    std::string size = "256x256";
+    std::string out = "out";
+    std::vector<std::string> dump;
+    std::string dumpFrames;
+    std::vector<std::string> set;
+    unsigned threads = 0;
+    std::string statsFile;
+    double fps = 60.0;
+    bool quiet = false;
+    bool poison = false;
+};
+
+std::string frameFileName(const std::string& pass, const std::string& field, uint64_t frame, Format f) {
+    return fmt::format("{}.{}.{:04}.{}", pass, field, frame, imageExtension(f));
+}
+
+void progress(uint64_t done, uint64_t total, double msPerFrame) {
+    const int width = 30;
+    int filled = int(width * done / std::max<uint64_t>(total, 1));
+    std::fprintf(stderr, "\r[%.*s%*s] %llu/%llu frames  %.2f ms/frame", filled, "##############################",
+                 width - filled, "", (unsigned long long)done, (unsigned long long)total, msPerFrame);
+    if (done == total) std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+}
+
+void runRender(const RenderOptions& o) {
+    uint32_t width, height;
+    parseSize(o.size, "--size", width, height);
+    if (o.frames == 0) throwBadInput("--frames", "frame count is 0", "at least 1 frame");
+    if (!(o.fps > 0.0) || o.fps > 1e6) throwBadInput("--fps", "frame rate must be positive", "e.g. 60");
+    std::set<uint64_t> dumpFrames;
+    if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
+    ensureWritableDir(o.out, "--out");
+
+    ThreadLimit threadLimit(o.threads);
+    PluginRegistry registry = makeRegistry();
+    RenderGraph graph(loadGraph(o.graph), registry);
+    for (const auto& s : o.set) {
+        auto eq = s.find('=');
+        auto dot = s.find('.');
+        if (eq == std::string::npos || dot == std::string::npos || dot > eq)
+            throwBadInput("--set " + s, "not an assignment", "Pass.param=value, e.g. SVGF.iterations=4");
+        graph.setParam(s.substr(0, dot), s.substr(dot + 1, eq - dot - 1), parseParamValue(s.substr(eq + 1)),
+                       "--set " + s);
+    }
+    CompileOptions copts;
+    copts.width = width;
+    copts.height = height;
+    copts.observe = o.dump;
+    copts.poisonTransients = o.poison;
+    graph.compile(copts);
+
+    const std::filesystem::path outDir(o.out);
+    uint64_t dumped = 0;
+    if (!o.dump.empty()) {
+        graph.setFieldObserver([&](const FrameInfo& f, const std::string& pass, const std::string& field,
+                                   const Texture& tex) {
+            if (!dumpFrames.empty() && !dumpFrames.count(f.frameIndex)) return;
+            writeImage(outDir / frameFileName(pass, field, f.frameIndex, tex.format()), tex);
+            ++dumped;
+        });
+    }
+
+    const bool showProgress = !o.quiet && isatty(STDERR_FILENO);
+    nlohmann::json statsJson = {{"graph", o.graph}, {"width", width}, {"height", height}, {"frames", nlohmann::json::array()}};
+    uint64_t written = 0;
+    auto start = std::chrono::steady_clock::now();
+    for (uint64_t i = 0; i < o.frames; ++i) {
+        FrameInfo frame;
+        frame.frameIndex = o.startFrame + i;
+        frame.time = double(frame.frameIndex) / o.fps;
+        graph.execute(frame);
+        for (const auto& out : graph.outputs()) {
+            const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
+            writeImage(outDir / frameFileName(out.pass, out.channel, frame.frameIndex, tex->format()), *tex);
+            ++written;
+        }
+        if (!o.statsFile.empty()) {
+            nlohmann::json jf = {{"frame", frame.frameIndex}, {"passes", nlohmann::json::object()}};
+            for (const auto& t : graph.timings()) jf["passes"][t.name]["ms"] = t.lastMs;
+            for (const auto& [pass, counters] : graph.lastStats())
+                for (const auto& [k, v] : counters) jf["passes"][pass][k] = v;
+            statsJson["frames"].push_back(std::move(jf));
+        }
+        if (showProgress) {
+            double elapsed = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+            progress(i + 1, o.frames, elapsed / double(i + 1));
+        }
+    }
+    if (!o.statsFile.empty()) writeFileAtomic(o.statsFile, statsJson.dump(2) + "\n");
+
+    if (!o.quiet) {
+        std::cout << fmt::format("Rendered {} frame(s) at {}x{}: {} output image(s), {} dump(s) in {}\n", o.frames,
+                                 width, height, written, dumped, o.out);
+        std::cout << fmt::format("  {:24} {:>12} {:>12}\n", "pass", "mean ms", "total ms");
+        double total = 0;
+        for (const auto& t : graph.timings()) {
+            std::cout << fmt::format("  {:24} {:>12.3f} {:>12.3f}\n", t.name, t.totalMs / std::max<uint64_t>(t.runs, 1),
+                                     t.totalMs);
+            total += t.totalMs;
+        }
+        std::cout << fmt::format("  {:24} {:>12.3f} {:>12.3f}\n", "all passes", total / double(o.frames), total);
+    }
+}
+
+}  // namespace
+
+void addRenderCommand(CLI::App& app) {
+    auto o = std::make_shared<RenderOptions>();
+    CLI::App* cmd = app.add_subcommand("render", "Render a graph headless and write its outputs");
+    cmd->add_option("--graph,-g", o->graph, "graph file (.json)")->required();
+    cmd->add_option("--frames,-n", o->frames, "number of frames")->capture_default_str();
+    cmd->add_option("--start-frame", o->startFrame, "index of the first frame")->capture_default_str();
+    cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT")->capture_default_str();
+    cmd->add_option("--out,-o", o->out, "output folder")->capture_default_str();
+    cmd->add_option("--dump", o->dump, "dump fields matching a glob, e.g. 'SVGF.*' (repeatable)");
+    cmd->add_option("--dump-frames", o->dumpFrames, "frames to dump, e.g. 3,10-12 (default: all)");
+    cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
+    cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
+    cmd->add_option("--stats", o->statsFile, "write per-frame timings and counters as JSON");
+    cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
+    cmd->add_flag("--quiet,-q", o->quiet, "no progress bar or summary");
+    cmd->add_flag("--poison", o->poison, "fill transient memory with NaN when its lifetime starts (debug)");
+    cmd->callback([o] { runRender(*o); });
+}
+
+}  // namespace loom::cli

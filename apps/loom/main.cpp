@@ -1,0 +1,54 @@
+// loom: render graphs headless, check them, list passes.
+#include <cstdio>
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "CliUtil.h"
+#include "loom/Error.h"
+#include "loom/Log.h"
+
+int main(int argc, char** argv) {
+    CLI::App app{"Loom: a frame-graph renderer for path tracing and denoising"};
+    app.require_subcommand(1);
+    app.set_version_flag("--version", std::string(loom::version()));
+    std::string logLevel = "info";
+    bool verbose = false;
+    app.add_option("--log-level", logLevel, "trace, debug, info, warn, error or off")->capture_default_str();
+    app.add_flag("-v,--verbose", verbose, "same as --log-level debug");
+    app.parse_complete_callback([&] {
+        if (verbose) logLevel = "debug";
+        if (!loom::setLogLevel(logLevel))
+            loom::throwBadInput("--log-level", "unknown log level '" + logLevel + "'",
+                                "trace, debug, info, warn, error or off");
+    });
+    spdlog::set_pattern("%^[%l]%$ %v");
+    spdlog::set_default_logger(spdlog::stderr_color_mt("loom"));
+    spdlog::set_pattern("%^[%l]%$ %v");
+
+    loom::cli::addRenderCommand(app);
+    loom::cli::addCheckCommand(app);
+    loom::cli::addPassesCommand(app);
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        std::cerr << "error: " << e.what() << "\n  hint: run `loom --help` or `loom <command> --help`\n";
+        return 2;
+    } catch (const loom::Error& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return e.exitCode();
+    } catch (const std::exception& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return 1;
+    }
+    return 0;
+}

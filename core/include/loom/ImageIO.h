@@ -1,0 +1,31 @@
+#pragma once
+// Reading and writing images: EXR for float and uint formats (OpenEXR), PNG
+// for 8-bit formats (stb). Writes are atomic: a temporary file in the same
+// folder, then a rename, so a reader never sees a half-written image.
+#include <filesystem>
+#include <string>
+
+#include "loom/Texture.h"
+
+namespace loom {
+
+/// The file extension a texture of this format is dumped as: "exr" for float
+/// and uint formats, "png" for 8-bit formats.
+const char* imageExtension(Format f);
+
+/// Writes a texture. EXR: R32F/RG32F/RGBA32F as FLOAT channels, RGBA16F as
+/// HALF, R32U/RG32U/RGBA32U as UINT; channels named R, G, B, A. PNG:
+/// RGBA8Unorm and RGBA8Srgb as 4-channel 8-bit. Throws loom::Error (Runtime
+/// kind for I/O failures, naming the path; BadInput when the folder does not
+/// exist or is not writable).
+void writeImage(const std::filesystem::path& path, const Texture& tex);
+
+/// Reads an EXR (into RGBA32F, or RGBA32U when all channels are UINT; missing
+/// channels are 0, alpha 1) or a PNG (RGBA8Unorm). Throws loom::Error
+/// (BadInput) for a missing or malformed file.
+Texture readImage(const std::filesystem::path& path);
+
+/// Writes bytes to a file atomically (temporary + rename). Throws loom::Error.
+void writeFileAtomic(const std::filesystem::path& path, const std::string& bytes);
+
+}  // namespace loom

@@ -1,0 +1,87 @@
+#pragma once
+// Typed parameter declarations: declared once per pass, bound to the pass's
+// own members. They are the single source of truth for JSON parsing,
+// validation, the viewer's UI and the generated pass reference.
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
+#include <nlohmann/json_fwd.hpp>
+
+namespace loom {
+
+enum class ParamType { Bool, Int, Float, Enum, String, Vec3, Vec4 };
+
+const char* paramTypeName(ParamType t);
+
+struct ParamDecl {
+    std::string name;
+    ParamType type = ParamType::Float;
+    std::string doc;
+    std::optional<double> min, max;       ///< inclusive range for Int, Float (and each Vec component)
+    std::vector<std::string> enumValues;  ///< for Enum: the accepted strings, index = value
+
+    // Bound storage: how to read and write the member as JSON. Set by ParamList::add.
+    std::function<nlohmann::json()> get;
+    std::function<void(const nlohmann::json&)> set;
+    std::function<nlohmann::json()> defaultValue;
+};
+
+/// Chained setters on a declaration.
+class ParamBuilder {
+public:
+    explicit ParamBuilder(ParamDecl& d) : mDecl(d) {}
+    ParamBuilder& range(double lo, double hi) { mDecl.min = lo; mDecl.max = hi; return *this; }
+    ParamBuilder& min(double lo) { mDecl.min = lo; return *this; }
+    ParamBuilder& doc(std::string text) { mDecl.doc = std::move(text); return *this; }
+
+private:
+    ParamDecl& mDecl;
+};
+
+/// A pass's parameters, bound to its members. Assigning the default happens
+/// at declaration.
+class ParamList {
+public:
+    ParamBuilder add(std::string name, bool* member, bool def);
+    ParamBuilder add(std::string name, int* member, int def);
+    ParamBuilder add(std::string name, float* member, float def);
+    ParamBuilder add(std::string name, std::string* member, std::string def);
+    ParamBuilder add(std::string name, glm::vec3* member, glm::vec3 def);
+    ParamBuilder add(std::string name, glm::vec4* member, glm::vec4 def);
+    /// An enum given in JSON as one of `values`; the member holds the index.
+    template <class E>
+    ParamBuilder addEnum(std::string name, E* member, E def, std::vector<std::string> values) {
+        return addEnumImpl(
+            std::move(name), [member] { return int(*member); }, [member](int v) { *member = E(v); }, int(def),
+            std::move(values));
+    }
+
+    const std::vector<ParamDecl>& decls() const { return mDecls; }
+    const ParamDecl* find(const std::string& name) const;
+
+    /// Validates and assigns. Throws loom::Error (BadInput) naming `where`
+    /// (e.g. "/passes/1/params/alpha" or "SVGF.alpha") for an unknown name
+    /// (with did-you-mean), a wrong type or an out-of-range value.
+    void set(const std::string& name, const nlohmann::json& value, const std::string& where);
+    /// Assigns every key of a JSON object; `where` is the object's JSON path.
+    void setAll(const nlohmann::json& object, const std::string& where);
+    nlohmann::json get(const std::string& name) const;
+    /// All values (or only those that differ from their default) as a JSON object.
+    nlohmann::json toJson(bool onlyNonDefault) const;
+
+private:
+    ParamBuilder addEnumImpl(std::string name, std::function<int()> get, std::function<void(int)> set, int def,
+                             std::vector<std::string> values);
+    ParamDecl& push(std::string name, ParamType type);
+    std::vector<ParamDecl> mDecls;
+};
+
+/// Parses a command-line value ("3", "0.5", "true", "aces", "[1,2,3]") into
+/// JSON: JSON syntax when it parses, else a string.
+nlohmann::json parseParamValue(const std::string& text);
+
+}  // namespace loom

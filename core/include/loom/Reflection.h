@@ -1,0 +1,76 @@
+#pragma once
+// What a pass declares about its fields: inputs, outputs, transient scratch
+// and history, with formats and sizes.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "loom/Format.h"
+
+namespace loom {
+
+enum class FieldKind : uint8_t {
+    Input,     ///< read; produced by another pass
+    Output,    ///< written; may be consumed by other passes or marked as a graph output
+    Internal,  ///< transient scratch, valid only during the pass's execute
+    History,   ///< persistent across frames, ping-ponged by the graph (prev / cur)
+};
+
+const char* fieldKindName(FieldKind k);
+
+enum class SizeMode : uint8_t {
+    Frame,  ///< the frame size (default)
+    Scale,  ///< the frame size times (scaleX, scaleY), rounded, at least 1
+    Fixed,  ///< (fixedWidth, fixedHeight)
+};
+
+struct FieldDesc {
+    std::string name;
+    FieldKind kind = FieldKind::Input;
+    Format format = Format::RGBA32F;
+    bool optional = false;
+    SizeMode sizeMode = SizeMode::Frame;
+    float scaleX = 1.f, scaleY = 1.f;
+    uint32_t fixedWidth = 0, fixedHeight = 0;
+    std::string doc;
+
+    /// Resolved size for a frame of frameWidth x frameHeight.
+    void resolveSize(uint32_t frameWidth, uint32_t frameHeight, uint32_t& w, uint32_t& h) const;
+    bool operator==(const FieldDesc&) const = default;
+};
+
+/// Chained setters on the most recently declared field.
+class FieldBuilder {
+public:
+    explicit FieldBuilder(FieldDesc& f) : mField(f) {}
+    FieldBuilder& optional(bool v = true) { mField.optional = v; return *this; }
+    FieldBuilder& scaled(float sx, float sy) {
+        mField.sizeMode = SizeMode::Scale; mField.scaleX = sx; mField.scaleY = sy; return *this;
+    }
+    FieldBuilder& fixedSize(uint32_t w, uint32_t h) {
+        mField.sizeMode = SizeMode::Fixed; mField.fixedWidth = w; mField.fixedHeight = h; return *this;
+    }
+    FieldBuilder& doc(std::string text) { mField.doc = std::move(text); return *this; }
+
+private:
+    FieldDesc& mField;
+};
+
+/// The fields of one pass, in declaration order.
+class Reflection {
+public:
+    FieldBuilder input(std::string name, Format f) { return add(std::move(name), FieldKind::Input, f); }
+    FieldBuilder output(std::string name, Format f) { return add(std::move(name), FieldKind::Output, f); }
+    FieldBuilder internal(std::string name, Format f) { return add(std::move(name), FieldKind::Internal, f); }
+    FieldBuilder history(std::string name, Format f) { return add(std::move(name), FieldKind::History, f); }
+
+    const std::vector<FieldDesc>& fields() const { return mFields; }
+    const FieldDesc* find(const std::string& name) const;
+    std::vector<std::string> names(FieldKind kind) const;
+
+private:
+    FieldBuilder add(std::string name, FieldKind kind, Format f);
+    std::vector<FieldDesc> mFields;
+};
+
+}  // namespace loom

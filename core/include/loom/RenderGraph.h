@@ -1,0 +1,152 @@
+#pragma once
+// The frame graph: passes created from a graph description, compiled into an
+// execution plan (wiring, culling, order, memory), and executed frame by frame.
+#include <chrono>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "loom/Graph.h"
+#include "loom/Plugin.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+struct CompileOptions {
+    uint32_t width = 256;
+    uint32_t height = 256;
+    /// Glob patterns over "Pass.field" (e.g. "SVGF.*") that must be computed
+    /// and shown to the field observer even when nothing consumes them.
+    std::vector<std::string> observe;
+    /// Fill transient memory with NaN (0xFFFFFFFF for integers) when its
+    /// lifetime starts, so a read-before-write shows up.
+    bool poisonTransients = false;
+};
+
+struct FrameInfo {
+    uint64_t frameIndex = 0;
+    double time = 0.0;
+    const Scene* scene = nullptr;
+    const Camera* camera = nullptr;
+};
+
+/// One connection in the compiled plan.
+struct Wire {
+    ChannelRef src;   ///< an output (src.prev: last frame's value)
+    ChannelRef dst;   ///< an input
+    bool byName = false;  ///< wired automatically by channel name
+};
+
+enum class ResourceKind { Transient, History };
+
+/// One allocation of the compiled plan.
+struct ResourceInfo {
+    std::string name;  ///< "Pass.field" of the field that owns it
+    ResourceKind kind = ResourceKind::Transient;
+    Format format = Format::RGBA32F;
+    uint32_t width = 0, height = 0;
+    size_t bytes = 0;        ///< per texture (a history pair holds two)
+    int firstUse = 0;        ///< execution position of the writer
+    int lastUse = 0;         ///< last execution position that reads it (order size = after the frame)
+    size_t offset = 0;       ///< transient: offset into the shared arena
+};
+
+struct CulledPass {
+    std::string name;
+    std::string reason;
+};
+
+/// The result of compiling: what `loom check` prints.
+struct CompiledPlan {
+    uint32_t width = 0, height = 0;
+    std::vector<std::string> order;   ///< live passes in execution order
+    std::vector<CulledPass> culled;
+    std::vector<Wire> wires;           ///< between live passes
+    std::vector<ChannelRef> outputs;   ///< marked outputs
+    std::vector<ResourceInfo> resources;
+    std::vector<std::string> skippedOutputs;  ///< optional outputs not computed
+    std::vector<std::string> warnings;
+    size_t transientPeakBytes = 0;     ///< size of the shared transient arena
+    size_t transientSumBytes = 0;      ///< what the transients would take unshared
+    size_t historyBytes = 0;           ///< both sides of every history pair
+};
+
+struct PassTiming {
+    std::string name;
+    double lastMs = 0.0;
+    double totalMs = 0.0;
+    uint64_t runs = 0;
+};
+
+class RenderGraph {
+public:
+    /// Creates the passes of `desc` and applies their parameters. Throws
+    /// loom::Error for unknown types and bad parameters.
+    RenderGraph(GraphDesc desc, PluginRegistry& registry);
+    ~RenderGraph();
+    RenderGraph(const RenderGraph&) = delete;
+    RenderGraph& operator=(const RenderGraph&) = delete;
+
+    /// Validates and plans the graph for a frame size. History whose field
+    /// declaration (pass type, format, size) is unchanged survives; any other
+    /// history starts invalid. Throws loom::Error for bad wiring, formats,
+    /// cycles and outputs.
+    void compile(const CompileOptions& options);
+    /// Replaces the description (edges, outputs, passes) and recompiles with
+    /// the last options. Passes whose name and type are unchanged are kept,
+    /// with their state and history.
+    void setDesc(GraphDesc desc);
+    /// Changes the frame size and recompiles (history resets).
+    void resize(uint32_t width, uint32_t height);
+
+    /// Runs every live pass once, then swaps history.
+    void execute(const FrameInfo& frame);
+    /// Invalidates all history (camera cut, explicit reset).
+    void resetHistory();
+
+    /// Sets a parameter; never recompiles or reallocates. `where` names the
+    /// origin for errors (e.g. "--set SVGF.alpha").
+    void setParam(const std::string& pass, const std::string& param, const nlohmann::json& value,
+                  const std::string& where);
+    RenderPass* pass(const std::string& name) const;
+
+    /// The texture of a field after execute: marked outputs, history (cur),
+    /// and anything that was observed. nullptr when not allocated.
+    const Texture* fieldTexture(const std::string& passDotField) const;
+    const std::vector<ChannelRef>& outputs() const { return mPlan.outputs; }
+
+    using FieldObserver =
+        std::function<void(const FrameInfo&, const std::string& pass, const std::string& field, const Texture&)>;
+    /// Called for every field matching CompileOptions::observe: inputs just
+    /// before the pass executes, outputs, internals and history right after.
+    void setFieldObserver(FieldObserver observer) { mObserver = std::move(observer); }
+
+    const CompiledPlan& plan() const { return mPlan; }
+    bool compiled() const { return mCompiled; }
+    const CompileOptions& options() const { return mOptions; }
+    std::vector<PassTiming> timings() const;
+    /// Counters each pass reported in the last frame.
+    std::map<std::string, std::map<std::string, double>> lastStats() const;
+
+    /// The description with current parameter values (non-default ones).
+    GraphDesc desc() const;
+
+    /// Human-readable plan (for `loom check`) and Graphviz.
+    std::string planText() const;
+    std::string planDot() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+    CompiledPlan mPlan;
+    CompileOptions mOptions;
+    FieldObserver mObserver;
+    bool mCompiled = false;
+};
+
+/// fnmatch-style glob ('*', '?', '[...]') over a whole string.
+bool globMatch(const std::string& pattern, const std::string& text);
+
+}  // namespace loom

@@ -1,0 +1,119 @@
+#pragma once
+// The interface every render-pass plugin implements, and what it sees while
+// executing.
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "loom/Params.h"
+#include "loom/Reflection.h"
+#include "loom/Texture.h"
+
+namespace loom {
+
+class Scene;   // defined by the scene module
+struct Camera; // defined by the scene module
+
+/// What the compiler tells a pass when it reflects and compiles.
+struct CompileInfo {
+    uint32_t frameWidth = 0;
+    uint32_t frameHeight = 0;
+    /// Optional inputs that are connected, and outputs someone consumes (an
+    /// optional output not listed here is neither allocated nor expected).
+    /// Empty during reflect.
+    std::vector<std::string> connectedInputs;
+    std::vector<std::string> consumedOutputs;
+    bool isInputConnected(std::string_view name) const;
+    bool isOutputConsumed(std::string_view name) const;
+};
+
+/// Counters a pass reports for the frame (rays traced, samples dropped...).
+class Stats {
+public:
+    void add(const std::string& name, double value) { mValues[name] += value; }
+    void set(const std::string& name, double value) { mValues[name] = value; }
+    const std::map<std::string, double>& values() const { return mValues; }
+    void clear() { mValues.clear(); }
+
+private:
+    std::map<std::string, double> mValues;
+};
+
+/// One bound field of a pass during execute.
+struct BoundField {
+    std::string name;
+    FieldKind kind;
+    Texture* cur = nullptr;   ///< input, output, internal, or history "cur"
+    Texture* prev = nullptr;  ///< history "prev"; for inputs fed by an @prev edge, unused
+    const bool* valid = nullptr;  ///< history pairs and @prev inputs: does prev hold a real frame?
+};
+
+/// What a pass sees while executing one frame.
+class PassContext {
+public:
+    /// Input texture; nullptr for an optional input that is not connected.
+    const Texture* input(std::string_view name) const;
+    /// Output texture; nullptr for an optional output nobody consumes.
+    Texture* output(std::string_view name) const;
+    /// Transient scratch texture (contents undefined on entry).
+    Texture* internal(std::string_view name) const;
+    /// History field: last frame's value (read) and this frame's (write).
+    const Texture& historyPrev(std::string_view name) const;
+    Texture& historyCur(std::string_view name) const;
+    /// False on the first frame, after a reset, resize or camera cut: then
+    /// the prev side of every history field (and of @prev inputs) is zero.
+    bool historyValid() const { return mHistoryValid; }
+
+    uint64_t frameIndex() const { return mFrameIndex; }
+    double time() const { return mTime; }
+    uint32_t frameWidth() const { return mFrameWidth; }
+    uint32_t frameHeight() const { return mFrameHeight; }
+    const Scene* scene() const { return mScene; }
+    const Camera* camera() const { return mCamera; }
+    Stats& stats() const { return *mStats; }
+    const std::string& passName() const { return mPassName; }
+
+private:
+    friend class RenderGraph;
+    const BoundField* find(std::string_view name, FieldKind kind) const;
+    std::string mPassName;
+    std::vector<BoundField> mFields;
+    bool mHistoryValid = false;
+    uint64_t mFrameIndex = 0;
+    double mTime = 0.0;
+    uint32_t mFrameWidth = 0, mFrameHeight = 0;
+    const Scene* mScene = nullptr;
+    const Camera* mCamera = nullptr;
+    Stats* mStats = nullptr;
+};
+
+/// A render pass. Plugins subclass it and register a factory.
+class RenderPass {
+public:
+    virtual ~RenderPass() = default;
+
+    /// Declares fields. Must not depend on parameter values: changing a
+    /// parameter never reallocates.
+    virtual void reflect(Reflection& r, const CompileInfo& info) const = 0;
+    /// Declares parameters, bound to members (called once after creation).
+    virtual void declareParams(ParamList& params) { (void)params; }
+    /// Called after the graph is compiled (sizes and connections known).
+    virtual void compile(const CompileInfo& info) { (void)info; }
+    /// Renders one frame.
+    virtual void execute(PassContext& ctx) = 0;
+    virtual void setScene(const std::shared_ptr<const Scene>& scene) { (void)scene; }
+    /// Forget any state carried from previous frames (graph history is
+    /// reset by the graph itself).
+    virtual void resetHistory() {}
+
+    ParamList& params() { return mParams; }
+    const ParamList& params() const { return mParams; }
+
+private:
+    ParamList mParams;
+};
+
+}  // namespace loom

@@ -1,0 +1,294 @@
+#include "loom/ImageIO.h"
+
+#include <atomic>
+
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfInputFile.h>
+#include <ImfOutputFile.h>
+#include <ImfStdIO.h>
+#include <ImfVersion.h>
+#include <stb/stb_image.h>
+#include <stb/stb_image_write.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <system_error>
+#include <vector>
+
+#include "loom/Error.h"
+
+namespace loom {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr std::array<const char*, 4> kChannelNames = {"R", "G", "B", "A"};
+
+[[noreturn]] void throwRuntime(const fs::path& file, std::string what, std::string suggestion = {}) {
+    throw Error(Error::Info{ErrorKind::Runtime, file.string(), "", std::move(what), "", std::move(suggestion)});
+}
+
+std::string lowerExtension(const fs::path& path) {
+    std::string ext = path.extension().string();
+    if (!ext.empty() && ext[0] == '.') ext.erase(0, 1);
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+
+/// The folder a file is written into must exist and be writable: otherwise it is the user's mistake (a wrong
+/// --output path), not a runtime failure.
+void checkOutputFolder(const fs::path& path) {
+    fs::path folder = path.parent_path();
+    if (folder.empty()) folder = ".";
+    std::error_code ec;
+    if (!fs::exists(folder, ec)) {
+        throwBadInput("", "folder does not exist: " + folder.string(), "an existing folder",
+                      "create the folder first or choose another output path", path.string());
+    }
+    if (!fs::is_directory(folder, ec)) {
+        throwBadInput("", "not a folder: " + folder.string(), "an existing folder", "choose another output path",
+                      path.string());
+    }
+    if (::access(folder.c_str(), W_OK) != 0) {
+        throwBadInput("", "cannot write into folder " + folder.string() + ": " + std::strerror(errno),
+                      "a writable folder", "check the folder's permissions or choose another output path",
+                      path.string());
+    }
+}
+
+/// Runs `write` on a temporary file next to `path`, then renames it over `path`. On any failure the temporary
+/// file is removed and the error is rethrown as a loom::Error.
+void writeAtomically(const fs::path& path, const std::function<void(std::ofstream&, const std::string&)>& write) {
+    checkOutputFolder(path);
+    static std::atomic<uint64_t> counter{0};
+    const std::string tmp = path.string() + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
+    auto removeTmp = [&] {
+        std::error_code ignored;
+        fs::remove(tmp, ignored);
+    };
+    try {
+        std::ofstream out;
+        errno = 0;
+        out.open(tmp, std::ios::binary | std::ios::trunc);
+        if (!out) {
+            int err = errno;
+            std::string reason = err ? std::strerror(err) : "unknown error";
+            if (err == EACCES || err == EPERM || err == EROFS) {
+                throwBadInput("", "cannot write " + tmp + ": " + reason, "a writable folder",
+                              "check the folder's permissions or choose another output path", path.string());
+            }
+            throwRuntime(path, "cannot create " + tmp + ": " + reason, "check free disk space and the output path");
+        }
+        write(out, tmp);
+        out.close();
+        if (!out) {
+            throwRuntime(path, "writing " + tmp + " failed: " + (errno ? std::strerror(errno) : "unknown error"),
+                         "check free disk space");
+        }
+        std::error_code ec;
+        fs::rename(tmp, path, ec);
+        if (ec) {
+            throwRuntime(path, "cannot rename " + tmp + " to " + path.string() + ": " + ec.message(),
+                         "check that the output path is not a folder and is writable");
+        }
+    } catch (const Error&) {
+        removeTmp();
+        throw;
+    } catch (const std::exception& e) {
+        removeTmp();
+        throwRuntime(path, std::string("writing failed: ") + e.what(), "check free disk space and the output path");
+    } catch (...) {
+        removeTmp();
+        throw;
+    }
+}
+
+Imf::PixelType exrPixelType(ComponentType c) {
+    switch (c) {
+    case ComponentType::Float32: return Imf::FLOAT;
+    case ComponentType::Float16: return Imf::HALF;
+    case ComponentType::Uint32: return Imf::UINT;
+    case ComponentType::Unorm8: break;
+    }
+    return Imf::NUM_PIXELTYPES;
+}
+
+size_t pixelTypeSize(Imf::PixelType t) { return t == Imf::HALF ? 2 : 4; }
+
+void writeExr(const fs::path& path, const Texture& tex) {
+    const FormatInfo& info = formatInfo(tex.format());
+    const Imf::PixelType type = exrPixelType(info.component);
+    Imf::Header header(int(tex.width()), int(tex.height()));
+    Imf::FrameBuffer frameBuffer;
+    // OpenEXR's slices take non-const pointers, but writing only reads through them.
+    char* base = reinterpret_cast<char*>(const_cast<std::byte*>(tex.data()));
+    for (uint32_t c = 0; c < info.channels; ++c) {
+        header.channels().insert(kChannelNames[c], Imf::Channel(type));
+        frameBuffer.insert(kChannelNames[c], Imf::Slice(type, base + c * pixelTypeSize(type), info.bytesPerPixel,
+                                                        tex.rowPitch()));
+    }
+    writeAtomically(path, [&](std::ofstream& out, const std::string& tmp) {
+        Imf::StdOFStream stream(out, tmp.c_str());
+        Imf::OutputFile file(stream, header);
+        file.setFrameBuffer(frameBuffer);
+        file.writePixels(int(tex.height()));
+    });
+}
+
+void writePng(const fs::path& path, const Texture& tex) {
+    std::string bytes;
+    auto append = [](void* context, void* data, int size) {
+        static_cast<std::string*>(context)->append(static_cast<const char*>(data), size_t(size));
+    };
+    if (tex.rowPitch() > size_t(std::numeric_limits<int>::max()) ||
+        !stbi_write_png_to_func(append, &bytes, int(tex.width()), int(tex.height()), 4, tex.data(),
+                                int(tex.rowPitch()))) {
+        throwRuntime(path, "PNG encoding failed", "check the image size");
+    }
+    writeFileAtomic(path, bytes);
+}
+
+bool hasExrMagic(const fs::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    char magic[4] = {};
+    if (!in.read(magic, 4)) return false;
+    return Imf::isImfMagic(magic);
+}
+
+Texture readExr(const fs::path& path) {
+    try {
+        Imf::InputFile file(path.c_str());
+        const Imf::Header& header = file.header();
+        const Imath::Box2i dw = header.dataWindow();
+        const int64_t width = int64_t(dw.max.x) - dw.min.x + 1;
+        const int64_t height = int64_t(dw.max.y) - dw.min.y + 1;
+        if (width <= 0 || height <= 0) {
+            throwBadInput("", "the image's data window is empty", "a non-empty image", "", path.string());
+        }
+
+        const Imf::ChannelList& channels = header.channels();
+        bool anyRgba = false, allUint = true;
+        for (const char* name : kChannelNames) {
+            if (const Imf::Channel* ch = channels.findChannel(name)) {
+                anyRgba = true;
+                allUint = allUint && ch->type == Imf::UINT;
+            }
+        }
+        // A luminance-only image (channel Y) is read as grey.
+        const Imf::Channel* luminance = anyRgba ? nullptr : channels.findChannel("Y");
+        if (!anyRgba && !luminance) {
+            std::vector<std::string> found;
+            for (auto it = channels.begin(); it != channels.end(); ++it) found.emplace_back(it.name());
+            throwBadInput("", "the image has no R, G, B, A or Y channel (it has: " + join(found) + ")",
+                          "channels named R, G, B and A", "", path.string());
+        }
+        if (luminance) allUint = luminance->type == Imf::UINT;
+
+        const Format format = allUint ? Format::RGBA32U : Format::RGBA32F;
+        const Imf::PixelType type = allUint ? Imf::UINT : Imf::FLOAT;
+        Texture tex(uint32_t(width), uint32_t(height), format);
+        Imf::FrameBuffer frameBuffer;
+        auto slice = [&](uint32_t c, double fill) {
+            return Imf::Slice::Make(type, tex.data() + 4 * c, dw, 16, tex.rowPitch(), 1, 1, fill);
+        };
+        if (luminance) {
+            // OpenEXR reads a channel into one slice only: Y goes into R here and is copied to G and B below.
+            frameBuffer.insert("Y", slice(0, 0.0));
+            frameBuffer.insert("A", slice(3, 1.0));
+        } else {
+            // Slices of channels missing from the file are filled: 0 for colour, 1 for alpha.
+            for (uint32_t c = 0; c < 4; ++c) frameBuffer.insert(kChannelNames[c], slice(c, c == 3 ? 1.0 : 0.0));
+        }
+        file.setFrameBuffer(frameBuffer);
+        file.readPixels(dw.min.y, dw.max.y);
+        if (luminance) {
+            for (uint32_t y = 0; y < tex.height(); ++y) {
+                std::byte* row = tex.row(y);
+                for (uint32_t x = 0; x < tex.width(); ++x) {
+                    std::memcpy(row + 16 * x + 4, row + 16 * x, 4);
+                    std::memcpy(row + 16 * x + 8, row + 16 * x, 4);
+                }
+            }
+        }
+        return tex;
+    } catch (const Error&) {
+        throw;
+    } catch (const std::exception& e) {
+        throwBadInput("", std::string("cannot read the EXR image: ") + e.what(), "a valid OpenEXR file",
+                      "check that the file is a complete, single-part scanline or tiled EXR", path.string());
+    }
+}
+
+Texture readStb(const fs::path& path) {
+    int width = 0, height = 0, channelsInFile = 0;
+    std::unique_ptr<stbi_uc, void (*)(void*)> pixels(stbi_load(path.c_str(), &width, &height, &channelsInFile, 4),
+                                                     stbi_image_free);
+    if (!pixels) {
+        const char* reason = stbi_failure_reason();
+        throwBadInput("", std::string("cannot read the image: ") + (reason ? reason : "unknown error"),
+                      "a valid PNG or EXR file", "check that the file is a complete PNG or OpenEXR image",
+                      path.string());
+    }
+    Texture tex(uint32_t(width), uint32_t(height), Format::RGBA8Unorm);
+    const size_t rowBytes = size_t(width) * 4;
+    for (uint32_t y = 0; y < tex.height(); ++y) std::memcpy(tex.row(y), pixels.get() + rowBytes * y, rowBytes);
+    return tex;
+}
+
+}  // namespace
+
+const char* imageExtension(Format f) { return formatInfo(f).component == ComponentType::Unorm8 ? "png" : "exr"; }
+
+void writeImage(const fs::path& path, const Texture& tex) {
+    if (tex.empty() || tex.width() == 0 || tex.height() == 0) {
+        throwRuntime(path, "cannot write an empty " + std::to_string(tex.width()) + "x" +
+                               std::to_string(tex.height()) + " image");
+    }
+    const std::string expected = imageExtension(tex.format());
+    const std::string ext = lowerExtension(path);
+    if ((ext == "exr" || ext == "png") && ext != expected) {
+        throwBadInput("", "a " + std::string(formatName(tex.format())) + " texture cannot be written as ." + ext,
+                      "a ." + expected + " file", "name the file with the ." + expected + " extension",
+                      path.string());
+    }
+    if (expected == "png") {
+        writePng(path, tex);
+    } else {
+        writeExr(path, tex);
+    }
+}
+
+Texture readImage(const fs::path& path) {
+    std::error_code ec;
+    if (!fs::exists(path, ec)) {
+        throwBadInput("", "image file not found", "an existing image file",
+                      "check the path and the working folder", path.string());
+    }
+    if (!fs::is_regular_file(path, ec)) {
+        throwBadInput("", "not a regular file", "an image file", "", path.string());
+    }
+    if (::access(path.c_str(), R_OK) != 0) {
+        throwBadInput("", std::string("cannot read the file: ") + std::strerror(errno), "a readable image file",
+                      "check the file's permissions", path.string());
+    }
+    return hasExrMagic(path) ? readExr(path) : readStb(path);
+}
+
+void writeFileAtomic(const fs::path& path, const std::string& bytes) {
+    writeAtomically(path, [&](std::ofstream& out, const std::string&) {
+        out.write(bytes.data(), std::streamsize(bytes.size()));
+    });
+}
+
+}  // namespace loom

@@ -1,0 +1,35 @@
+#include "loom/Parallel.h"
+
+#include <tbb/blocked_range2d.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+namespace loom {
+
+void parallelFor2D(uint32_t width, uint32_t height, const std::function<void(const Tile&)>& fn, uint32_t tileSize) {
+    if (width == 0 || height == 0) return;
+    const uint32_t tilesX = (width + tileSize - 1) / tileSize;
+    const uint32_t tilesY = (height + tileSize - 1) / tileSize;
+    // Tiles are fixed by the image size alone (not by the scheduler), so the
+    // work each call sees is the same for any thread count.
+    tbb::parallel_for(
+        tbb::blocked_range2d<uint32_t>(0, tilesY, 1, 0, tilesX, 1),
+        [&](const tbb::blocked_range2d<uint32_t>& r) {
+            for (uint32_t ty = r.rows().begin(); ty < r.rows().end(); ++ty)
+                for (uint32_t tx = r.cols().begin(); tx < r.cols().end(); ++tx) {
+                    Tile t{tx * tileSize, ty * tileSize, std::min(width, (tx + 1) * tileSize),
+                           std::min(height, (ty + 1) * tileSize)};
+                    fn(t);
+                }
+        },
+        tbb::simple_partitioner());
+}
+
+ThreadLimit::ThreadLimit(unsigned threads) {
+    if (threads > 0)
+        mControl = new tbb::global_control(tbb::global_control::max_allowed_parallelism, threads);
+}
+
+ThreadLimit::~ThreadLimit() { delete static_cast<tbb::global_control*>(mControl); }
+
+}  // namespace loom

@@ -1,0 +1,2 @@
+// A shared library without Loom's entry points.
+extern "C" int somethingElse() { return 1; }
