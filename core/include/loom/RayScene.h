@@ -1,0 +1,49 @@
+#pragma once
+// Ray tracing over a Scene with Embree 3: one bottom-level scene per mesh and
+// one instance per Scene::Instance, so animation moves instances and never
+// rebuilds geometry.
+#include <cstdint>
+#include <memory>
+
+#include <glm/glm.hpp>
+
+namespace loom {
+
+class Scene;
+
+inline constexpr uint32_t kInvalidId = 0xFFFFFFFFu;
+
+struct RayHit {
+    uint32_t instance = kInvalidId;  ///< index into Scene::instances; kInvalidId on a miss
+    uint32_t primitive = kInvalidId; ///< triangle index within the instance's mesh
+    float u = 0.f, v = 0.f;          ///< barycentrics: p = (1-u-v) p0 + u p1 + v p2
+    float t = 0.f;                   ///< distance along the (unnormalised) direction
+    bool hit() const { return instance != kInvalidId; }
+};
+
+class RayScene {
+public:
+    explicit RayScene(const Scene& scene);
+    ~RayScene();
+    RayScene(const RayScene&) = delete;
+    RayScene& operator=(const RayScene&) = delete;
+
+    /// Copies the instances' current world transforms and recommits the
+    /// top-level scene (no geometry rebuild).
+    void updateInstances(const Scene& scene);
+
+    /// Closest hit in (tMin, tMax). Thread-safe.
+    RayHit intersect(const glm::vec3& origin, const glm::vec3& dir, float tMin = 0.f, float tMax = 1e30f) const;
+    /// Any hit in (tMin, tMax). Thread-safe.
+    bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tMin, float tMax) const;
+
+    /// 16 rays at once (for coherent primary rays); valid[i] = false skips lane i.
+    void intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax,
+                     RayHit* hits) const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
+
+}  // namespace loom

@@ -1,0 +1,244 @@
+#pragma once
+// Scenes: glTF 2.0 content in plain arrays (meshes, materials, images, node
+// hierarchy, instances, lights, cameras, animations), updated over time.
+// Ray tracing over a scene lives in RayScene.h.
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+#include <glm/gtc/quaternion.hpp>
+
+#include "loom/Camera.h"
+#include "loom/SceneView.h"
+
+namespace loom {
+
+struct Bounds {
+    glm::vec3 lo{1e30f}, hi{-1e30f};
+    void extend(const glm::vec3& p) { lo = glm::min(lo, p); hi = glm::max(hi, p); }
+    void extend(const Bounds& b) { lo = glm::min(lo, b.lo); hi = glm::max(hi, b.hi); }
+    bool valid() const { return lo.x <= hi.x; }
+    glm::vec3 center() const { return 0.5f * (lo + hi); }
+    glm::vec3 extent() const { return hi - lo; }
+};
+
+/// An 8-bit RGBA image used by materials, stored as in the file. Whether it
+/// is sRGB-encoded depends on the material slot that samples it: base colour
+/// and emission are sRGB, metallic-roughness and normal maps are linear.
+struct SceneImage {
+    std::string name;
+    uint32_t width = 0, height = 0;
+    std::vector<glm::u8vec4> texels;  ///< row 0 = top of the image (glTF uv (0,0))
+};
+
+enum class AlphaMode : uint8_t { Opaque, Mask, Blend };
+
+/// glTF metallic-roughness material. Texture fields index Scene::images (-1 = none).
+struct Material {
+    std::string name;
+    glm::vec4 baseColorFactor{1.f};
+    float metallicFactor = 1.f;   ///< glTF default is 1 (fully metallic) when absent
+    float roughnessFactor = 1.f;
+    glm::vec3 emissiveFactor{0.f};  ///< already multiplied by KHR_materials_emissive_strength
+    int baseColorTexture = -1;
+    int metallicRoughnessTexture = -1;  ///< G = roughness, B = metallic
+    int normalTexture = -1;
+    float normalScale = 1.f;
+    int emissiveTexture = -1;
+    bool doubleSided = false;
+    AlphaMode alphaMode = AlphaMode::Opaque;
+    float alphaCutoff = 0.5f;
+    bool isEmissive() const { return emissiveFactor.x > 0.f || emissiveFactor.y > 0.f || emissiveFactor.z > 0.f; }
+};
+
+/// One glTF primitive: an indexed triangle list with one material. Normals
+/// and tangents are always present (generated when the file has none).
+struct Mesh {
+    std::string name;  ///< "<glTF mesh name>/<primitive index>"
+    std::vector<glm::vec3> positions;
+    std::vector<glm::vec3> normals;
+    std::vector<glm::vec4> tangents;  ///< xyz tangent, w handedness
+    std::vector<glm::vec2> uvs;       ///< TEXCOORD_0, or all zero when absent
+    std::vector<uint32_t> indices;    ///< 3 per triangle
+    uint32_t material = 0;
+    Bounds bounds;
+    uint32_t triangleCount() const { return uint32_t(indices.size() / 3); }
+};
+
+/// A node of the glTF hierarchy.
+struct Node {
+    std::string name;
+    int parent = -1;
+    std::vector<int> children;
+    glm::vec3 translation{0.f};
+    glm::quat rotation{1.f, 0.f, 0.f, 0.f};  ///< (w, x, y, z)
+    glm::vec3 scale{1.f};
+    bool hasMatrix = false;  ///< a static "matrix" node (not animatable)
+    glm::mat4 matrix{1.f};
+    glm::mat4 local() const;  ///< T * R * S, or matrix
+    int camera = -1;  ///< index into Scene::cameras
+    int light = -1;   ///< index into Scene::lights
+};
+
+/// A mesh placed in the world by a node. Its index is the instance id that
+/// G-buffers write into vbuffer and meshId.
+struct Instance {
+    uint32_t node = 0;
+    uint32_t mesh = 0;
+    glm::mat4 world{1.f};
+    glm::mat4 prevWorld{1.f};
+};
+
+enum class LightType : uint8_t { Point, Spot, Directional };
+
+/// KHR_lights_punctual light; position/direction are in world space after update().
+struct Light {
+    std::string name;
+    LightType type = LightType::Point;
+    glm::vec3 color{1.f};
+    float intensity = 1.f;  ///< candela (point, spot) or lux (directional), as glTF
+    float range = 0.f;      ///< 0 = infinite
+    float innerConeAngle = 0.f, outerConeAngle = 0.7853982f;
+    int node = -1;
+    glm::vec3 position{0.f};
+    glm::vec3 direction{0.f, 0.f, -1.f};  ///< direction the light points to
+};
+
+enum class Interpolation : uint8_t { Linear, Step, CubicSpline };
+enum class AnimPath : uint8_t { Translation, Rotation, Scale };
+
+struct AnimationSampler {
+    std::vector<float> times;
+    /// Values as vec4 (translation/scale use xyz; rotation is quaternion x, y, z, w).
+    /// CubicSpline stores (inTangent, value, outTangent) per key, as glTF.
+    std::vector<glm::vec4> values;
+    Interpolation interpolation = Interpolation::Linear;
+    /// Value at time t (clamped to the key range). Rotations are normalised;
+    /// linear rotation uses slerp.
+    glm::vec4 sample(float t, AnimPath path) const;
+};
+
+struct AnimationChannel {
+    uint32_t sampler = 0;
+    int node = -1;
+    AnimPath path = AnimPath::Translation;
+};
+
+struct Animation {
+    std::string name;
+    std::vector<AnimationSampler> samplers;
+    std::vector<AnimationChannel> channels;
+    float duration() const;
+};
+
+/// A triangle with emission, for light sampling.
+struct EmissiveTriangle {
+    uint32_t instance = 0;
+    uint32_t primitive = 0;
+};
+
+/// Constant colour, or an equirectangular HDR map (radiance).
+struct Environment {
+    glm::vec3 color{0.f};
+    uint32_t width = 0, height = 0;  ///< 0 when constant
+    std::vector<glm::vec3> texels;   ///< equirect, row 0 = +Y (up)
+    float intensity = 1.f;
+    bool isConstant() const { return texels.empty(); }
+};
+
+/// A procedural camera motion for scenes whose camera is not animated.
+enum class CameraPathKind : uint8_t { Static, Orbit, Dolly };
+struct CameraPath {
+    CameraPathKind kind = CameraPathKind::Static;
+    float speed = 1.f;  ///< orbit: radians per second; dolly: fraction of the distance per second
+    float amount = 0.25f;  ///< dolly: amplitude as a fraction of the distance to the target
+};
+
+struct SceneLoadOptions {
+    /// Warnings (degenerate triangles dropped, missing texture, ...) go to the
+    /// log and are collected in Scene::warnings.
+    bool generateTangents = true;
+};
+
+class RayScene;
+
+class Scene {
+public:
+    Scene();
+    ~Scene();
+    Scene(const Scene&) = delete;
+    Scene& operator=(const Scene&) = delete;
+
+    /// Loads a .gltf or .glb. Throws loom::Error (BadInput) naming the file
+    /// and the offending mesh/accessor/material for: missing file, truncated
+    /// buffer, accessor out of range, NaN/Inf vertex data, unsupported required
+    /// extension, empty scene. Recoverable problems (degenerate triangles,
+    /// missing texture image) are warnings, and loading goes on.
+    static std::shared_ptr<Scene> load(const std::filesystem::path& file, const SceneLoadOptions& options = {});
+
+    /// Evaluates animations and the camera path at `time` (seconds): every
+    /// node's world transform, instances' world and prevWorld (prev = the
+    /// last update's value; on the first update prev = current), lights, the
+    /// camera (prevWorld likewise), and the ray-tracing instances.
+    void update(double time);
+    /// Makes prev equal current everywhere (camera cut / first frame).
+    void cutMotion();
+
+    // Content (public so tests and tools can build scenes in code; call
+    // finalize() after editing).
+    std::string name;
+    std::filesystem::path file;
+    std::vector<Mesh> meshes;
+    std::vector<Material> materials;
+    std::vector<SceneImage> images;
+    std::vector<Node> nodes;
+    std::vector<int> roots;  ///< root nodes of the active glTF scene
+    std::vector<Instance> instances;
+    std::vector<Light> lights;
+    std::vector<Camera> cameras;  ///< glTF cameras (world filled by update); may be empty
+    std::vector<Animation> animations;
+    std::vector<EmissiveTriangle> emissiveTriangles;
+    Environment environment;
+    std::vector<std::string> warnings;
+
+    /// The camera passes render from: a copy of the glTF camera chosen by
+    /// activeCamera (or a default framing the bounds), driven by cameraPath
+    /// when the camera is not animated.
+    Camera camera;
+    int activeCamera = -1;
+    CameraPath cameraPath;
+
+    /// Builds instances from the node hierarchy, fills bounds, emissive
+    /// triangles, a default camera when there is none, and the ray scene.
+    void finalize();
+
+    Bounds bounds() const;  ///< world bounds at the last update
+    float animationLength() const;  ///< longest animation, seconds
+    size_t triangleCount() const;  ///< over instances
+    bool hasMotion() const;  ///< animations or a camera path
+
+    const RayScene& rayScene() const { return *mRayScene; }
+    /// Plain view for kernels; rebuilt by finalize() and update().
+    const SceneView& view() const { return mView; }
+    /// Loads an equirectangular .hdr (Radiance) as the environment.
+    void loadEnvironmentMap(const std::filesystem::path& file);
+
+private:
+    void updateWorldTransforms();
+    void rebuildView();
+    SceneView mView;
+    std::vector<MeshView> mMeshViews;
+    std::vector<MaterialData> mMaterialData;
+    std::vector<ImageView8> mImageViews;
+    std::vector<InstanceView> mInstanceViews;
+    std::unique_ptr<RayScene> mRayScene;
+    std::vector<glm::mat4> mNodeWorld;
+    bool mUpdated = false;
+    glm::mat4 mCameraBase{1.f};  // camera pose before the procedural path
+    bool mCameraAnimated = false;
+};
+
+}  // namespace loom

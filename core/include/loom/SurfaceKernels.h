@@ -1,0 +1,139 @@
+#pragma once
+// Surface evaluation shared by every pass that shades a hit: interpolation of
+// vertex attributes, texture sampling and the glTF metallic-roughness inputs.
+// GBufferRaster's fragment shader implements the same formulas in GLSL; the
+// two are tested against each other.
+#include <cmath>
+
+#include <glm/glm.hpp>
+
+#include "loom/Kernel.h"
+#include "loom/SceneView.h"
+
+namespace loom {
+
+/// sRGB-encoded [0,1] -> linear (IEC 61966-2-1).
+LOOM_HD inline float srgbToLinear(float c) {
+    return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+/// Linear [0,1] -> sRGB-encoded.
+LOOM_HD inline float linearToSrgb(float c) {
+    return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.f / 2.4f) - 0.055f;
+}
+
+/// Bilinear sample with repeat wrapping; texel centres at ((i + 0.5) / w).
+/// sRGB images are decoded before filtering (as GL does for SRGB8_ALPHA8).
+LOOM_HD inline glm::vec4 sampleImage(const ImageView8& img, glm::vec2 uv, bool srgb) {
+    if (!img.texels || img.width == 0 || img.height == 0) return glm::vec4(1.f);
+    const float fx = uv.x * float(img.width) - 0.5f;
+    const float fy = uv.y * float(img.height) - 0.5f;
+    const float x0f = std::floor(fx), y0f = std::floor(fy);
+    const float tx = fx - x0f, ty = fy - y0f;
+    auto wrap = [](int i, int n) { int m = i % n; return m < 0 ? m + n : m; };
+    const int w = int(img.width), h = int(img.height);
+    const int x0 = wrap(int(x0f), w), x1 = wrap(int(x0f) + 1, w);
+    const int y0 = wrap(int(y0f), h), y1 = wrap(int(y0f) + 1, h);
+    auto fetch = [&](int x, int y) {
+        glm::u8vec4 t = img.texels[size_t(y) * img.width + size_t(x)];
+        glm::vec4 c = glm::vec4(t) / 255.f;
+        if (srgb) c = glm::vec4(srgbToLinear(c.r), srgbToLinear(c.g), srgbToLinear(c.b), c.a);
+        return c;
+    };
+    return glm::mix(glm::mix(fetch(x0, y0), fetch(x1, y0), tx), glm::mix(fetch(x0, y1), fetch(x1, y1), tx), ty);
+}
+
+/// Directional albedo of the GGX specular lobe with Schlick Fresnel, from
+/// Karis' analytic fit ("Physically Based Shading on Mobile", 2014).
+LOOM_HD inline glm::vec3 specularAlbedo(glm::vec3 f0, float NdotV, float roughness) {
+    const glm::vec4 c0(-1.f, -0.0275f, -0.572f, 0.022f);
+    const glm::vec4 c1(1.f, 0.0425f, 1.04f, -0.04f);
+    const glm::vec4 r = roughness * c0 + c1;
+    const float a004 = std::fmin(r.x * r.x, std::exp2(-9.28f * NdotV)) * r.x + r.y;
+    const float a = -1.04f * a004 + r.z;
+    const float b = 1.04f * a004 + r.w;
+    return glm::clamp(f0 * a + b, 0.f, 1.f);
+}
+
+/// A primary or secondary hit, evaluated.
+struct SurfaceHit {
+    glm::vec3 posW{0.f};
+    glm::vec3 prevPosW{0.f};    ///< the same surface point last frame (instance's prevWorld)
+    glm::vec3 faceNormalW{0.f}; ///< geometric, facing the viewer for double-sided materials
+    glm::vec3 normalW{0.f};     ///< shading (interpolated, normal-mapped), same side as faceNormalW
+    glm::vec2 uv{0.f};
+    glm::vec3 baseColor{1.f};
+    float alpha = 1.f;
+    float metallic = 0.f;
+    float roughness = 1.f;
+    glm::vec3 emission{0.f};
+    uint32_t material = 0;
+    bool frontFacing = true;
+};
+
+/// Evaluates the surface at barycentrics (u, v) of triangle `prim` of an
+/// instance, seen along direction `rayDir` (from the viewer toward the hit).
+LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v,
+                                      glm::vec3 rayDir) {
+    const InstanceView& inst = scene.instances[instance];
+    const MeshView& mesh = scene.meshes[inst.mesh];
+    const MaterialData& mat = scene.materials[mesh.material];
+    const uint32_t i0 = mesh.indices[3 * prim], i1 = mesh.indices[3 * prim + 1], i2 = mesh.indices[3 * prim + 2];
+    const float w = 1.f - u - v;
+    SurfaceHit s;
+    s.material = mesh.material;
+    const glm::vec3 p0 = mesh.positions[i0], p1 = mesh.positions[i1], p2 = mesh.positions[i2];
+    const glm::vec3 pObj = w * p0 + u * p1 + v * p2;
+    s.posW = glm::vec3(inst.world * glm::vec4(pObj, 1.f));
+    s.prevPosW = glm::vec3(inst.prevWorld * glm::vec4(pObj, 1.f));
+    glm::vec3 fn = glm::normalize(inst.normalMatrix * glm::cross(p1 - p0, p2 - p0));
+    glm::vec3 n = glm::normalize(inst.normalMatrix *
+                                 (w * mesh.normals[i0] + u * mesh.normals[i1] + v * mesh.normals[i2]));
+    s.uv = w * mesh.uvs[i0] + u * mesh.uvs[i1] + v * mesh.uvs[i2];
+    s.frontFacing = glm::dot(fn, rayDir) < 0.f;
+    if (!s.frontFacing && mat.doubleSided) {
+        fn = -fn;
+        n = -n;
+    }
+    if (mat.normalTexture >= 0) {
+        glm::vec4 t4 = w * mesh.tangents[i0] + u * mesh.tangents[i1] + v * mesh.tangents[i2];
+        glm::vec3 t = glm::vec3(inst.world * glm::vec4(glm::vec3(t4), 0.f));
+        t = t - n * glm::dot(n, t);
+        const float tl = glm::length(t);
+        if (tl > 1e-8f) {
+            t /= tl;
+            const glm::vec3 b = glm::cross(n, t) * (t4.w < 0.f ? -1.f : 1.f);
+            glm::vec3 m = glm::vec3(sampleImage(scene.images[mat.normalTexture], s.uv, false)) * 2.f - 1.f;
+            m.x *= mat.normalScale;
+            m.y *= mat.normalScale;
+            const glm::vec3 mapped = t * m.x + b * m.y + n * m.z;
+            if (glm::dot(mapped, mapped) > 1e-12f) n = glm::normalize(mapped);
+        }
+    }
+    s.faceNormalW = fn;
+    s.normalW = n;
+    glm::vec4 base = mat.baseColorFactor;
+    if (mat.baseColorTexture >= 0) base *= sampleImage(scene.images[mat.baseColorTexture], s.uv, true);
+    s.baseColor = glm::vec3(base);
+    s.alpha = base.a;
+    s.metallic = mat.metallicFactor;
+    s.roughness = mat.roughnessFactor;
+    if (mat.metallicRoughnessTexture >= 0) {
+        glm::vec4 mr = sampleImage(scene.images[mat.metallicRoughnessTexture], s.uv, false);
+        s.roughness *= mr.g;
+        s.metallic *= mr.b;
+    }
+    s.metallic = glm::clamp(s.metallic, 0.f, 1.f);
+    s.roughness = glm::clamp(s.roughness, 0.f, 1.f);
+    s.emission = mat.emissiveFactor;
+    if (mat.emissiveTexture >= 0)
+        s.emission *= glm::vec3(sampleImage(scene.images[mat.emissiveTexture], s.uv, true));
+    return s;
+}
+
+/// Diffuse reflectance used for demodulation: baseColor * (1 - metallic).
+LOOM_HD inline glm::vec3 diffuseAlbedo(const SurfaceHit& s) { return s.baseColor * (1.f - s.metallic); }
+
+/// Specular reflectance at normal incidence: mix(0.04, baseColor, metallic).
+LOOM_HD inline glm::vec3 specularF0(const SurfaceHit& s) { return glm::mix(glm::vec3(0.04f), s.baseColor, s.metallic); }
+
+}  // namespace loom
