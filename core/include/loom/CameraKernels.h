@@ -1,6 +1,7 @@
 #pragma once
 // The camera as per-pixel kernels see it (plain data), with primary-ray
 // generation and projection following the conventions in Camera.h.
+#include <cmath>
 #include <cstdint>
 
 #include <glm/glm.hpp>
