@@ -8,3 +8,20 @@
 #else
 #define LOOM_HD
 #endif
+
+#include <cstdint>
+#include <cstring>
+
+namespace loom {
+/// The IEEE bits of a float (for packing barycentrics into integer channels).
+LOOM_HD inline uint32_t floatBits(float f) {
+    uint32_t u;
+    std::memcpy(&u, &f, sizeof u);
+    return u;
+}
+LOOM_HD inline float bitsToFloat(uint32_t u) {
+    float f;
+    std::memcpy(&f, &u, sizeof f);
+    return f;
+}
+}  // namespace loom

@@ -1,0 +1,107 @@
+#include "GBufferRT.h"
+
+#include "GBufferCommon.h"
+#include "GBufferKernels.h"
+#include "loom/Error.h"
+#include "loom/Parallel.h"
+#include "loom/RayScene.h"
+#include "loom/Scene.h"
+
+namespace loom {
+
+using namespace gbuffer;
+
+void GBufferRT::reflect(Reflection& r, const CompileInfo&) const { reflectChannels(r); }
+
+void GBufferRT::declareParams(ParamList& p) {
+    p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
+        .doc("skip back faces of single-sided materials (double-sided ones are always hit)");
+    p.add("alphaTest", &mAlphaTest, true).doc("alpha-masked materials let rays pass below their cutoff");
+}
+
+namespace {
+
+/// Typed output views; data == nullptr for channels nobody consumes.
+struct Outputs {
+    ImageView<glm::vec4> posW, normW, faceNormalW, albedo, specAlbedo, emission;
+    ImageView<glm::vec2> linearZ, pnFwidth, mvec;
+    ImageView<glm::uvec4> vbuffer;
+    ImageView<uint32_t> meshId;
+};
+
+template <class T>
+ImageView<T> viewOf(const PassContext& ctx, const char* name) {
+    Texture* t = ctx.output(name);
+    return t ? t->view<T>() : ImageView<T>{};
+}
+
+void store(const Outputs& o, uint32_t x, uint32_t y, const GBufferSample& g) {
+    if (o.posW.data) o.posW.at(x, y) = g.posW;
+    if (o.normW.data) o.normW.at(x, y) = g.normW;
+    if (o.faceNormalW.data) o.faceNormalW.at(x, y) = g.faceNormalW;
+    if (o.linearZ.data) o.linearZ.at(x, y) = g.linearZ;
+    if (o.pnFwidth.data) o.pnFwidth.at(x, y) = g.pnFwidth;
+    if (o.mvec.data) o.mvec.at(x, y) = g.mvec;
+    if (o.albedo.data) o.albedo.at(x, y) = g.albedo;
+    if (o.specAlbedo.data) o.specAlbedo.at(x, y) = g.specAlbedo;
+    if (o.emission.data) o.emission.at(x, y) = g.emission;
+    if (o.vbuffer.data) o.vbuffer.at(x, y) = g.vbuffer;
+    if (o.meshId.data) o.meshId.at(x, y) = g.meshId;
+}
+
+}  // namespace
+
+void GBufferRT::execute(PassContext& ctx) {
+    const Scene* scene = ctx.scene();
+    if (!scene || !ctx.camera())
+        throwBadInput(ctx.passName(), "GBufferRT needs a scene", "a scene given with --scene",
+                      "render with `loom render --scene data/scenes/cornell_box.gltf ...`");
+    Outputs o{viewOf<glm::vec4>(ctx, kPosW),       viewOf<glm::vec4>(ctx, kNormW),
+              viewOf<glm::vec4>(ctx, kFaceNormalW), viewOf<glm::vec4>(ctx, kAlbedo),
+              viewOf<glm::vec4>(ctx, kSpecAlbedo),  viewOf<glm::vec4>(ctx, kEmission),
+              viewOf<glm::vec2>(ctx, kLinearZ),     viewOf<glm::vec2>(ctx, kPnFwidth),
+              viewOf<glm::vec2>(ctx, kMvec),        viewOf<glm::uvec4>(ctx, kVBuffer),
+              viewOf<uint32_t>(ctx, kMeshId)};
+    const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
+    Camera camera = *ctx.camera();
+    camera.aspect = float(w) / float(h);
+    const CameraData cam = makeCameraData(camera, w, h);
+    const SceneView& view = scene->view();
+    const RayScene& rays = scene->rayScene();
+    const bool cullBack = mCullMode == CullMode::Back;
+    const bool alphaTest = mAlphaTest;
+
+    parallelFor2D(w, h, [&](const Tile& t) {
+        for (uint32_t y = t.y0; y < t.y1; ++y) {
+            for (uint32_t x = t.x0; x < t.x1; ++x) {
+                const glm::vec3 dir = pixelRayDir(cam, x, y);
+                float tMin = 0.f;
+                GBufferSample g = missSample(cam, dir);
+                // Continue past culled back faces and alpha-masked texels, a bounded number of times.
+                for (int layer = 0; layer < 16; ++layer) {
+                    RayHit hit = rays.intersect(cam.origin, dir, tMin);
+                    if (!hit.hit()) break;
+                    const InstanceView& inst = view.instances[hit.instance];
+                    const MaterialData& mat = view.materials[view.meshes[inst.mesh].material];
+                    bool skip = false;
+                    if (cullBack && !mat.doubleSided) {
+                        const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
+                        skip = !s.frontFacing;
+                    }
+                    if (!skip && alphaTest && mat.alphaMask) {
+                        const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
+                        skip = s.alpha < mat.alphaCutoff;
+                    }
+                    if (!skip) {
+                        g = hitSample(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v);
+                        break;
+                    }
+                    tMin = std::nextafter(hit.t, 1e30f);
+                }
+                store(o, x, y, g);
+            }
+        }
+    });
+}
+
+}  // namespace loom
