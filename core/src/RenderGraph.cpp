@@ -67,6 +67,7 @@ struct PassNode {
 struct RenderGraph::Impl {
     GraphDesc desc;
     PluginRegistry& registry;
+    std::shared_ptr<const Scene> scene;
     std::vector<std::unique_ptr<PassNode>> nodes;  // in description order
     std::vector<PassNode*> order;                  // live, in execution order
     std::map<std::string, std::unique_ptr<HistoryEntry>> history;
@@ -111,6 +112,7 @@ std::unique_ptr<PassNode> RenderGraph::Impl::makeNode(const PassDesc& pd, size_t
         throw e.withFile(file);
     }
     n->timing.name = pd.name;
+    if (scene) n->pass->setScene(scene);
     return n;
 }
 
@@ -130,6 +132,7 @@ RenderPass* RenderGraph::pass(const std::string& name) const {
 void RenderGraph::setDesc(GraphDesc desc) {
     std::vector<std::unique_ptr<PassNode>> nodes;
     auto next = std::make_unique<Impl>(std::move(desc), mImpl->registry);
+    next->scene = mImpl->scene;
     for (size_t i = 0; i < next->desc.passes.size(); ++i) {
         const PassDesc& pd = next->desc.passes[i];
         std::unique_ptr<PassNode> kept;
@@ -146,6 +149,12 @@ void RenderGraph::setDesc(GraphDesc desc) {
     mImpl->desc = next->desc;
     mImpl->nodes = std::move(nodes);
     compile(mOptions);
+}
+
+void RenderGraph::setScene(std::shared_ptr<const Scene> scene) {
+    mImpl->scene = std::move(scene);
+    for (auto& n : mImpl->nodes) n->pass->setScene(mImpl->scene);
+    resetHistory();
 }
 
 void RenderGraph::resize(uint32_t width, uint32_t height) {
