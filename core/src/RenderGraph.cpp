@@ -130,24 +130,34 @@ RenderPass* RenderGraph::pass(const std::string& name) const {
 }
 
 void RenderGraph::setDesc(GraphDesc desc) {
-    std::vector<std::unique_ptr<PassNode>> nodes;
     auto next = std::make_unique<Impl>(std::move(desc), mImpl->registry);
     next->scene = mImpl->scene;
-    for (size_t i = 0; i < next->desc.passes.size(); ++i) {
+    const size_t count = next->desc.passes.size();
+    // Create the new passes and set the kept ones' parameters before taking any node from the current graph,
+    // so an unknown type or a bad parameter leaves the graph as it was.
+    std::vector<std::unique_ptr<PassNode>> nodes(count);
+    std::vector<std::unique_ptr<PassNode>*> kept(count, nullptr);
+    for (size_t i = 0; i < count; ++i) {
         const PassDesc& pd = next->desc.passes[i];
-        std::unique_ptr<PassNode> kept;
         for (auto& old : mImpl->nodes)
-            if (old && old->desc.name == pd.name && old->desc.type == pd.type) kept = std::move(old);
-        if (kept) {
-            kept->pass->params().setAll(pd.params, fmt::format("/passes/{}/params", i));
-            kept->desc = pd;
-            nodes.push_back(std::move(kept));
-        } else {
-            nodes.push_back(next->makeNode(pd, i));
-        }
+            if (old->desc.name == pd.name && old->desc.type == pd.type &&
+                std::find(kept.begin(), kept.end(), &old) == kept.end())
+                kept[i] = &old;
+        if (!kept[i]) nodes[i] = next->makeNode(pd, i);
+    }
+    for (size_t i = 0; i < count; ++i)
+        if (kept[i])
+            (*kept[i])->pass->params().setAll(next->desc.passes[i].params, fmt::format("/passes/{}/params", i));
+    for (size_t i = 0; i < count; ++i) {
+        if (!kept[i]) continue;
+        nodes[i] = std::move(*kept[i]);
+        nodes[i]->desc = next->desc.passes[i];
     }
     mImpl->desc = next->desc;
     mImpl->nodes = std::move(nodes);
+    // Dropped passes are destroyed: the old plan must never run again.
+    mCompiled = false;
+    mImpl->order.clear();
     compile(mOptions);
 }
 
@@ -163,7 +173,7 @@ void RenderGraph::resize(uint32_t width, uint32_t height) {
     o.width = width;
     o.height = height;
     compile(o);
-    for (auto& n : mImpl->nodes) n->pass->resetHistory();
+    resetHistory();  // even history of fixed-size fields: a new frame size is a new sequence
 }
 
 void RenderGraph::setParam(const std::string& passName, const std::string& param, const json& value,
@@ -461,6 +471,8 @@ void RenderGraph::compile(const CompileOptions& options) {
                         last = std::max(last, m.node(wi.dst.pass)->position);
                 if (marked.count(key)) last = N;
             }
+            // Observed fields stay readable through fieldTexture() after the frame, like marked outputs.
+            if (observed.count(key)) last = N;
             transients.push_back({ResourceInfo{key, ResourceKind::Transient, f.format, w, h,
                                                textureByteSize(w, h, f.format), p, last, 0},
                                   key});
@@ -496,7 +508,10 @@ void RenderGraph::compile(const CompileOptions& options) {
     plan.transientPeakBytes = peak;
     for (const auto& t : transients) plan.resources.push_back(t.info);
 
-    // 10. Allocate: arena, then history (kept when its declaration is unchanged).
+    // 10. Allocate: arena, then history (kept when its declaration is unchanged). The old plan's memory is
+    //     released here, so until this compile succeeds there is no plan to execute.
+    mCompiled = false;
+    m.order.clear();
     m.transients.clear();
     m.fieldTextures.clear();
     m.arena.reset();
