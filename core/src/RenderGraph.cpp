@@ -1,6 +1,7 @@
 #include "loom/RenderGraph.h"
 
 #include <fnmatch.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -24,8 +25,35 @@ bool globMatch(const std::string& pattern, const std::string& text) {
 
 namespace {
 
-struct AlignedFree {
-    void operator()(std::byte* p) const { std::free(p); }
+/// Memory for transient fields. Anonymous mmap gives page-aligned memory
+/// that the kernel zeroes lazily, so a large arena costs nothing until
+/// touched; a recompile that fits in the current arena keeps it.
+class Arena {
+public:
+    Arena() = default;
+    Arena(const Arena&) = delete;
+    Arena& operator=(const Arena&) = delete;
+    ~Arena() { release(); }
+    bool reserve(size_t bytes) {
+        if (bytes <= mCapacity && bytes * 2 >= mCapacity) return true;
+        release();
+        if (bytes == 0) return true;
+        void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (p == MAP_FAILED) return false;
+        mData = static_cast<std::byte*>(p);
+        mCapacity = bytes;
+        return true;
+    }
+    void release() {
+        if (mData) munmap(mData, mCapacity);
+        mData = nullptr;
+        mCapacity = 0;
+    }
+    std::byte* data() const { return mData; }
+
+private:
+    std::byte* mData = nullptr;
+    size_t mCapacity = 0;
 };
 
 std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }
@@ -71,7 +99,7 @@ struct RenderGraph::Impl {
     std::vector<std::unique_ptr<PassNode>> nodes;  // in description order
     std::vector<PassNode*> order;                  // live, in execution order
     std::map<std::string, std::unique_ptr<HistoryEntry>> history;
-    std::unique_ptr<std::byte, AlignedFree> arena;
+    Arena arena;
     std::vector<std::unique_ptr<Texture>> transients;
     std::map<std::string, Texture*> fieldTextures;
 
@@ -514,18 +542,12 @@ void RenderGraph::compile(const CompileOptions& options) {
     m.order.clear();
     m.transients.clear();
     m.fieldTextures.clear();
-    m.arena.reset();
-    if (peak > 0) {
-        void* mem = std::aligned_alloc(kRowAlignment, alignUp(peak, kRowAlignment));
-        if (!mem)
-            throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
-                                    {}, "render at a smaller size"});
-        std::memset(mem, 0, alignUp(peak, kRowAlignment));
-        m.arena.reset(static_cast<std::byte*>(mem));
-    }
+    if (!m.arena.reserve(peak))
+        throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
+                                {}, "render at a smaller size"});
     for (const auto& t : transients) {
         auto tex = std::make_unique<Texture>(
-            Texture::wrap(m.arena.get() + t.info.offset, t.info.width, t.info.height, t.info.format));
+            Texture::wrap(m.arena.data() + t.info.offset, t.info.width, t.info.height, t.info.format));
         m.fieldTextures[t.key] = tex.get();
         m.transients.push_back(std::move(tex));
     }
