@@ -1,4 +1,4 @@
-// loom: render graphs headless, check them, list passes.
+// loom: render graphs headless, check them, list passes, inspect scenes.
 #include <cstdio>
 #include <iostream>
 
@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
     loom::cli::addRenderCommand(app);
     loom::cli::addCheckCommand(app);
     loom::cli::addPassesCommand(app);
+    loom::cli::addSceneCommand(app);
 
     try {
         app.parse(argc, argv);
