@@ -1,4 +1,4 @@
-// loom: render graphs headless, check them, list passes.
+// loom: render graphs headless, check them, list passes, inspect scenes.
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
     loom::cli::addRenderCommand(app);
     loom::cli::addCheckCommand(app);
     loom::cli::addPassesCommand(app);
+    loom::cli::addSceneCommand(app);
 
     try {
         if (argc > 1 && argv[1][0] != '-') {
