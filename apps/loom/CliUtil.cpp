@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <regex>
 
@@ -55,6 +56,34 @@ void ensureWritableDir(const std::string& dir, const std::string& option) {
     if (access(dir.c_str(), W_OK) != 0)
         throwBadInput(option, "folder '" + dir + "' is not writable", "a writable folder",
                       "choose another --out folder or fix its permissions");
+}
+
+CameraPath parseCameraPath(const std::string& text, const std::string& option) {
+    static const std::regex re(R"((static|orbit|dolly)(?::([-+0-9.eE]+))?(?::([-+0-9.eE]+))?)");
+    std::smatch m;
+    if (!std::regex_match(text, m, re))
+        throwBadInput(option, "'" + text + "' is not a camera path",
+                      "static, orbit[:SPEED] or dolly[:SPEED[:AMOUNT]], e.g. orbit:0.5");
+    CameraPath path;
+    path.kind = m[1] == "orbit"   ? CameraPathKind::Orbit
+                : m[1] == "dolly" ? CameraPathKind::Dolly
+                                  : CameraPathKind::Static;
+    auto number = [&](const std::string& s, const char* what) {
+        try {
+            size_t used = 0;
+            const float v = std::stof(s, &used);
+            if (used == s.size() && std::isfinite(v)) return v;
+        } catch (const std::exception&) {
+        }
+        throwBadInput(option, std::string(what) + " '" + s + "' is not a number", "e.g. orbit:0.5 or dolly:1:0.25");
+    };
+    if (m[2].matched) path.speed = number(m[2], "speed");
+    if (m[3].matched) {
+        if (path.kind != CameraPathKind::Dolly)
+            throwBadInput(option, "only dolly takes an amount", "orbit[:SPEED] or dolly[:SPEED[:AMOUNT]]");
+        path.amount = number(m[3], "amount");
+    }
+    return path;
 }
 
 }  // namespace loom::cli

@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 
 #include "loom/Plugin.h"
+#include "loom/Scene.h"
 
 namespace loom::cli {
 
@@ -22,5 +23,9 @@ void ensureWritableDir(const std::string& dir, const std::string& option);
 void addRenderCommand(CLI::App& app);
 void addCheckCommand(CLI::App& app);
 void addPassesCommand(CLI::App& app);
+void addSceneCommand(CLI::App& app);
+
+/// "orbit", "orbit:0.5", "dolly:1:0.25", "static" -> a camera path. Throws loom::Error naming the option.
+CameraPath parseCameraPath(const std::string& text, const std::string& option);
 
 }  // namespace loom::cli

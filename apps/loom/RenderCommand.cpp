@@ -12,6 +12,7 @@
 #include <spdlog/spdlog.h>
 
 #include "CliUtil.h"
+#include "SceneSetup.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
 #include "loom/Parallel.h"
@@ -35,6 +36,7 @@ struct RenderOptions {
     double fps = 60.0;
     bool quiet = false;
     bool poison = false;
+    SceneOptions scene;
 };
 
 std::string frameFileName(const std::string& pass, const std::string& field, uint64_t frame, Format f) {
@@ -61,7 +63,9 @@ void runRender(const RenderOptions& o) {
 
     ThreadLimit threadLimit(o.threads);
     PluginRegistry registry = makeRegistry();
+    std::shared_ptr<Scene> scene = loadScene(o.scene);
     RenderGraph graph(loadGraph(o.graph), registry);
+    if (scene) graph.setScene(scene);
     for (const auto& s : o.set) {
         auto eq = s.find('=');
         auto dot = s.find('.');
@@ -96,6 +100,11 @@ void runRender(const RenderOptions& o) {
         FrameInfo frame;
         frame.frameIndex = o.startFrame + i;
         frame.time = double(frame.frameIndex) / o.fps;
+        if (scene) {
+            beginSceneFrame(*scene, frame.frameIndex, frame.time, width, height);
+            frame.scene = scene.get();
+            frame.camera = &scene->camera;
+        }
         graph.execute(frame);
         for (const auto& out : graph.outputs()) {
             const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
@@ -148,6 +157,7 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_flag("--quiet,-q", o->quiet, "no progress bar or summary");
     cmd->add_flag("--poison", o->poison, "fill transient memory with NaN when its lifetime starts (debug)");
+    addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runRender(*o); });
 }
 

@@ -1,4 +1,5 @@
-// loom: render graphs headless, check them, list passes.
+// loom: render graphs headless, check them, list passes, inspect scenes.
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 
@@ -31,8 +32,17 @@ int main(int argc, char** argv) {
     loom::cli::addRenderCommand(app);
     loom::cli::addCheckCommand(app);
     loom::cli::addPassesCommand(app);
+    loom::cli::addSceneCommand(app);
 
     try {
+        if (argc > 1 && argv[1][0] != '-') {
+            std::vector<std::string> commands;
+            for (const CLI::App* sub : app.get_subcommands({})) commands.push_back(sub->get_name());
+            if (std::find(commands.begin(), commands.end(), argv[1]) == commands.end())
+                loom::throwBadInput(argv[1], std::string("unknown command '") + argv[1] + "'",
+                                    "one of: " + loom::join(commands),
+                                    loom::didYouMean(argv[1], commands, "commands"));
+        }
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
         return app.exit(e);

@@ -72,7 +72,10 @@ void checkOutputFolder(const fs::path& path) {
 void writeAtomically(const fs::path& path, const std::function<void(std::ofstream&, const std::string&)>& write) {
     checkOutputFolder(path);
     static std::atomic<uint64_t> counter{0};
-    const std::string tmp = path.string() + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
+    // A hidden sibling ".<name>.<pid>.<n>.partial": never mistaken for an output, never a glob match.
+    const std::string tmp = (path.parent_path() / ("." + path.filename().string() + "." + std::to_string(::getpid()) +
+                                                   "." + std::to_string(counter++) + ".partial"))
+                                .string();
     auto removeTmp = [&] {
         std::error_code ignored;
         fs::remove(tmp, ignored);

@@ -1,6 +1,7 @@
 #include "loom/Params.h"
 
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include <fmt/format.h>
@@ -140,6 +141,9 @@ void checkNumber(const ParamDecl& d, const json& v, const std::string& where, bo
     }
     if (integer && (x < double(INT32_MIN) || x > double(INT32_MAX)))
         throwBadInput(where, "parameter '" + d.name + "' does not fit a 32-bit integer", "a smaller integer");
+    // A finite double can still overflow the float member (1e300 would be stored as inf).
+    if (!integer && std::fabs(x) > double(std::numeric_limits<float>::max()))
+        throwBadInput(where, "parameter '" + d.name + "' does not fit a 32-bit float", "a smaller number");
 }
 
 }  // namespace

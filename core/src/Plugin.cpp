@@ -94,7 +94,11 @@ void PluginRegistry::scan() {
             if (p.extension() == ".json" && p.filename().string().rfind("libloom_", 0) == 0) {
                 std::ifstream in(p);
                 auto manifest = nlohmann::json::parse(in, nullptr, false);
-                if (manifest.is_discarded() || !manifest.contains("library") || !manifest.contains("types")) {
+                bool valid = manifest.is_object() && manifest.contains("library") && manifest["library"].is_string() &&
+                             manifest.contains("types") && manifest["types"].is_array();
+                if (valid)
+                    for (const auto& t : manifest["types"]) valid = valid && t.is_string();
+                if (!valid) {
                     spdlog::warn("{}: not a valid plugin manifest; ignored", p.string());
                     continue;
                 }
@@ -103,13 +107,14 @@ void PluginRegistry::scan() {
                     auto type = t.get<std::string>();
                     if (!mAnnounced.count(type)) mAnnounced[type] = lib;
                 }
-                seen.insert(lib);
+                if (seen.insert(lib).second) mLibraries.push_back(lib);
             }
         }
         for (const auto& p : entries) {
             fs::path canonical = fs::weakly_canonical(p, ec);
             if (isPluginLibrary(p) && !seen.count(canonical)) {
                 mUnannounced.push_back(canonical);
+                mLibraries.push_back(canonical);
                 seen.insert(canonical);
             }
         }
@@ -185,10 +190,9 @@ std::vector<std::string> PluginRegistry::knownTypes() const {
 
 void PluginRegistry::loadAll() {
     scan();
-    std::set<fs::path> libs;
-    for (const auto& [t, lib] : mAnnounced) libs.insert(lib);
-    for (const auto& lib : mUnannounced) libs.insert(lib);
-    for (const auto& lib : libs) loadLibrary(lib);
+    // Every library found, in search order: also one whose manifest types are all announced by an earlier
+    // library, so that a duplicate type is reported instead of silently hidden.
+    for (const auto& lib : mLibraries) loadLibrary(lib);
 }
 
 std::unique_ptr<RenderPass> PluginRegistry::create(const std::string& type) {

@@ -1,6 +1,7 @@
 #include "loom/RenderGraph.h"
 
 #include <fnmatch.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -24,8 +25,35 @@ bool globMatch(const std::string& pattern, const std::string& text) {
 
 namespace {
 
-struct AlignedFree {
-    void operator()(std::byte* p) const { std::free(p); }
+/// Memory for transient fields. Anonymous mmap gives page-aligned memory
+/// that the kernel zeroes lazily, so a large arena costs nothing until
+/// touched; a recompile that fits in the current arena keeps it.
+class Arena {
+public:
+    Arena() = default;
+    Arena(const Arena&) = delete;
+    Arena& operator=(const Arena&) = delete;
+    ~Arena() { release(); }
+    bool reserve(size_t bytes) {
+        if (bytes <= mCapacity && bytes * 2 >= mCapacity) return true;
+        release();
+        if (bytes == 0) return true;
+        void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (p == MAP_FAILED) return false;
+        mData = static_cast<std::byte*>(p);
+        mCapacity = bytes;
+        return true;
+    }
+    void release() {
+        if (mData) munmap(mData, mCapacity);
+        mData = nullptr;
+        mCapacity = 0;
+    }
+    std::byte* data() const { return mData; }
+
+private:
+    std::byte* mData = nullptr;
+    size_t mCapacity = 0;
 };
 
 std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }
@@ -67,10 +95,11 @@ struct PassNode {
 struct RenderGraph::Impl {
     GraphDesc desc;
     PluginRegistry& registry;
+    std::shared_ptr<const Scene> scene;
     std::vector<std::unique_ptr<PassNode>> nodes;  // in description order
     std::vector<PassNode*> order;                  // live, in execution order
     std::map<std::string, std::unique_ptr<HistoryEntry>> history;
-    std::unique_ptr<std::byte, AlignedFree> arena;
+    Arena arena;
     std::vector<std::unique_ptr<Texture>> transients;
     std::map<std::string, Texture*> fieldTextures;
 
@@ -111,6 +140,7 @@ std::unique_ptr<PassNode> RenderGraph::Impl::makeNode(const PassDesc& pd, size_t
         throw e.withFile(file);
     }
     n->timing.name = pd.name;
+    if (scene) n->pass->setScene(scene);
     return n;
 }
 
@@ -128,24 +158,41 @@ RenderPass* RenderGraph::pass(const std::string& name) const {
 }
 
 void RenderGraph::setDesc(GraphDesc desc) {
-    std::vector<std::unique_ptr<PassNode>> nodes;
     auto next = std::make_unique<Impl>(std::move(desc), mImpl->registry);
-    for (size_t i = 0; i < next->desc.passes.size(); ++i) {
+    next->scene = mImpl->scene;
+    const size_t count = next->desc.passes.size();
+    // Create the new passes and set the kept ones' parameters before taking any node from the current graph,
+    // so an unknown type or a bad parameter leaves the graph as it was.
+    std::vector<std::unique_ptr<PassNode>> nodes(count);
+    std::vector<std::unique_ptr<PassNode>*> kept(count, nullptr);
+    for (size_t i = 0; i < count; ++i) {
         const PassDesc& pd = next->desc.passes[i];
-        std::unique_ptr<PassNode> kept;
         for (auto& old : mImpl->nodes)
-            if (old && old->desc.name == pd.name && old->desc.type == pd.type) kept = std::move(old);
-        if (kept) {
-            kept->pass->params().setAll(pd.params, fmt::format("/passes/{}/params", i));
-            kept->desc = pd;
-            nodes.push_back(std::move(kept));
-        } else {
-            nodes.push_back(next->makeNode(pd, i));
-        }
+            if (old->desc.name == pd.name && old->desc.type == pd.type &&
+                std::find(kept.begin(), kept.end(), &old) == kept.end())
+                kept[i] = &old;
+        if (!kept[i]) nodes[i] = next->makeNode(pd, i);
+    }
+    for (size_t i = 0; i < count; ++i)
+        if (kept[i])
+            (*kept[i])->pass->params().setAll(next->desc.passes[i].params, fmt::format("/passes/{}/params", i));
+    for (size_t i = 0; i < count; ++i) {
+        if (!kept[i]) continue;
+        nodes[i] = std::move(*kept[i]);
+        nodes[i]->desc = next->desc.passes[i];
     }
     mImpl->desc = next->desc;
     mImpl->nodes = std::move(nodes);
+    // Dropped passes are destroyed: the old plan must never run again.
+    mCompiled = false;
+    mImpl->order.clear();
     compile(mOptions);
+}
+
+void RenderGraph::setScene(std::shared_ptr<const Scene> scene) {
+    mImpl->scene = std::move(scene);
+    for (auto& n : mImpl->nodes) n->pass->setScene(mImpl->scene);
+    resetHistory();
 }
 
 void RenderGraph::resize(uint32_t width, uint32_t height) {
@@ -154,7 +201,7 @@ void RenderGraph::resize(uint32_t width, uint32_t height) {
     o.width = width;
     o.height = height;
     compile(o);
-    for (auto& n : mImpl->nodes) n->pass->resetHistory();
+    resetHistory();  // even history of fixed-size fields: a new frame size is a new sequence
 }
 
 void RenderGraph::setParam(const std::string& passName, const std::string& param, const json& value,
@@ -452,6 +499,8 @@ void RenderGraph::compile(const CompileOptions& options) {
                         last = std::max(last, m.node(wi.dst.pass)->position);
                 if (marked.count(key)) last = N;
             }
+            // Observed fields stay readable through fieldTexture() after the frame, like marked outputs.
+            if (observed.count(key)) last = N;
             transients.push_back({ResourceInfo{key, ResourceKind::Transient, f.format, w, h,
                                                textureByteSize(w, h, f.format), p, last, 0},
                                   key});
@@ -487,21 +536,18 @@ void RenderGraph::compile(const CompileOptions& options) {
     plan.transientPeakBytes = peak;
     for (const auto& t : transients) plan.resources.push_back(t.info);
 
-    // 10. Allocate: arena, then history (kept when its declaration is unchanged).
+    // 10. Allocate: arena, then history (kept when its declaration is unchanged). The old plan's memory is
+    //     released here, so until this compile succeeds there is no plan to execute.
+    mCompiled = false;
+    m.order.clear();
     m.transients.clear();
     m.fieldTextures.clear();
-    m.arena.reset();
-    if (peak > 0) {
-        void* mem = std::aligned_alloc(kRowAlignment, alignUp(peak, kRowAlignment));
-        if (!mem)
-            throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
-                                    {}, "render at a smaller size"});
-        std::memset(mem, 0, alignUp(peak, kRowAlignment));
-        m.arena.reset(static_cast<std::byte*>(mem));
-    }
+    if (!m.arena.reserve(peak))
+        throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
+                                {}, "render at a smaller size"});
     for (const auto& t : transients) {
         auto tex = std::make_unique<Texture>(
-            Texture::wrap(m.arena.get() + t.info.offset, t.info.width, t.info.height, t.info.format));
+            Texture::wrap(m.arena.data() + t.info.offset, t.info.width, t.info.height, t.info.format));
         m.fieldTextures[t.key] = tex.get();
         m.transients.push_back(std::move(tex));
     }

@@ -89,6 +89,7 @@ private:
     std::map<std::string, PassTypeInfo> mTypes;                 // registered
     std::map<std::string, std::filesystem::path> mAnnounced;    // type -> library, from manifests
     std::vector<std::filesystem::path> mUnannounced;            // libraries without a manifest
+    std::vector<std::filesystem::path> mLibraries;              // every library found, in search order
     std::map<std::filesystem::path, void*> mHandles;            // loaded libraries
     bool mScanned = false;
 };

@@ -101,6 +101,9 @@ public:
     /// Changes the frame size and recompiles (history resets).
     void resize(uint32_t width, uint32_t height);
 
+    /// Gives every pass (present and future) the scene. Resets history.
+    void setScene(std::shared_ptr<const Scene> scene);
+
     /// Runs every live pass once, then swaps history.
     void execute(const FrameInfo& frame);
     /// Invalidates all history (camera cut, explicit reset).

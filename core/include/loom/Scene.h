@@ -79,6 +79,7 @@ struct Node {
     bool hasMatrix = false;  ///< a static "matrix" node (not animatable)
     glm::mat4 matrix{1.f};
     glm::mat4 local() const;  ///< T * R * S, or matrix
+    std::vector<uint32_t> meshes;  ///< primitives this node draws (indices into Scene::meshes)
     int camera = -1;  ///< index into Scene::cameras
     int light = -1;   ///< index into Scene::lights
 };
@@ -238,6 +239,7 @@ private:
     std::vector<glm::mat4> mNodeWorld;
     bool mUpdated = false;
     glm::mat4 mCameraBase{1.f};  // camera pose before the procedural path
+    Bounds mRestBounds;           // world bounds at time 0: the pivot of camera paths
     bool mCameraAnimated = false;
 };
 

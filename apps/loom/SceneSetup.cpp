@@ -1,0 +1,70 @@
+#include "SceneSetup.h"
+
+#include <cmath>
+#include <regex>
+
+#include "loom/Error.h"
+
+namespace loom::cli {
+
+void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
+    cmd->add_option("--scene,-s", o.scene, "glTF 2.0 scene (.gltf or .glb)");
+    cmd->add_option("--camera-path", o.cameraPath, "camera motion when the scene's camera is not animated: "
+                                                   "static, orbit or dolly")
+        ->capture_default_str();
+    cmd->add_option("--camera-speed", o.cameraSpeed, "orbit: radians per second; dolly: cycles per second")
+        ->capture_default_str();
+    cmd->add_option("--jitter", o.jitter, "sub-pixel camera jitter: none, halton or stratified")->capture_default_str();
+    cmd->add_option("--jitter-count", o.jitterCount, "period of the jitter pattern")->capture_default_str();
+    cmd->add_option("--env", o.env, "environment: an equirectangular .hdr file, or a colour R,G,B");
+}
+
+std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
+    if (o.scene.empty()) return nullptr;
+    CameraPath path;
+    if (o.cameraPath == "static") path.kind = CameraPathKind::Static;
+    else if (o.cameraPath == "orbit") path.kind = CameraPathKind::Orbit;
+    else if (o.cameraPath == "dolly") path.kind = CameraPathKind::Dolly;
+    else
+        throwBadInput("--camera-path", "unknown camera path '" + o.cameraPath + "'", "static, orbit or dolly",
+                      didYouMean(o.cameraPath, {"static", "orbit", "dolly"}, "paths"));
+    if (!std::isfinite(o.cameraSpeed) || std::fabs(o.cameraSpeed) > 1000.f)
+        throwBadInput("--camera-speed", "camera speed must be a finite number", "a value in [-1000, 1000]");
+    path.speed = o.cameraSpeed;
+    JitterPattern jitter;
+    if (o.jitter == "none") jitter = JitterPattern::None;
+    else if (o.jitter == "halton") jitter = JitterPattern::Halton;
+    else if (o.jitter == "stratified") jitter = JitterPattern::Stratified;
+    else
+        throwBadInput("--jitter", "unknown jitter pattern '" + o.jitter + "'", "none, halton or stratified",
+                      didYouMean(o.jitter, {"none", "halton", "stratified"}, "patterns"));
+    if (o.jitterCount == 0 || o.jitterCount > 1024)
+        throwBadInput("--jitter-count", "jitter period out of range", "1 to 1024 samples");
+
+    std::shared_ptr<Scene> scene = Scene::load(o.scene);
+    scene->cameraPath = path;
+    scene->camera.jitterPattern = jitter;
+    scene->camera.jitterSampleCount = o.jitterCount;
+    if (!o.env.empty()) {
+        static const std::regex rgb(R"(\s*([0-9.eE+-]+)\s*,\s*([0-9.eE+-]+)\s*,\s*([0-9.eE+-]+)\s*)");
+        std::smatch m;
+        if (std::regex_match(o.env, m, rgb)) {
+            glm::vec3 c(std::stof(m[1]), std::stof(m[2]), std::stof(m[3]));
+            if (!std::isfinite(c.x + c.y + c.z) || glm::any(glm::lessThan(c, glm::vec3(0.f))))
+                throwBadInput("--env", "environment colour must be finite and non-negative", "R,G,B, e.g. 0.1,0.1,0.1");
+            scene->environment = Environment{};
+            scene->environment.color = c;
+        } else {
+            scene->loadEnvironmentMap(o.env);
+        }
+    }
+    return scene;
+}
+
+void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height) {
+    scene.update(time);
+    scene.camera.aspect = float(width) / float(height);
+    scene.camera.beginFrame(frameIndex);
+}
+
+}  // namespace loom::cli

@@ -1,0 +1,30 @@
+#pragma once
+// Scene options shared by the commands that render (render, bench, view).
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "loom/Scene.h"
+
+namespace loom::cli {
+
+struct SceneOptions {
+    std::string scene;
+    std::string cameraPath = "static";
+    float cameraSpeed = 0.5f;
+    std::string jitter = "none";
+    uint32_t jitterCount = 16;
+    std::string env;
+};
+
+/// Adds --scene, --camera-path, --camera-speed, --jitter, --jitter-count, --env.
+void addSceneOptions(CLI::App* cmd, SceneOptions& o);
+/// Loads the scene and applies the options; nullptr when no --scene was given.
+/// Throws loom::Error (BadInput) for bad values.
+std::shared_ptr<Scene> loadScene(const SceneOptions& o);
+/// Animates the scene to `time` and sets the camera for this frame.
+void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height);
+
+}  // namespace loom::cli

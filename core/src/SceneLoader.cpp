@@ -1,0 +1,1227 @@
+// Scene::load: glTF 2.0 (.gltf and .glb) through tinygltf (Debian's shared
+// library build: no TINYGLTF_IMPLEMENTATION here, and it decodes images with
+// libstb). tinygltf parses; everything it leaves unchecked (accessor ranges,
+// index values, NaNs, degenerate triangles, ...) is validated here before it
+// is read, and every problem is reported as a loom::Error or a warning that
+// names the glTF object it is about.
+#include <spdlog/spdlog.h>
+#include <stb/stb_image.h>
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <glm/gtc/type_ptr.hpp>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <optional>
+
+#include "loom/Error.h"
+#include "loom/Scene.h"
+
+namespace loom {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// Required extensions Loom implements. KHR_mesh_quantization only widens the
+/// accessor types allowed for attributes, which the accessor reader handles.
+const std::vector<std::string> kSupportedRequired = {"KHR_materials_emissive_strength", "KHR_lights_punctual",
+                                                     "KHR_mesh_quantization"};
+
+std::string labelOf(const char* kind, size_t index, const std::string& name) {
+    std::string s = std::string(kind) + "[" + std::to_string(index) + "]";
+    if (!name.empty()) s += " '" + name + "'";
+    return s;
+}
+
+void checkRequiredExtensions(const std::vector<std::string>& required, const std::string& file) {
+    for (const std::string& ext : required) {
+        if (std::find(kSupportedRequired.begin(), kSupportedRequired.end(), ext) != kSupportedRequired.end()) continue;
+        std::string hint = "re-export the file without " + ext;
+        if (ext == "KHR_draco_mesh_compression" || ext == "EXT_meshopt_compression")
+            hint += " (uncompressed geometry), e.g. with gltf-transform";
+        throwBadInput("extensionsRequired", "the file requires extension '" + ext + "', which Loom does not support",
+                      "only these required extensions: " + join(kSupportedRequired), hint, file);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Image decoding (replaces tinygltf's default loader)
+
+/// Shared with the image callback: tinygltf parses buffers and bufferViews
+/// before images, so the callback can check an image's bufferView against
+/// its buffer before reading it (tinygltf does not).
+struct ImageLoadContext {
+    const tinygltf::Model* model = nullptr;
+    std::vector<std::string> failures;  ///< per glTF image: why it could not be decoded ("" = fine)
+};
+
+/// Decodes any image to RGBA8 with stb: 1-3 channel images gain channels and
+/// 16-bit images are reduced to 8 bits by stb itself. A failure is recorded
+/// and loading goes on; the materials that use the image get a warning.
+bool decodeImage(tinygltf::Image* image, const int index, std::string* /*err*/, std::string* /*warn*/, int /*reqWidth*/,
+                 int /*reqHeight*/, const unsigned char* bytes, int size, void* user) {
+    auto* ctx = static_cast<ImageLoadContext*>(user);
+    if (index >= 0 && size_t(index) >= ctx->failures.size()) ctx->failures.resize(size_t(index) + 1);
+    auto fail = [&](std::string why) {
+        if (index >= 0) ctx->failures[size_t(index)] = std::move(why);
+        return true;  // not fatal: the texture is dropped, rendering goes on
+    };
+    if (image->bufferView >= 0) {
+        const auto& views = ctx->model->bufferViews;
+        const auto& view = views[size_t(image->bufferView)];  // index checked by tinygltf
+        const auto& buffer = ctx->model->buffers[size_t(view.buffer)];
+        if (view.byteOffset > buffer.data.size() || view.byteLength > buffer.data.size() - view.byteOffset)
+            return fail("bufferViews[" + std::to_string(image->bufferView) + "] runs past the end of its buffer");
+    }
+    if (!bytes || size <= 0) return fail("the image data is empty");
+    int w = 0, h = 0, channels = 0;
+    unsigned char* data = stbi_load_from_memory(bytes, size, &w, &h, &channels, 4);
+    if (!data) {
+        const char* reason = stbi_failure_reason();
+        return fail(std::string("cannot decode the image (") + (reason ? reason : "unknown format") +
+                    "); PNG and JPEG are supported");
+    }
+    image->width = w;
+    image->height = h;
+    image->component = 4;
+    image->bits = 8;
+    image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+    image->image.assign(data, data + size_t(w) * size_t(h) * 4);
+    stbi_image_free(data);
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Diagnosis when tinygltf refuses a file
+
+std::string readWholeFile(const fs::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+std::string percentDecode(const std::string& s) {
+    std::string out;
+    for (size_t i = 0; i < s.size(); ++i) {
+        if (s[i] == '%' && i + 2 < s.size() && std::isxdigit((unsigned char)s[i + 1]) &&
+            std::isxdigit((unsigned char)s[i + 2])) {
+            out += char(std::stoi(s.substr(i + 1, 2), nullptr, 16));
+            i += 2;
+        } else {
+            out += s[i];
+        }
+    }
+    return out;
+}
+
+/// Bytes a base64 payload decodes to (whitespace and padding ignored).
+size_t base64DecodedSize(const std::string& payload) {
+    size_t n = 0;
+    for (char c : payload)
+        if (std::isalnum((unsigned char)c) || c == '+' || c == '/') ++n;
+    return n * 3 / 4;
+}
+
+/// tinygltf's message, one line, without megabytes of data URI.
+std::string cleanTinyMessage(const std::string& msg) {
+    std::string out;
+    size_t start = 0;
+    while (start < msg.size()) {
+        size_t end = msg.find('\n', start);
+        if (end == std::string::npos) end = msg.size();
+        std::string line = msg.substr(start, end - start);
+        if (line.size() > 160) line = line.substr(0, 160) + "...";
+        if (!line.empty()) out += (out.empty() ? "" : "; ") + line;
+        start = end + 1;
+    }
+    return out.empty() ? "unknown error" : out;
+}
+
+/// tinygltf stops at the first problem with a terse message. Re-reads the
+/// JSON to name the glTF object at fault, then throws.
+[[noreturn]] void failLoad(const fs::path& path, bool binary, const std::string& tinyErr) {
+    const std::string file = path.string();
+    const std::string bytes = readWholeFile(path);
+    std::string jsonText = bytes;
+    std::optional<size_t> binChunk;  // size of a GLB BIN chunk, when there is one
+    if (binary) {
+        auto u32 = [&](size_t at) {
+            uint32_t v;
+            std::memcpy(&v, bytes.data() + at, 4);
+            return v;
+        };
+        if (bytes.size() < 20)
+            throwBadInput("GLB header", "the file is only " + std::to_string(bytes.size()) + " bytes",
+                          "a 12-byte header and a JSON chunk", "the file is truncated", file);
+        if (u32(4) != 2)
+            throwBadInput("GLB header", "GLB container version " + std::to_string(u32(4)), "version 2 (glTF 2.0)", {},
+                          file);
+        if (u32(8) > bytes.size())
+            throwBadInput("GLB header",
+                          "the header gives a length of " + std::to_string(u32(8)) + " bytes but the file has " +
+                              std::to_string(bytes.size()),
+                          "the complete file", "the file is truncated: copy or export it again", file);
+        const size_t jsonLen = u32(12);
+        if (u32(16) != 0x4E4F534Au || 20 + jsonLen > bytes.size())
+            throwBadInput("GLB JSON chunk", "the first chunk is not a complete JSON chunk",
+                          "a JSON chunk of the length its header gives", "the file is truncated or not a GLB", file);
+        jsonText = bytes.substr(20, jsonLen);
+        const size_t binAt = 20 + ((jsonLen + 3) & ~size_t(3));
+        if (binAt + 8 <= bytes.size()) {
+            const size_t binLen = u32(binAt);
+            if (binAt + 8 + binLen > bytes.size())
+                throwBadInput("GLB BIN chunk",
+                              "the chunk header gives " + std::to_string(binLen) + " bytes but only " +
+                                  std::to_string(bytes.size() - binAt - 8) + " follow",
+                              "the complete BIN chunk", "the file is truncated: copy or export it again", file);
+            binChunk = binLen;
+        }
+    }
+    nlohmann::json j;
+    try {
+        j = nlohmann::json::parse(jsonText);
+    } catch (const nlohmann::json::parse_error& e) {
+        throwBadInput("JSON", std::string("the glTF JSON does not parse: ") + e.what(), "valid JSON", {}, file);
+    }
+    if (!j.is_object()) throwBadInput("JSON", "the top level is not an object", "a glTF JSON object", {}, file);
+
+    if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array()) {
+        std::vector<std::string> required;
+        for (const auto& e : j["extensionsRequired"])
+            if (e.is_string()) required.push_back(e.get<std::string>());
+        checkRequiredExtensions(required, file);
+    }
+
+    auto arraySize = [&](const char* key) { return j.contains(key) && j[key].is_array() ? j[key].size() : 0; };
+    auto nameOf = [](const nlohmann::json& o) {
+        return o.is_object() && o.contains("name") && o["name"].is_string() ? o["name"].get<std::string>() : "";
+    };
+
+    // Buffers: the usual failure is data shorter than byteLength (a truncated .bin or data URI).
+    for (size_t i = 0; i < arraySize("buffers"); ++i) {
+        const auto& b = j["buffers"][i];
+        if (!b.is_object()) continue;
+        const std::string where = labelOf("buffers", i, nameOf(b));
+        const uint64_t byteLength = b.value("byteLength", uint64_t(0));
+        const std::string uri = b.value("uri", std::string());
+        uint64_t have = 0;
+        if (uri.empty()) {
+            if (!binary || i != 0 || !binChunk)
+                throwBadInput(where, "the buffer has no uri and there is no GLB BIN chunk for it",
+                              "a uri, or the GLB's BIN chunk for buffer 0", {}, file);
+            have = *binChunk;
+        } else if (uri.rfind("data:", 0) == 0) {
+            const size_t comma = uri.find(";base64,");
+            if (comma == std::string::npos)
+                throwBadInput(where, "the data URI is not base64", "data:application/octet-stream;base64,...", {},
+                              file);
+            have = base64DecodedSize(uri.substr(comma + 8));
+            if (have > byteLength)
+                throwBadInput(where,
+                              "the data URI holds " + std::to_string(have) + " bytes but byteLength says " +
+                                  std::to_string(byteLength),
+                              "byteLength equal to the data size", "fix byteLength or the data", file);
+        } else {
+            const fs::path binPath = path.parent_path() / percentDecode(uri);
+            std::error_code ec;
+            if (!fs::is_regular_file(binPath, ec))
+                throwBadInput(where, "buffer file '" + binPath.string() + "' not found", "the file next to the glTF",
+                              "copy the .bin with the .gltf", file);
+            have = fs::file_size(binPath, ec);
+            if (have > byteLength && !ec)
+                throwBadInput(where,
+                              "buffer file '" + binPath.string() + "' is " + std::to_string(have) +
+                                  " bytes but byteLength says " + std::to_string(byteLength),
+                              "a file of exactly byteLength bytes",
+                              "the .bin does not belong to this .gltf, or byteLength is wrong", file);
+        }
+        if (have < byteLength)
+            throwBadInput(where,
+                          "byteLength is " + std::to_string(byteLength) + " bytes but the data holds only " +
+                              std::to_string(have),
+                          "at least byteLength bytes of data", "the buffer is truncated: copy or export the file again",
+                          file);
+    }
+    // Index accessors (tinygltf checks them before anything else in meshes).
+    const size_t accessorCount = arraySize("accessors");
+    for (size_t m = 0; m < arraySize("meshes"); ++m) {
+        const auto& mesh = j["meshes"][m];
+        if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
+        for (size_t p = 0; p < mesh["primitives"].size(); ++p) {
+            const auto& prim = mesh["primitives"][p];
+            if (!prim.is_object() || !prim.contains("indices") || !prim["indices"].is_number_integer()) continue;
+            const int64_t a = prim["indices"].get<int64_t>();
+            const std::string where =
+                labelOf("meshes", m, nameOf(mesh)) + "/primitives[" + std::to_string(p) + "]/indices";
+            if (a < 0 || uint64_t(a) >= accessorCount)
+                throwBadInput(where, "accessor " + std::to_string(a) + " does not exist",
+                              "an accessor index below " + std::to_string(accessorCount), {}, file);
+            const auto& acc = j["accessors"][size_t(a)];
+            const int64_t view = acc.is_object() ? acc.value("bufferView", int64_t(-1)) : -1;
+            if (view < 0 || uint64_t(view) >= arraySize("bufferViews"))
+                throwBadInput(where, "index accessor " + std::to_string(a) + " has no valid bufferView",
+                              "an index accessor stored in a bufferView", {}, file);
+        }
+    }
+    for (size_t i = 0; i < arraySize("images"); ++i) {
+        const auto& img = j["images"][i];
+        if (!img.is_object() || !img.contains("bufferView")) continue;
+        const int64_t view = img.value("bufferView", int64_t(-1));
+        if (view < 0 || uint64_t(view) >= arraySize("bufferViews"))
+            throwBadInput(labelOf("images", i, nameOf(img)), "bufferView " + std::to_string(view) + " does not exist",
+                          "a bufferView index below " + std::to_string(arraySize("bufferViews")), {}, file);
+    }
+    throwBadInput({}, "tinygltf cannot load the file: " + cleanTinyMessage(tinyErr), "a valid glTF 2.0 file",
+                  "check it with the Khronos glTF Validator (https://github.khronos.org/glTF-Validator/)", file);
+}
+
+// ---------------------------------------------------------------------------
+// Geometry helpers
+
+template <glm::length_t N>
+bool allFinite(const glm::vec<N, float>& v) {
+    for (glm::length_t i = 0; i < N; ++i)
+        if (!std::isfinite(v[i])) return false;
+    return true;
+}
+
+/// Degenerate: the area is zero to float precision (sine of the angle between
+/// the edges below ~1e-7), so no reliable face normal exists.
+bool isDegenerate(const glm::vec3& p0, const glm::vec3& p1, const glm::vec3& p2) {
+    const glm::vec3 e1 = p1 - p0, e2 = p2 - p0;
+    const glm::vec3 c = glm::cross(e1, e2);
+    const float cc = glm::dot(c, c);
+    return !(cc > 1e-14f * glm::dot(e1, e1) * glm::dot(e2, e2)) || !std::isfinite(cc);
+}
+
+/// Any unit vector perpendicular to unit vector n.
+glm::vec3 anyPerpendicular(const glm::vec3& n) {
+    const glm::vec3 axis = std::fabs(n.x) < 0.9f ? glm::vec3(1.f, 0.f, 0.f) : glm::vec3(0.f, 1.f, 0.f);
+    return glm::normalize(glm::cross(axis, n));
+}
+
+/// Per-vertex tangents from the UV mapping: each triangle's dP/du, dP/dv,
+/// area-weighted at its vertices, then Gram-Schmidt against the normal.
+/// Handedness follows glTF's normal-map convention (green = +Y = up in the
+/// image, i.e. towards decreasing v, since glTF's v runs down the image):
+/// the bitangent cross(n, t) * w must point along -dP/dv.
+void generateTangents(Mesh& mesh) {
+    const size_t n = mesh.positions.size();
+    std::vector<glm::vec3> tan(n, glm::vec3(0.f)), bit(n, glm::vec3(0.f));
+    for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+        const uint32_t i[3] = {mesh.indices[t], mesh.indices[t + 1], mesh.indices[t + 2]};
+        const glm::vec3 e1 = mesh.positions[i[1]] - mesh.positions[i[0]];
+        const glm::vec3 e2 = mesh.positions[i[2]] - mesh.positions[i[0]];
+        const glm::vec2 d1 = mesh.uvs[i[1]] - mesh.uvs[i[0]];
+        const glm::vec2 d2 = mesh.uvs[i[2]] - mesh.uvs[i[0]];
+        const float det = d1.x * d2.y - d2.x * d1.y;
+        if (!(std::fabs(det) > 1e-20f)) continue;  // no UV mapping here: contributes nothing
+        const glm::vec3 dpdu = (e1 * d2.y - e2 * d1.y) / det;
+        const glm::vec3 dpdv = (e2 * d1.x - e1 * d2.x) / det;
+        const float area = glm::length(glm::cross(e1, e2));
+        const float lu = glm::length(dpdu), lv = glm::length(dpdv);
+        if (!(lu > 0.f) || !(lv > 0.f) || !std::isfinite(lu) || !std::isfinite(lv)) continue;
+        for (uint32_t v : i) {
+            tan[v] += dpdu * (area / lu);
+            bit[v] += dpdv * (area / lv);
+        }
+    }
+    mesh.tangents.resize(n);
+    for (size_t v = 0; v < n; ++v) {
+        const glm::vec3 nrm = mesh.normals[v];
+        glm::vec3 t = tan[v] - nrm * glm::dot(nrm, tan[v]);
+        const float len = glm::length(t);
+        // A degenerate UV mapping has no preferred direction: any orthonormal tangent will do.
+        t = len > 1e-12f && std::isfinite(len) ? t / len : anyPerpendicular(nrm);
+        const float w = glm::dot(glm::cross(nrm, t), -bit[v]) < 0.f ? -1.f : 1.f;
+        mesh.tangents[v] = glm::vec4(t, w);
+    }
+}
+
+glm::vec3 faceNormal(const glm::vec3& p0, const glm::vec3& p1, const glm::vec3& p2) {
+    return glm::normalize(glm::cross(p1 - p0, p2 - p0));  // counter-clockwise winding faces the viewer
+}
+
+/// Reads one component and converts it to double, applying glTF's
+/// normalised-integer rules (glTF 2.0 section 3.11).
+double componentValue(const unsigned char* p, int type, bool normalized) {
+    switch (type) {
+        case TINYGLTF_COMPONENT_TYPE_BYTE: {
+            int8_t v;
+            std::memcpy(&v, p, 1);
+            return normalized ? std::max(v / 127.0, -1.0) : double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
+            uint8_t v;
+            std::memcpy(&v, p, 1);
+            return normalized ? v / 255.0 : double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_SHORT: {
+            int16_t v;
+            std::memcpy(&v, p, 2);
+            return normalized ? std::max(v / 32767.0, -1.0) : double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+            uint16_t v;
+            std::memcpy(&v, p, 2);
+            return normalized ? v / 65535.0 : double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_INT: {
+            int32_t v;
+            std::memcpy(&v, p, 4);
+            return double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+            uint32_t v;
+            std::memcpy(&v, p, 4);
+            return normalized ? v / 4294967295.0 : double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+            float v;
+            std::memcpy(&v, p, 4);
+            return double(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_DOUBLE: {
+            double v;
+            std::memcpy(&v, p, 8);
+            return v;
+        }
+        default:
+            return 0.0;
+    }
+}
+
+const char* typeName(int type) {
+    switch (type) {
+        case TINYGLTF_TYPE_SCALAR:
+            return "SCALAR";
+        case TINYGLTF_TYPE_VEC2:
+            return "VEC2";
+        case TINYGLTF_TYPE_VEC3:
+            return "VEC3";
+        case TINYGLTF_TYPE_VEC4:
+            return "VEC4";
+        case TINYGLTF_TYPE_MAT2:
+            return "MAT2";
+        case TINYGLTF_TYPE_MAT3:
+            return "MAT3";
+        case TINYGLTF_TYPE_MAT4:
+            return "MAT4";
+        default:
+            return "unknown";
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The importer
+
+class Importer {
+public:
+    Importer(const tinygltf::Model& model, const ImageLoadContext& images, Scene& scene,
+             const SceneLoadOptions& options)
+        : m(model), mImageCtx(images), s(scene), mOptions(options), mFile(scene.file.string()) {}
+
+    void run();
+
+private:
+    /// The elements of accessor `index` (which must be of `expectedType`), flattened, every component
+    /// converted to T. Bounds, sparse substitution and (for floats) NaN/Inf are checked.
+    template <class T>
+    std::vector<T> readAccessor(int index, const std::string& where, int expectedType);
+    std::vector<uint32_t> readIndices(int index, const std::string& where);
+
+    void convertImages();
+    void convertMaterials();
+    void convertMeshes();
+    std::optional<Mesh> convertPrimitive(size_t meshIndex, size_t primIndex);
+    void convertCameras();
+    void convertNodes(const std::vector<int>& roots);
+    void convertAnimations();
+
+    int textureImage(const tinygltf::TextureInfo& info, const std::string& material, const char* slot);
+    int textureImage(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
+                     const std::string& material, const char* slot);
+    uint32_t defaultMaterial();
+    std::string meshLabel(size_t i) const { return labelOf("meshes", i, m.meshes[i].name); }
+
+    [[noreturn]] void fail(const std::string& where, const std::string& what, const std::string& expected = {},
+                           const std::string& suggestion = {}) const {
+        throwBadInput(where, what, expected, suggestion, mFile);
+    }
+    void warn(std::string msg) {
+        spdlog::warn("{}: {}", mFile, msg);
+        s.warnings.push_back(std::move(msg));
+    }
+
+    const tinygltf::Model& m;
+    const ImageLoadContext& mImageCtx;
+    Scene& s;
+    const SceneLoadOptions& mOptions;
+    const std::string mFile;
+    std::vector<int> mImageMap;                   // glTF image -> Scene::images index, -1 when not decoded
+    std::vector<std::vector<uint32_t>> mMeshMap;  // glTF mesh -> Scene::meshes of its primitives
+    int mDefaultMaterial = -1;
+};
+
+template <class T>
+std::vector<T> Importer::readAccessor(int index, const std::string& where, int expectedType) {
+    if (index < 0 || size_t(index) >= m.accessors.size())
+        fail(where, "accessor " + std::to_string(index) + " does not exist",
+             "an accessor index below " + std::to_string(m.accessors.size()));
+    const tinygltf::Accessor& acc = m.accessors[size_t(index)];
+    const std::string at = where + " (accessors[" + std::to_string(index) + "])";
+    if (acc.type != expectedType)
+        fail(at, std::string("accessor type is ") + typeName(acc.type), typeName(expectedType));
+    const int comps = tinygltf::GetNumComponentsInType(uint32_t(acc.type));
+    const int compSize = tinygltf::GetComponentSizeInBytes(uint32_t(acc.componentType));
+    if (comps <= 0 || compSize <= 0) fail(at, "unknown component type " + std::to_string(acc.componentType));
+    const size_t elemSize = size_t(comps) * size_t(compSize);
+    const size_t count = acc.count;
+
+    // Checks that `n` elements of `size` bytes at `stride` from `offset` lie inside bufferView `viewIndex`
+    // and that the bufferView lies inside its buffer; returns the first byte.
+    auto locate = [&](int viewIndex, size_t offset, size_t n, size_t size, size_t stride,
+                      const std::string& what) -> const unsigned char* {
+        if (viewIndex < 0 || size_t(viewIndex) >= m.bufferViews.size())
+            fail(at, what + "bufferView " + std::to_string(viewIndex) + " does not exist",
+                 "a bufferView index below " + std::to_string(m.bufferViews.size()));
+        const tinygltf::BufferView& view = m.bufferViews[size_t(viewIndex)];
+        const std::string viewLabel = "bufferViews[" + std::to_string(viewIndex) + "]";
+        if (view.buffer < 0 || size_t(view.buffer) >= m.buffers.size())
+            fail(viewLabel, "buffer " + std::to_string(view.buffer) + " does not exist",
+                 "a buffer index below " + std::to_string(m.buffers.size()));
+        const size_t bufferSize = m.buffers[size_t(view.buffer)].data.size();
+        if (view.byteOffset > bufferSize || view.byteLength > bufferSize - view.byteOffset)
+            fail(viewLabel,
+                 "bytes " + std::to_string(view.byteOffset) + " to " +
+                     std::to_string(uint64_t(view.byteOffset) + view.byteLength) + " run past the end of buffers[" +
+                     std::to_string(view.buffer) + "] (" + std::to_string(bufferSize) + " bytes)",
+                 "a bufferView inside its buffer", "the buffer (.bin) is truncated, or the file is corrupt");
+        if (n == 0) return nullptr;
+        // Overflow-safe form of offset + (n - 1) * stride + size <= byteLength.
+        const size_t len = view.byteLength;
+        const bool fits =
+            offset <= len && size <= len - offset && (n - 1) <= (len - offset - size) / std::max<size_t>(stride, 1);
+        if (!fits)
+            fail(at,
+                 what + std::to_string(n) + " elements of " + std::to_string(size) + " bytes (stride " +
+                     std::to_string(stride) + ") from byte " + std::to_string(offset) + " do not fit in " + viewLabel +
+                     " (" + std::to_string(len) + " bytes)",
+                 "count, byteOffset and byteStride that stay inside the bufferView",
+                 "the accessor or bufferView is wrong, or the buffer is truncated");
+        return m.buffers[size_t(view.buffer)].data.data() + view.byteOffset + offset;
+    };
+
+    const unsigned char* base = nullptr;
+    size_t stride = elemSize;
+    if (acc.bufferView >= 0) {
+        // locate() bounds the count by the data, so the allocation below is safe.
+        const size_t viewStride =
+            size_t(acc.bufferView) < m.bufferViews.size() ? m.bufferViews[size_t(acc.bufferView)].byteStride : 0;
+        if (viewStride) stride = viewStride;
+        if (stride < elemSize)
+            fail(at, "byteStride " + std::to_string(stride) + " is smaller than an element (" +
+                         std::to_string(elemSize) + " bytes)");
+        base = locate(acc.bufferView, acc.byteOffset, count, elemSize, stride, "");
+    } else if (count > (size_t(1) << 28)) {
+        // Without a bufferView nothing bounds the count (sparse or all-zero accessors).
+        fail(at, "count " + std::to_string(count) + " is implausibly large for an accessor without a bufferView");
+    }
+    std::vector<T> out(count * size_t(comps), T(0));  // no bufferView: zeros (glTF 2.0 section 3.6.2.3)
+    if (base) {
+        for (size_t i = 0; i < count; ++i)
+            for (int c = 0; c < comps; ++c)
+                out[i * size_t(comps) + size_t(c)] = T(componentValue(base + i * stride + size_t(c) * size_t(compSize),
+                                                                      acc.componentType, acc.normalized));
+    }
+    if (acc.sparse.isSparse && acc.sparse.count > 0) {
+        // Sparse substitution (glTF 2.0 section 3.6.2.3): indices and values are tightly packed.
+        const size_t n = size_t(acc.sparse.count);
+        const int indexType = acc.sparse.indices.componentType;
+        const int indexSize = tinygltf::GetComponentSizeInBytes(uint32_t(indexType));
+        if (indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+            indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+            fail(at, "sparse indices have component type " + std::to_string(indexType), "unsigned byte, short or int");
+        const unsigned char* idx = locate(acc.sparse.indices.bufferView, size_t(acc.sparse.indices.byteOffset), n,
+                                          size_t(indexSize), size_t(indexSize), "sparse indices: ");
+        const unsigned char* val = locate(acc.sparse.values.bufferView, size_t(acc.sparse.values.byteOffset), n,
+                                          elemSize, elemSize, "sparse values: ");
+        for (size_t k = 0; k < n; ++k) {
+            const double target = componentValue(idx + k * size_t(indexSize), indexType, false);
+            if (target >= double(count))
+                fail(at, "sparse index " + std::to_string(uint64_t(target)) + " is out of range",
+                     "below the accessor count " + std::to_string(count));
+            for (int c = 0; c < comps; ++c)
+                out[size_t(target) * size_t(comps) + size_t(c)] = T(componentValue(
+                    val + k * elemSize + size_t(c) * size_t(compSize), acc.componentType, acc.normalized));
+        }
+    }
+    if constexpr (std::is_floating_point_v<T>) {
+        for (size_t i = 0; i < out.size(); ++i)
+            if (!std::isfinite(out[i]))
+                fail(at,
+                     std::string(std::isnan(out[i]) ? "NaN" : "infinite") + " value in element " +
+                         std::to_string(i / size_t(comps)),
+                     "finite numbers", "fix the exporter or the source data");
+    }
+    return out;
+}
+
+std::vector<uint32_t> Importer::readIndices(int index, const std::string& where) {
+    if (index >= 0 && size_t(index) < m.accessors.size()) {
+        const int type = m.accessors[size_t(index)].componentType;
+        if (type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+            type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+            fail(where + " (accessors[" + std::to_string(index) + "])", "index component type " + std::to_string(type),
+                 "unsigned byte, short or int (5121, 5123, 5125)");
+    }
+    return readAccessor<uint32_t>(index, where, TINYGLTF_TYPE_SCALAR);
+}
+
+void Importer::convertImages() {
+    mImageMap.assign(m.images.size(), -1);
+    for (size_t i = 0; i < m.images.size(); ++i) {
+        const tinygltf::Image& img = m.images[i];
+        if (img.image.empty() || img.width <= 0 || img.height <= 0 || img.component != 4 || img.bits != 8) continue;
+        SceneImage out;
+        out.name = img.name;
+        if (out.name.empty()) out.name = !img.uri.empty() && img.uri.rfind("data:", 0) != 0 ? img.uri : "";
+        if (out.name.empty()) out.name = "image" + std::to_string(i);
+        out.width = uint32_t(img.width);
+        out.height = uint32_t(img.height);
+        out.texels.resize(size_t(out.width) * out.height);
+        std::memcpy(out.texels.data(), img.image.data(), out.texels.size() * 4);
+        mImageMap[i] = int(s.images.size());
+        s.images.push_back(std::move(out));
+    }
+}
+
+int Importer::textureImage(const tinygltf::TextureInfo& info, const std::string& material, const char* slot) {
+    return textureImage(info.index, info.texCoord, info.extensions, material, slot);
+}
+
+int Importer::textureImage(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
+                           const std::string& material, const char* slot) {
+    if (textureIndex < 0) return -1;
+    const std::string where = material + "/" + slot;
+    if (size_t(textureIndex) >= m.textures.size()) {
+        warn(where + ": texture " + std::to_string(textureIndex) + " does not exist; the texture is ignored");
+        return -1;
+    }
+    if (texCoord != 0)
+        warn(where + ": uses TEXCOORD_" + std::to_string(texCoord) + "; only TEXCOORD_0 is supported and used instead");
+    if (extensions.count("KHR_texture_transform"))
+        warn(where + ": KHR_texture_transform is not supported; the texture is mapped without the transform");
+    const int source = m.textures[size_t(textureIndex)].source;
+    if (source < 0 || size_t(source) >= m.images.size()) {
+        warn(where + ": texture " + std::to_string(textureIndex) +
+             " has no image Loom can read (only PNG and JPEG sources); the texture is ignored");
+        return -1;
+    }
+    const int image = mImageMap[size_t(source)];
+    if (image < 0) {
+        const tinygltf::Image& img = m.images[size_t(source)];
+        std::string why = size_t(source) < mImageCtx.failures.size() ? mImageCtx.failures[size_t(source)] : "";
+        if (why.empty())
+            why = !img.uri.empty() ? "image file '" + percentDecode(img.uri) + "' not found or unreadable"
+                                   : "the image could not be decoded";
+        warn(where + ": " + labelOf("images", size_t(source), img.name) + ": " + why + "; the texture is ignored");
+    }
+    return image;
+}
+
+uint32_t Importer::defaultMaterial() {
+    // glTF's default material: white, fully metallic, fully rough (section 3.9.6).
+    if (mDefaultMaterial < 0) {
+        Material mat;
+        mat.name = "default";
+        mDefaultMaterial = int(s.materials.size());
+        s.materials.push_back(mat);
+    }
+    return uint32_t(mDefaultMaterial);
+}
+
+void Importer::convertMaterials() {
+    for (size_t i = 0; i < m.materials.size(); ++i) {
+        const tinygltf::Material& src = m.materials[i];
+        const std::string label = labelOf("materials", i, src.name);
+        Material mat;
+        mat.name = !src.name.empty() ? src.name : "material" + std::to_string(i);
+        const auto& pbr = src.pbrMetallicRoughness;
+        if (pbr.baseColorFactor.size() == 4)
+            mat.baseColorFactor = glm::vec4(float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]),
+                                            float(pbr.baseColorFactor[2]), float(pbr.baseColorFactor[3]));
+        mat.metallicFactor = float(pbr.metallicFactor);  // tinygltf applies glTF's default of 1 when absent
+        mat.roughnessFactor = float(pbr.roughnessFactor);
+        if (src.emissiveFactor.size() == 3)
+            mat.emissiveFactor =
+                glm::vec3(float(src.emissiveFactor[0]), float(src.emissiveFactor[1]), float(src.emissiveFactor[2]));
+        auto strength = src.extensions.find("KHR_materials_emissive_strength");
+        if (strength != src.extensions.end() && strength->second.IsObject()) {
+            const tinygltf::Value& v = strength->second.Get("emissiveStrength");
+            if (v.IsNumber()) mat.emissiveFactor *= float(v.GetNumberAsDouble());
+        }
+        const bool finite = std::isfinite(mat.metallicFactor) && std::isfinite(mat.roughnessFactor) &&
+                            allFinite(mat.baseColorFactor) && allFinite(mat.emissiveFactor);
+        if (!finite)
+            fail(label, "a material factor is NaN or infinite", "finite baseColor, metallic, roughness and emissive");
+        if (glm::any(glm::lessThan(mat.emissiveFactor, glm::vec3(0.f)))) {
+            warn(label + ": negative emissive factor clamped to 0");
+            mat.emissiveFactor = glm::max(mat.emissiveFactor, glm::vec3(0.f));
+        }
+        // Images are kept as stored; the slot decides the decoding when sampled (base colour and emission
+        // are sRGB, metallic-roughness and normal maps linear), so one image may serve both kinds of slot.
+        mat.baseColorTexture = textureImage(pbr.baseColorTexture, label, "baseColorTexture");
+        mat.metallicRoughnessTexture = textureImage(pbr.metallicRoughnessTexture, label, "metallicRoughnessTexture");
+        mat.normalTexture = textureImage(src.normalTexture.index, src.normalTexture.texCoord,
+                                         src.normalTexture.extensions, label, "normalTexture");
+        mat.normalScale = float(src.normalTexture.scale);
+        mat.emissiveTexture = textureImage(src.emissiveTexture, label, "emissiveTexture");
+        mat.doubleSided = src.doubleSided;
+        if (src.alphaMode == "MASK")
+            mat.alphaMode = AlphaMode::Mask;
+        else if (src.alphaMode == "BLEND")
+            mat.alphaMode = AlphaMode::Blend;
+        else if (src.alphaMode != "OPAQUE")
+            warn(label + ": unknown alphaMode '" + src.alphaMode + "'; treated as OPAQUE");
+        mat.alphaCutoff = float(src.alphaCutoff);
+        s.materials.push_back(std::move(mat));
+    }
+}
+
+std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primIndex) {
+    const tinygltf::Primitive& prim = m.meshes[meshIndex].primitives[primIndex];
+    const std::string label = meshLabel(meshIndex) + "/primitives[" + std::to_string(primIndex) + "]";
+    const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        static const char* names[] = {"points", "lines", "line loop", "line strip"};
+        warn(label + ": primitive mode " + (mode >= 0 && mode < 4 ? names[mode] : std::to_string(mode)) +
+             " is not made of triangles; the primitive is skipped");
+        return std::nullopt;
+    }
+    auto attribute = [&](const char* name) {
+        auto it = prim.attributes.find(name);
+        return it == prim.attributes.end() ? -1 : it->second;
+    };
+    const int posAcc = attribute("POSITION");
+    if (posAcc < 0) {
+        warn(label + ": no POSITION attribute; the primitive is skipped");
+        return std::nullopt;
+    }
+
+    Mesh mesh;
+    const std::string& gltfName = m.meshes[meshIndex].name;
+    mesh.name = (gltfName.empty() ? "mesh" + std::to_string(meshIndex) : gltfName) + "/" + std::to_string(primIndex);
+
+    const std::vector<float> pos = readAccessor<float>(posAcc, label + "/POSITION", TINYGLTF_TYPE_VEC3);
+    const size_t vertexCount = pos.size() / 3;
+    mesh.positions.resize(vertexCount);
+    std::memcpy(mesh.positions.data(), pos.data(), pos.size() * sizeof(float));
+
+    auto readMatching = [&](const char* name, int type, size_t comps) -> std::vector<float> {
+        const int acc = attribute(name);
+        if (acc < 0) return {};
+        std::vector<float> v = readAccessor<float>(acc, label + "/" + name, type);
+        if (v.size() / comps != vertexCount)
+            fail(
+                label + "/" + name + " (accessors[" + std::to_string(acc) + "])",
+                "has " + std::to_string(v.size() / comps) + " elements but POSITION has " + std::to_string(vertexCount),
+                "one element per vertex");
+        return v;
+    };
+    const std::vector<float> nrm = readMatching("NORMAL", TINYGLTF_TYPE_VEC3, 3);
+    const std::vector<float> tng = readMatching("TANGENT", TINYGLTF_TYPE_VEC4, 4);
+    const std::vector<float> uv = readMatching("TEXCOORD_0", TINYGLTF_TYPE_VEC2, 2);
+    if (attribute("COLOR_0") >= 0) warn(label + ": vertex colours (COLOR_0) are not supported and are ignored");
+    if (!prim.targets.empty()) warn(label + ": morph targets are not supported; the base shape is used");
+
+    mesh.uvs.assign(vertexCount, glm::vec2(0.f));
+    if (!uv.empty()) std::memcpy(mesh.uvs.data(), uv.data(), uv.size() * sizeof(float));
+
+    std::vector<uint32_t> idx;
+    if (prim.indices >= 0) {
+        idx = readIndices(prim.indices, label + "/indices");
+        for (size_t i = 0; i < idx.size(); ++i)
+            if (idx[i] >= vertexCount)
+                fail(label + "/indices (accessors[" + std::to_string(prim.indices) + "])",
+                     "index " + std::to_string(idx[i]) + " at position " + std::to_string(i) +
+                         " is out of range: the primitive has " + std::to_string(vertexCount) + " vertices",
+                     "indices below the vertex count");
+    } else {
+        idx.resize(vertexCount);  // non-indexed: vertices in order
+        for (size_t i = 0; i < vertexCount; ++i) idx[i] = uint32_t(i);
+    }
+
+    // Strips and fans become lists, keeping glTF's winding (glTF 2.0 section 3.7.2.1).
+    if (mode == TINYGLTF_MODE_TRIANGLE_STRIP || mode == TINYGLTF_MODE_TRIANGLE_FAN) {
+        std::vector<uint32_t> list;
+        for (size_t i = 2; i < idx.size(); ++i) {
+            if (mode == TINYGLTF_MODE_TRIANGLE_FAN)
+                list.insert(list.end(), {idx[0], idx[i - 1], idx[i]});
+            else if (i % 2 == 0)
+                list.insert(list.end(), {idx[i - 2], idx[i - 1], idx[i]});
+            else
+                list.insert(list.end(), {idx[i - 2], idx[i], idx[i - 1]});
+        }
+        idx = std::move(list);
+    } else if (idx.size() % 3 != 0) {
+        warn(label + ": " + std::to_string(idx.size() % 3) + " trailing indices do not form a triangle; ignored");
+        idx.resize(idx.size() - idx.size() % 3);
+    }
+
+    // Degenerate triangles have no face normal and no area to hit: drop them.
+    size_t degenerate = 0;
+    for (size_t t = 0; t < idx.size(); t += 3) {
+        if (isDegenerate(mesh.positions[idx[t]], mesh.positions[idx[t + 1]], mesh.positions[idx[t + 2]])) {
+            ++degenerate;
+            continue;
+        }
+        mesh.indices.insert(mesh.indices.end(), {idx[t], idx[t + 1], idx[t + 2]});
+    }
+    if (degenerate > 0)
+        warn(label + ": " + std::to_string(degenerate) + " degenerate (zero-area) triangle" +
+             (degenerate > 1 ? "s" : "") + " dropped");
+    if (mesh.indices.empty()) {
+        warn(label + ": no triangles left; the primitive is skipped");
+        return std::nullopt;
+    }
+
+    if (nrm.empty()) {
+        // glTF 2.0 section 3.7.2.1: without normals, flat normals. Every triangle gets its own three
+        // vertices, so the normal is constant over it.
+        Mesh flat;
+        flat.name = mesh.name;
+        const size_t n = mesh.indices.size();
+        flat.positions.resize(n);
+        flat.uvs.resize(n);
+        flat.normals.resize(n);
+        if (!tng.empty()) flat.tangents.resize(n);
+        flat.indices.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            const uint32_t v = mesh.indices[i];
+            flat.positions[i] = mesh.positions[v];
+            flat.uvs[i] = mesh.uvs[v];
+            if (!tng.empty()) flat.tangents[i] = glm::make_vec4(&tng[4 * size_t(v)]);
+            flat.indices[i] = uint32_t(i);
+        }
+        for (size_t t = 0; t < n; t += 3) {
+            const glm::vec3 fn = faceNormal(flat.positions[t], flat.positions[t + 1], flat.positions[t + 2]);
+            flat.normals[t] = flat.normals[t + 1] = flat.normals[t + 2] = fn;
+        }
+        mesh = std::move(flat);
+    } else {
+        mesh.normals.resize(vertexCount);
+        // Zero-length normals (seen in exported files) become the average of the adjacent faces' normals.
+        std::vector<glm::vec3> faceSum;
+        size_t repaired = 0;
+        for (size_t v = 0; v < vertexCount; ++v) {
+            const glm::vec3 n = glm::make_vec3(&nrm[3 * v]);
+            const float len = glm::length(n);
+            if (len > 1e-20f) {
+                mesh.normals[v] = n / len;
+                continue;
+            }
+            if (faceSum.empty()) {
+                faceSum.assign(vertexCount, glm::vec3(0.f));
+                for (size_t t = 0; t < mesh.indices.size(); t += 3) {
+                    const uint32_t* i = &mesh.indices[t];
+                    const glm::vec3 c = glm::cross(mesh.positions[i[1]] - mesh.positions[i[0]],
+                                                   mesh.positions[i[2]] - mesh.positions[i[0]]);
+                    for (int k = 0; k < 3; ++k) faceSum[i[k]] += c;  // area-weighted
+                }
+            }
+            const float fl = glm::length(faceSum[v]);
+            mesh.normals[v] = fl > 0.f ? faceSum[v] / fl : glm::vec3(0.f, 0.f, 1.f);
+            ++repaired;
+        }
+        if (repaired > 0)
+            warn(label + ": " + std::to_string(repaired) + " zero-length normals replaced by face normals");
+        if (!tng.empty()) {
+            mesh.tangents.resize(vertexCount);
+            for (size_t v = 0; v < vertexCount; ++v) mesh.tangents[v] = glm::make_vec4(&tng[4 * v]);
+        }
+    }
+
+    if (mesh.tangents.empty()) {
+        if (mOptions.generateTangents) {
+            generateTangents(mesh);
+        } else {
+            mesh.tangents.resize(mesh.positions.size());
+            for (size_t v = 0; v < mesh.positions.size(); ++v)
+                mesh.tangents[v] = glm::vec4(anyPerpendicular(mesh.normals[v]), 1.f);
+        }
+    } else {
+        // File tangents: unit xyz orthogonal to the normal, w exactly +-1, as the shading code assumes.
+        for (size_t v = 0; v < mesh.tangents.size(); ++v) {
+            const glm::vec3 n = mesh.normals[v];
+            glm::vec3 t = glm::vec3(mesh.tangents[v]);
+            t -= n * glm::dot(n, t);
+            const float len = glm::length(t);
+            t = len > 1e-12f ? t / len : anyPerpendicular(n);
+            mesh.tangents[v] = glm::vec4(t, mesh.tangents[v].w < 0.f ? -1.f : 1.f);
+        }
+    }
+
+    if (prim.material >= 0 && size_t(prim.material) < m.materials.size()) {
+        mesh.material = uint32_t(prim.material);
+    } else {
+        if (prim.material >= 0)
+            warn(label + ": material " + std::to_string(prim.material) +
+                 " does not exist; the default material is used");
+        mesh.material = defaultMaterial();
+    }
+    return mesh;
+}
+
+void Importer::convertMeshes() {
+    mMeshMap.resize(m.meshes.size());
+    for (size_t i = 0; i < m.meshes.size(); ++i) {
+        for (size_t p = 0; p < m.meshes[i].primitives.size(); ++p) {
+            std::optional<Mesh> mesh = convertPrimitive(i, p);
+            if (!mesh) continue;
+            mMeshMap[i].push_back(uint32_t(s.meshes.size()));
+            s.meshes.push_back(std::move(*mesh));
+        }
+    }
+}
+
+void Importer::convertCameras() {
+    for (size_t i = 0; i < m.cameras.size(); ++i) {
+        const tinygltf::Camera& src = m.cameras[i];
+        const std::string label = labelOf("cameras", i, src.name);
+        Camera cam;
+        cam.name = !src.name.empty() ? src.name : "camera" + std::to_string(i);
+        if (src.type == "perspective") {
+            const auto& p = src.perspective;
+            if (p.yfov > 0.0 && p.yfov < std::numbers::pi)
+                cam.fovY = float(p.yfov);
+            else
+                warn(label + ": yfov " + std::to_string(p.yfov) + " is not in (0, pi); using " +
+                     std::to_string(cam.fovY));
+            if (p.aspectRatio > 0.0) cam.aspect = float(p.aspectRatio);
+            if (p.znear > 0.0) cam.nearZ = float(p.znear);
+            // No zfar means an infinite projection; a float depth buffer resolves 1e5 x near well.
+            cam.farZ = p.zfar > p.znear ? float(p.zfar) : cam.nearZ * 1e5f;
+        } else {
+            warn(label + ": " + (src.type.empty() ? std::string("untyped") : src.type) +
+                 " camera is not supported; it is replaced by a perspective camera with the same pose");
+            if (src.orthographic.znear >= 0.0 && src.orthographic.zfar > src.orthographic.znear) {
+                cam.nearZ = std::max(float(src.orthographic.znear), 1e-3f);
+                cam.farZ = float(src.orthographic.zfar);
+            }
+        }
+        s.cameras.push_back(std::move(cam));
+    }
+}
+
+void Importer::convertNodes(const std::vector<int>& roots) {
+    bool skinWarned = false;
+    s.nodes.resize(m.nodes.size());
+    for (size_t i = 0; i < m.nodes.size(); ++i) {
+        const tinygltf::Node& src = m.nodes[i];
+        const std::string label = labelOf("nodes", i, src.name);
+        Node& node = s.nodes[i];
+        node.name = !src.name.empty() ? src.name : "node" + std::to_string(i);
+        node.children = src.children;
+        for (int c : node.children)
+            if (c < 0 || size_t(c) >= m.nodes.size())
+                fail(label, "child " + std::to_string(c) + " does not exist",
+                     "a node index below " + std::to_string(m.nodes.size()));
+        auto finite = [](const std::vector<double>& v) {
+            return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+        };
+        if (!finite(src.matrix) || !finite(src.translation) || !finite(src.rotation) || !finite(src.scale))
+            fail(label, "the transform contains NaN or infinite values",
+                 "finite matrix / translation / rotation / scale");
+        if (src.matrix.size() == 16) {
+            node.hasMatrix = true;
+            for (int k = 0; k < 16; ++k) node.matrix[k / 4][k % 4] = float(src.matrix[size_t(k)]);  // column-major
+        } else {
+            if (src.translation.size() == 3)
+                node.translation =
+                    glm::vec3(float(src.translation[0]), float(src.translation[1]), float(src.translation[2]));
+            if (src.rotation.size() == 4) {
+                const glm::vec4 q(float(src.rotation[0]), float(src.rotation[1]), float(src.rotation[2]),
+                                  float(src.rotation[3]));
+                const float len = glm::length(q);
+                node.rotation =
+                    len > 0.f ? glm::quat(q.w / len, q.x / len, q.y / len, q.z / len) : glm::quat(1, 0, 0, 0);
+            }
+            if (src.scale.size() == 3)
+                node.scale = glm::vec3(float(src.scale[0]), float(src.scale[1]), float(src.scale[2]));
+        }
+        if (src.mesh >= 0) {
+            if (size_t(src.mesh) >= m.meshes.size())
+                fail(label, "mesh " + std::to_string(src.mesh) + " does not exist",
+                     "a mesh index below " + std::to_string(m.meshes.size()));
+            node.meshes = mMeshMap[size_t(src.mesh)];
+            if (src.skin >= 0 && !skinWarned) {
+                warn(label + ": skinning is not supported; skinned meshes are drawn in their bind pose");
+                skinWarned = true;
+            }
+        }
+        if (src.camera >= 0) {
+            if (size_t(src.camera) < s.cameras.size())
+                node.camera = src.camera;
+            else
+                warn(label + ": camera " + std::to_string(src.camera) + " does not exist; ignored");
+        }
+    }
+    // Lights are placed while walking the active scene, one Scene::Light per node that references a glTF
+    // light, so that a light used by two nodes shines from both.
+    std::vector<bool> visited(m.nodes.size(), false);
+    std::vector<int> stack(roots.rbegin(), roots.rend());
+    while (!stack.empty()) {
+        const int n = stack.back();
+        stack.pop_back();
+        if (visited[size_t(n)]) continue;  // shared children and cycles are reported by finalize()
+        visited[size_t(n)] = true;
+        const tinygltf::Node& src = m.nodes[size_t(n)];
+        for (auto it = src.children.rbegin(); it != src.children.rend(); ++it) stack.push_back(*it);
+        auto ext = src.extensions.find("KHR_lights_punctual");
+        if (ext == src.extensions.end() || !ext->second.IsObject()) continue;
+        const tinygltf::Value& lv = ext->second.Get("light");
+        const std::string label = labelOf("nodes", size_t(n), src.name);
+        if (!lv.IsNumber() || lv.GetNumberAsInt() < 0 || size_t(lv.GetNumberAsInt()) >= m.lights.size()) {
+            warn(label + ": KHR_lights_punctual light does not exist; ignored");
+            continue;
+        }
+        const size_t li = size_t(lv.GetNumberAsInt());
+        const tinygltf::Light& gl = m.lights[li];
+        Light light;
+        light.name = !gl.name.empty() ? gl.name : "light" + std::to_string(li);
+        if (gl.type == "point") {
+            light.type = LightType::Point;
+        } else if (gl.type == "spot") {
+            light.type = LightType::Spot;
+            light.innerConeAngle = float(gl.spot.innerConeAngle);
+            light.outerConeAngle = float(gl.spot.outerConeAngle);
+        } else if (gl.type == "directional") {
+            light.type = LightType::Directional;
+        } else {
+            warn(labelOf("KHR_lights_punctual lights", li, gl.name) + ": unknown type '" + gl.type + "'; ignored");
+            continue;
+        }
+        if (gl.color.size() == 3) light.color = glm::vec3(float(gl.color[0]), float(gl.color[1]), float(gl.color[2]));
+        light.intensity = float(gl.intensity);
+        light.range = float(gl.range);
+        if (!allFinite(light.color) || !std::isfinite(light.intensity) || !std::isfinite(light.range))
+            fail(labelOf("KHR_lights_punctual lights", li, gl.name), "NaN or infinite light parameters",
+                 "finite color, intensity and range");
+        light.node = n;
+        s.nodes[size_t(n)].light = int(s.lights.size());
+        s.lights.push_back(std::move(light));
+    }
+}
+
+void Importer::convertAnimations() {
+    for (size_t a = 0; a < m.animations.size(); ++a) {
+        const tinygltf::Animation& src = m.animations[a];
+        const std::string label = labelOf("animations", a, src.name);
+        Animation anim;
+        anim.name = !src.name.empty() ? src.name : "animation" + std::to_string(a);
+        for (size_t k = 0; k < src.samplers.size(); ++k) {
+            const tinygltf::AnimationSampler& ss = src.samplers[k];
+            const std::string where = label + "/samplers[" + std::to_string(k) + "]";
+            AnimationSampler sampler;
+            if (ss.interpolation == "STEP") {
+                sampler.interpolation = Interpolation::Step;
+            } else if (ss.interpolation == "CUBICSPLINE") {
+                sampler.interpolation = Interpolation::CubicSpline;
+            } else if (ss.interpolation != "LINEAR") {
+                warn(where + ": unknown interpolation '" + ss.interpolation + "'; LINEAR is used");
+            }
+            sampler.times = readAccessor<float>(ss.input, where + "/input", TINYGLTF_TYPE_SCALAR);
+            if (sampler.times.empty()) fail(where + "/input", "the sampler has no keyframes", "at least one key");
+            for (size_t t = 1; t < sampler.times.size(); ++t)
+                if (sampler.times[t] < sampler.times[t - 1])
+                    fail(where + "/input", "key times decrease at key " + std::to_string(t), "increasing key times");
+            if (sampler.times.front() < 0.f)
+                fail(where + "/input", "negative key time " + std::to_string(sampler.times.front()), "key times >= 0");
+            // The output type depends on the channel that uses the sampler; it is checked per channel below.
+            if (ss.output < 0 || size_t(ss.output) >= m.accessors.size())
+                fail(where + "/output", "accessor " + std::to_string(ss.output) + " does not exist",
+                     "an accessor index below " + std::to_string(m.accessors.size()));
+            const int type = m.accessors[size_t(ss.output)].type;
+            if (type != TINYGLTF_TYPE_VEC3 && type != TINYGLTF_TYPE_VEC4) {
+                anim.samplers.push_back(std::move(sampler));  // e.g. morph weights: unused, kept for indices
+                continue;
+            }
+            const std::vector<float> out = readAccessor<float>(ss.output, where + "/output", type);
+            const size_t comps = type == TINYGLTF_TYPE_VEC3 ? 3 : 4;
+            const size_t expected =
+                sampler.times.size() * (sampler.interpolation == Interpolation::CubicSpline ? 3 : 1);
+            if (out.size() / comps != expected)
+                fail(where + "/output",
+                     "has " + std::to_string(out.size() / comps) + " values for " +
+                         std::to_string(sampler.times.size()) + " keys",
+                     std::to_string(expected) + " values" +
+                         (sampler.interpolation == Interpolation::CubicSpline
+                              ? " (in-tangent, value, out-tangent per key)"
+                              : ""));
+            sampler.values.resize(expected);
+            for (size_t v = 0; v < expected; ++v)
+                sampler.values[v] =
+                    comps == 3 ? glm::vec4(glm::make_vec3(&out[3 * v]), 0.f) : glm::make_vec4(&out[4 * v]);
+            anim.samplers.push_back(std::move(sampler));
+        }
+        bool weightsWarned = false;
+        for (size_t c = 0; c < src.channels.size(); ++c) {
+            const tinygltf::AnimationChannel& ch = src.channels[c];
+            const std::string where = label + "/channels[" + std::to_string(c) + "]";
+            if (ch.target_path == "weights") {
+                if (!weightsWarned) warn(where + ": morph-target weight animation is not supported; ignored");
+                weightsWarned = true;
+                continue;
+            }
+            AnimationChannel out;
+            size_t comps = 3;
+            if (ch.target_path == "translation") {
+                out.path = AnimPath::Translation;
+            } else if (ch.target_path == "rotation") {
+                out.path = AnimPath::Rotation;
+                comps = 4;
+            } else if (ch.target_path == "scale") {
+                out.path = AnimPath::Scale;
+            } else {
+                warn(where + ": unknown target path '" + ch.target_path + "'; ignored");
+                continue;
+            }
+            if (ch.target_node < 0) continue;  // targets defined by an extension Loom does not know
+            if (size_t(ch.target_node) >= m.nodes.size())
+                fail(where, "target node " + std::to_string(ch.target_node) + " does not exist",
+                     "a node index below " + std::to_string(m.nodes.size()));
+            if (ch.sampler < 0 || size_t(ch.sampler) >= anim.samplers.size())
+                fail(where, "sampler " + std::to_string(ch.sampler) + " does not exist",
+                     "a sampler index below " + std::to_string(anim.samplers.size()));
+            const tinygltf::Accessor& outAcc = m.accessors[size_t(src.samplers[size_t(ch.sampler)].output)];
+            if (size_t(tinygltf::GetNumComponentsInType(uint32_t(outAcc.type))) != comps)
+                fail(where, "the sampler's output is " + std::string(typeName(outAcc.type)) + " but " + ch.target_path +
+                                " needs " + (comps == 3 ? "VEC3" : "VEC4"));
+            if (s.nodes[size_t(ch.target_node)].hasMatrix) {
+                warn(where + ": targets " +
+                     labelOf("nodes", size_t(ch.target_node), m.nodes[size_t(ch.target_node)].name) +
+                     ", which has a matrix (glTF forbids animating it); ignored");
+                continue;
+            }
+            out.node = ch.target_node;
+            out.sampler = uint32_t(ch.sampler);
+            anim.channels.push_back(out);
+        }
+        s.animations.push_back(std::move(anim));
+    }
+}
+
+void Importer::run() {
+    checkRequiredExtensions(m.extensionsRequired, mFile);
+    for (const std::string& ext : m.extensionsUsed) {
+        const bool handled =
+            std::find(kSupportedRequired.begin(), kSupportedRequired.end(), ext) != kSupportedRequired.end();
+        if (!handled) warn("extension '" + ext + "' is not supported; its data is ignored");
+    }
+
+    // The active scene: "scene", else the first one; with no scenes at all, every root node.
+    std::vector<bool> isChild(m.nodes.size(), false);
+    for (const tinygltf::Node& n : m.nodes)
+        for (int c : n.children)
+            if (c >= 0 && size_t(c) < m.nodes.size()) isChild[size_t(c)] = true;
+    std::vector<int> roots;
+    if (!m.scenes.empty()) {
+        size_t si = 0;
+        if (m.defaultScene >= 0 && size_t(m.defaultScene) < m.scenes.size())
+            si = size_t(m.defaultScene);
+        else if (m.defaultScene >= 0)
+            warn("scene " + std::to_string(m.defaultScene) + " does not exist; scenes[0] is shown");
+        roots = m.scenes[si].nodes;
+        s.name = m.scenes[si].name;
+        for (int r : roots)
+            if (r < 0 || size_t(r) >= m.nodes.size())
+                fail(labelOf("scenes", si, m.scenes[si].name), "node " + std::to_string(r) + " does not exist",
+                     "a node index below " + std::to_string(m.nodes.size()));
+        if (roots.empty())
+            fail(labelOf("scenes", si, m.scenes[si].name), "scene has no triangles (it has no nodes)",
+                 "a scene with at least one mesh");
+        // A scene lists root nodes only, once each; anything else would instance meshes twice.
+        std::vector<int> unique;
+        for (int r : roots) {
+            if (isChild[size_t(r)])
+                warn(labelOf("scenes", si, m.scenes[si].name) + ": " +
+                     labelOf("nodes", size_t(r), m.nodes[size_t(r)].name) +
+                     " is listed as a root but is the child of another node; it is shown once, under its parent");
+            else if (std::find(unique.begin(), unique.end(), r) == unique.end())
+                unique.push_back(r);
+        }
+        roots = std::move(unique);
+    } else {
+        for (size_t i = 0; i < m.nodes.size(); ++i)
+            if (!isChild[i]) roots.push_back(int(i));
+        if (!roots.empty()) warn("the file defines no scene; all root nodes are shown");
+    }
+    if (s.name.empty()) s.name = s.file.stem().string();
+
+    convertImages();
+    convertMaterials();
+    convertMeshes();
+    convertCameras();
+    convertNodes(roots);
+    convertAnimations();
+    if (s.materials.empty()) defaultMaterial();
+    s.roots = roots;
+    if (s.roots.empty()) fail({}, "scene has no triangles (the file has no nodes)", "at least one node with a mesh");
+
+    try {
+        s.finalize();
+    } catch (const Error& e) {
+        throw e.withFile(mFile);
+    }
+    if (s.triangleCount() == 0)
+        fail({}, "scene has no triangles", "at least one node with a triangle mesh in the active scene",
+             s.warnings.empty() ? "" : "see the warnings above for skipped primitives");
+    s.update(0.0);
+}
+
+}  // namespace
+
+std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const SceneLoadOptions& options) {
+    const std::string name = file.string();
+    std::error_code ec;
+    if (!fs::exists(file, ec))
+        throwBadInput({}, "scene file not found", "a .gltf or .glb file", "check the path", name);
+    if (!fs::is_regular_file(file, ec)) throwBadInput({}, "not a regular file", "a .gltf or .glb file", {}, name);
+
+    // The magic decides, whatever the extension says: "glTF" starts a binary container.
+    char magic[4] = {};
+    {
+        std::ifstream in(file, std::ios::binary);
+        in.read(magic, 4);
+    }
+    const bool binary = std::memcmp(magic, "glTF", 4) == 0;
+    std::string ext = file.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    if (ext == ".glb" && !binary)
+        throwBadInput({}, "the file has a .glb extension but does not start with the GLB magic 'glTF'",
+                      "a binary glTF container", "if it is JSON, rename it to .gltf", name);
+
+    auto scene = std::make_shared<Scene>();
+    scene->file = file;
+
+    tinygltf::Model model;
+    ImageLoadContext images;
+    images.model = &model;
+    tinygltf::TinyGLTF loader;
+    loader.SetImageLoader(&decodeImage, &images);
+    std::string err, warn;
+    const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, name)
+                           : loader.LoadASCIIFromFile(&model, &err, &warn, name);
+    // tinygltf's warnings are about images, which are reported again per material that uses them.
+    if (!warn.empty()) spdlog::debug("{}: tinygltf: {}", name, cleanTinyMessage(warn));
+    if (!ok) failLoad(file, binary, err.empty() ? warn : err);
+
+    Importer(model, images, *scene, options).run();
+    return scene;
+}
+
+}  // namespace loom

@@ -1,0 +1,10 @@
+# Regenerates the pass reference and compares it with the committed docs/PASSES.md.
+execute_process(COMMAND ${LOOM} passes --markdown ${OUT} RESULT_VARIABLE rc OUTPUT_QUIET)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "loom passes --markdown failed (${rc})")
+endif()
+file(READ ${DOC} committed)
+file(READ ${OUT} generated)
+if(NOT committed STREQUAL generated)
+  message(FATAL_ERROR "docs/PASSES.md is out of date: run `build/release/bin/loom passes --markdown docs/PASSES.md`")
+endif()

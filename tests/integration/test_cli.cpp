@@ -1,0 +1,315 @@
+// The loom command line: render (outputs, dumps, frame numbering, stats), check, passes, and the exit code and
+// message of each kind of bad input. Runs the real binary in a fresh folder per test.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "loom/ImageIO.h"
+#include "loom/Texture.h"
+
+namespace fs = std::filesystem;
+
+#define EXPECT_CONTAINS(text, part)                                                             \
+    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" \
+                                                               << (text)
+
+namespace {
+
+struct RunResult {
+    int code = -1;       ///< exit code (-1 when killed by a signal)
+    std::string output;  ///< stdout and stderr
+};
+
+std::string quoted(const std::string& s) {
+    std::string out = "'";
+    for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return out + "'";
+}
+
+const std::string kTestPattern = std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json";
+
+class Cli : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const auto* test = ::testing::UnitTest::GetInstance()->current_test_info();
+        mDir = fs::temp_directory_path() / ("loom_test_cli_" + std::to_string(::getpid()) + "_" + test->name());
+        fs::remove_all(mDir);
+        fs::create_directories(mDir);
+    }
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(mDir, ec);
+    }
+
+    /// Runs `loom ARGS` in the test folder, capturing stdout and stderr.
+    RunResult loom(const std::string& args) const {
+        const std::string cmd =
+            "cd " + quoted(mDir.string()) + " && " + quoted(LOOM_TEST_LOOM_EXE) + " " + args + " 2>&1 </dev/null";
+        RunResult r;
+        FILE* pipe = ::popen(cmd.c_str(), "r");
+        if (!pipe) {
+            ADD_FAILURE() << "popen failed: " << cmd;
+            return r;
+        }
+        char buffer[4096];
+        size_t n;
+        while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
+        const int status = ::pclose(pipe);
+        r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        return r;
+    }
+
+    /// Runs a render of TestPattern at 64x64 into OUT with extra arguments.
+    RunResult render(const std::string& extra, const std::string& graph = kTestPattern) const {
+        return loom("render --graph " + quoted(graph) + " --size 64x64 --out out " + extra);
+    }
+
+    /// Expects exit code 2, a message starting with "error:" that contains every part, and no image written.
+    void expectBadInput(const RunResult& r, const std::vector<std::string>& parts) const {
+        EXPECT_EQ(r.code, 2) << r.output;
+        EXPECT_CONTAINS(r.output, "error:");
+        for (const auto& p : parts) EXPECT_CONTAINS(r.output, p);
+        EXPECT_TRUE(files("out").empty()) << "images written despite the error";
+    }
+
+    fs::path path(const std::string& rel) const { return mDir / rel; }
+
+    void writeText(const std::string& rel, const std::string& text) const {
+        std::ofstream out(path(rel), std::ios::binary);
+        out << text;
+    }
+
+    std::string readText(const std::string& rel) const {
+        std::ifstream in(path(rel), std::ios::binary);
+        std::stringstream s;
+        s << in.rdbuf();
+        return s.str();
+    }
+
+    /// Sorted file names in a sub folder (empty when it does not exist).
+    std::vector<std::string> files(const std::string& rel) const {
+        std::vector<std::string> names;
+        std::error_code ec;
+        if (!fs::is_directory(path(rel), ec)) return names;
+        for (const auto& e : fs::directory_iterator(path(rel))) names.push_back(e.path().filename().string());
+        std::sort(names.begin(), names.end());
+        return names;
+    }
+
+    /// No temporary file of an atomic write (".NAME.PID.N.partial", formerly "NAME.tmp.PID.N") is left anywhere in
+    /// the test folder. (A dump of a field named "tmp", like Blur.tmp.0001.exr, is not one.)
+    void expectNoTemporaries() const {
+        static const std::regex temporary(R"(.*\.tmp\.[0-9]+\.[0-9]+|.*\.partial)");
+        for (const auto& e : fs::recursive_directory_iterator(mDir))
+            EXPECT_FALSE(std::regex_match(e.path().filename().string(), temporary)) << e.path();
+    }
+
+    /// A copy of TestPattern.json with one substring replaced, written to the test folder.
+    std::string patchedGraph(const std::string& from, const std::string& to) const {
+        std::ifstream in(kTestPattern, std::ios::binary);
+        std::stringstream s;
+        s << in.rdbuf();
+        std::string text = s.str();
+        const size_t at = text.find(from);
+        EXPECT_NE(at, std::string::npos) << from;
+        if (at != std::string::npos) text.replace(at, from.size(), to);
+        writeText("graph.json", text);
+        return path("graph.json").string();
+    }
+
+    fs::path mDir;
+};
+
+// ---------------------------------------------------------------------------------------------------------------
+// render
+
+TEST_F(Cli, RenderWritesTheMarkedOutputEveryFrame) {
+    RunResult r = render("--frames 3");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "Rendered 3 frame(s) at 64x64");
+    EXPECT_EQ(files("out"), (std::vector<std::string>{"Display.dst.0000.png", "Display.dst.0001.png",
+                                                      "Display.dst.0002.png"}));
+    loom::Texture img = loom::readImage(path("out/Display.dst.0002.png"));
+    EXPECT_EQ(img.width(), 64u);
+    EXPECT_EQ(img.height(), 64u);
+    expectNoTemporaries();
+}
+
+TEST_F(Cli, RenderDumpsMatchingFieldsOnlyForTheChosenFrames) {
+    RunResult r = render("--frames 3 --dump 'Blur.*' --dump-frames 1");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "3 dump(s)");
+    EXPECT_EQ(files("out"),
+              (std::vector<std::string>{"Blur.dst.0001.exr", "Blur.src.0001.exr", "Blur.tmp.0001.exr",
+                                        "Display.dst.0000.png", "Display.dst.0001.png", "Display.dst.0002.png"}));
+    loom::Texture tmp = loom::readImage(path("out/Blur.tmp.0001.exr"));
+    EXPECT_EQ(tmp.width(), 64u);
+    EXPECT_EQ(tmp.format(), loom::Format::RGBA32F);
+    expectNoTemporaries();
+}
+
+TEST_F(Cli, RenderNumbersFilesFromTheStartFrame) {
+    RunResult r = render("--frames 2 --start-frame 5 -q");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(files("out"), (std::vector<std::string>{"Display.dst.0005.png", "Display.dst.0006.png"}));
+}
+
+TEST_F(Cli, RenderWritesStatsForEveryFrame) {
+    RunResult r = render("--frames 3 -q --stats stats.json");
+    ASSERT_EQ(r.code, 0) << r.output;
+    nlohmann::json stats = nlohmann::json::parse(readText("stats.json"), nullptr, false);
+    ASSERT_FALSE(stats.is_discarded()) << readText("stats.json");
+    EXPECT_EQ(stats["width"], 64);
+    EXPECT_EQ(stats["height"], 64);
+    ASSERT_TRUE(stats["frames"].is_array());
+    ASSERT_EQ(stats["frames"].size(), 3u);
+    for (size_t i = 0; i < 3; ++i) {
+        EXPECT_EQ(stats["frames"][i]["frame"], i);
+        for (const char* pass : {"Pattern", "Blur", "Counter", "Mix", "Display"})
+            EXPECT_TRUE(stats["frames"][i]["passes"][pass]["ms"].is_number()) << pass;
+    }
+    expectNoTemporaries();
+}
+
+TEST_F(Cli, RenderWithPoisonSucceeds) {
+    RunResult r = render("--frames 1 -q --poison --set Blur.radius=1");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(files("out"), (std::vector<std::string>{"Display.dst.0000.png"}));
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Bad input: exit code 2 and a message
+
+TEST_F(Cli, MalformedGraphJsonReportsLineAndColumn) {
+    writeText("bad.json", "{\n  \"loom_graph\": 1,\n  \"passes\": [\n    {\"name\": \"A\" \"type\": \"Constant\"}\n"
+                          "  ],\n  \"outputs\": [\"A.dst\"]\n}\n");
+    RunResult r = render("", path("bad.json").string());
+    expectBadInput(r, {"bad.json", "line 4", "column", "malformed JSON"});
+}
+
+TEST_F(Cli, UnknownPassType) {
+    RunResult r = render("", patchedGraph(R"("type": "Blur")", R"("type": "Blr")"));
+    expectBadInput(r, {"graph.json", "/passes/1/type", "unknown pass type 'Blr'", "did you mean 'Blur'?"});
+}
+
+TEST_F(Cli, UnknownChannel) {
+    RunResult r = render("", patchedGraph(R"(["Pattern.dst", "Blur.src"])", R"(["Pattern.dts", "Blur.src"])"));
+    expectBadInput(r, {"graph.json", "/edges/0/0", "unknown channel 'dts'", "did you mean 'dst'?"});
+}
+
+TEST_F(Cli, MissingGraphFile) {
+    RunResult r = render("", path("nowhere.json").string());
+    expectBadInput(r, {"nowhere.json", "graph file not found"});
+}
+
+TEST_F(Cli, BadSize) {
+    RunResult r = loom("render --graph " + quoted(kTestPattern) + " --size 12by5 --out out");
+    expectBadInput(r, {"--size", "'12by5' is not a size"});
+}
+
+TEST_F(Cli, SetOfAnUnknownParameter) {
+    RunResult r = render("--set Blur.radiuz=3");
+    expectBadInput(r, {"--set Blur.radiuz=3", "unknown parameter 'radiuz'", "did you mean 'radius'?"});
+}
+
+TEST_F(Cli, SetOutOfRange) {
+    RunResult r = render("--set Blur.radius=1000");
+    expectBadInput(r, {"--set Blur.radius=1000", "out of range"});
+}
+
+TEST_F(Cli, SetOfAnUnknownPass) {
+    RunResult r = render("--set Blr.radius=1");
+    expectBadInput(r, {"unknown pass 'Blr'", "did you mean 'Blur'?"});
+}
+
+TEST_F(Cli, UnwritableOutFolder) {
+    writeText("file", "not a folder");
+    RunResult r = loom("render --graph " + quoted(kTestPattern) + " --size 64x64 --out file/sub");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "error:");
+    EXPECT_CONTAINS(r.output, "--out");
+    EXPECT_CONTAINS(r.output, "file/sub");
+    EXPECT_EQ(readText("file"), "not a folder");
+
+    RunResult same = loom("render --graph " + quoted(kTestPattern) + " --size 64x64 --out file");
+    EXPECT_EQ(same.code, 2) << same.output;
+    EXPECT_CONTAINS(same.output, "is not a folder");
+}
+
+TEST_F(Cli, BackwardsDumpFrames) {
+    RunResult r = render("--dump 'Blur.*' --dump-frames 3-1");
+    expectBadInput(r, {"--dump-frames", "'3-1' runs backwards"});
+}
+
+TEST_F(Cli, UnknownOption) {
+    RunResult r = render("--bogus");
+    expectBadInput(r, {"--bogus"});
+}
+
+TEST_F(Cli, UnknownCommand) {
+    RunResult r = loom("frobnicate");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "error:");
+    EXPECT_CONTAINS(r.output, "unknown command 'frobnicate'");
+    EXPECT_CONTAINS(r.output, "render");
+
+    RunResult close = loom("rendr --graph " + quoted(kTestPattern));
+    EXPECT_EQ(close.code, 2) << close.output;
+    EXPECT_CONTAINS(close.output, "did you mean 'render'?");
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// check and passes
+
+TEST_F(Cli, CheckPrintsThePlan) {
+    RunResult r = loom("check " + quoted(kTestPattern) + " --size 64x64");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "Execution order");
+    EXPECT_CONTAINS(r.output, "Blur (Blur)");
+    EXPECT_CONTAINS(r.output, "Memory:");
+    EXPECT_EQ(r.output.find("digraph"), std::string::npos);
+
+    RunResult dot = loom("check " + quoted(kTestPattern) + " --size 64x64 --dot -");
+    ASSERT_EQ(dot.code, 0) << dot.output;
+    EXPECT_CONTAINS(dot.output, "Execution order");
+    EXPECT_CONTAINS(dot.output, "digraph");
+    EXPECT_CONTAINS(dot.output, "\"Pattern\":\"dst\" -> \"Blur\":\"src\"");
+}
+
+TEST_F(Cli, CheckReportsABadGraph) {
+    RunResult r = loom("check " + quoted(patchedGraph(R"(["Mix.dst", "Display.src"])", R"(["Mix.dst", "Display.a"])")));
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "unknown channel 'a'");
+    EXPECT_EQ(r.output.find("Execution order"), std::string::npos);
+}
+
+TEST_F(Cli, PassesListsTheTypes) {
+    RunResult r = loom("passes");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "FrameCounter");
+    EXPECT_CONTAINS(r.output, "readScratchFirst");
+}
+
+TEST_F(Cli, PassesWritesMarkdown) {
+    RunResult r = loom("passes --markdown PASSES.md");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const std::string md = readText("PASSES.md");
+    EXPECT_CONTAINS(md, "# Pass reference");
+    EXPECT_CONTAINS(md, "## Blur");
+    EXPECT_CONTAINS(md, "radius");
+    EXPECT_CONTAINS(md, "## FrameCounter");
+    expectNoTemporaries();
+}
+
+}  // namespace
