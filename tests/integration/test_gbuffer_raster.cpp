@@ -1,7 +1,12 @@
 // GBufferRaster (OpenGL 4.5 through headless EGL): channel values against
 // analytic expectations and against SurfaceKernels.h on tiny scenes built in
 // code, run through the real plugin and RenderGraph.
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -793,4 +798,37 @@ TEST(GBufferRaster, MatchesGBufferRTOnCornellDynamic) {
 
 TEST(GBufferRaster, MatchesGBufferRTOnMaterials) {
     compareWithRayTracer("materials.gltf", 0.0, 0.0, glm::vec2(0.f));
+}
+
+namespace {
+
+/// Runs the loom CLI with a shell prefix (environment), capturing its output.
+int runLoom(const std::string& prefix, const std::string& args, std::string& output) {
+    const std::string cmd = prefix + " '" + std::string(LOOM_TEST_LOOM_EXE) + "' " + args + " 2>&1 </dev/null";
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    if (!pipe) return -1;
+    char buffer[4096];
+    size_t n;
+    while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) output.append(buffer, n);
+    const int status = ::pclose(pipe);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace
+
+// Without a usable EGL (here: GLVND pointed at no vendor library) the run
+// fails with a runtime error that names EGL and says what to do.
+TEST(GBufferRaster, NoEglIsAClearRuntimeError) {
+    const auto out = std::filesystem::temp_directory_path() / ("loom_test_noegl_" + std::to_string(::getpid()));
+    std::string output;
+    const int code = runLoom("__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent/vendor.json",
+                             "render -q --size 16x16 --graph '" + std::string(LOOM_TEST_SOURCE_DIR) +
+                                 "/graphs/GBufferRaster.json' --scene '" + std::string(LOOM_TEST_SOURCE_DIR) +
+                                 "/data/scenes/cornell_box.gltf' --out '" + out.string() + "'",
+                             output);
+    std::filesystem::remove_all(out);
+    EXPECT_EQ(code, 1) << output;
+    EXPECT_NE(output.find("EGL"), std::string::npos) << output;
+    EXPECT_NE(output.find("OpenGL 4.5"), std::string::npos) << output;
+    EXPECT_NE(output.find("GBufferRT"), std::string::npos) << output;  // the alternative
 }
