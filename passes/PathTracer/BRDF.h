@@ -18,19 +18,18 @@
 //         (Heitz 2014, "Understanding the Masking-Shadowing Function in Microfacet-Based BRDFs", JCGT 3(2); the
 //         closed form is glTF Appendix B, "Specular BRDF").
 //   F(f0) Schlick 1994 with VdotH: f0 + (1 - f0) (1 - |wo.h|)^5, h = normalize(wo + wi).
-//   dielectric = F(0.04) D V + (1 - F(0.04)) baseColor / pi
-//   metal      = F(baseColor) D V
-//   f          = mix(dielectric, metal, metallic)
-//              = F(mix(0.04, baseColor, metallic)) D V + (1 - metallic) (1 - F(0.04)) baseColor / pi
-//   (the second form holds because Schlick's F is linear in f0; it is the one evaluated.)
+//   specular   = F(mix(0.04, baseColor, metallic)) D V      (Schlick's F is linear in f0, so the spec's
+//                                                           mix(dielectric, metal, metallic) is one evaluation)
+//   diffuse    = (1 - metallic) baseColor / pi (1 - Fd(n.wi)) (1 - Fd(n.wo)),  Fd = Schlick with f0 = 0.04
+//   f          = specular + diffuse
 //
+//   The diffuse coupling is the one the glTF spec suggests for energy conservation (Appendix B.3.6.3, "Coupling
+//   diffuse and specular reflection"; Burley 2012 / Shirley et al. 1997): light that the dielectric interface
+//   reflects at either direction does not reach the diffuse layer. The spec's reference weight 1 - F(VdotH) creates
+//   energy at grazing views (a white smooth dielectric reflected 1.85x at 89 degrees); this form is reciprocal and
+//   keeps every white albedo <= 1 (test_brdf.cpp, WhiteAlbedoIsAtMostOne, all views up to 89 degrees), at the
+//   price of a slightly darker diffuse lobe (about 0.9 of Lambert head-on).
 //   Single scattering only: rough metals lose the energy of multiple bounces between microfacets, as in the spec.
-//   The spec's diffuse weight 1 - F(VdotH) does not conserve energy, as the spec says itself (Appendix B.3.6.3,
-//   "Coupling diffuse and specular reflection"): at a grazing view the specular lobe reflects F(n.wo) of the light,
-//   but the diffuse lobe's half vectors see small angles of incidence and keep ~0.96 of it. A white dielectric's
-//   directional albedo exceeds 1 beyond ~45 degrees from the normal when smooth (1.59 at 85 degrees, 1.85 at 89) and
-//   only near grazing when rough (1.01 at 89 degrees for roughness 1); metals never exceed 1. test_brdf.cpp measures
-//   it (GltfDielectricCouplingCreatesEnergyAtGrazingViews).
 //
 // Sampling: a one-sample mixture (Veach 1997, thesis section 9.2.4, "the one-sample model") of cosine-weighted
 // hemisphere sampling for the diffuse lobe and GGX visible-normal sampling for the specular lobe (Heitz 2018,
@@ -230,12 +229,12 @@ LOOM_HD inline glm::vec3 brdfF0(const BrdfInputs& in) {
 /// Probability that sampleBrdf() samples the specular lobe, seen from a view with n.wo = NdotV. A heuristic that
 /// only affects variance: the luminance of the specular lobe's directional albedo (Karis' fit, specularAlbedo())
 /// against the diffuse lobe's, clamped to [0.1, 0.9] so neither lobe is starved, or 1 without a diffuse lobe. The
-/// diffuse albedo is (1 - metallic) baseColor (1 - F(VdotH)) averaged, about 0.96 (1 - metallic) baseColor at every
-/// view: the glTF coupling does not dim it at grazing views (see the header), so neither does the estimate.
+/// diffuse albedo is (1 - metallic) baseColor (1 - Fd(n.wo)) times the cosine-weighted mean of 1 - Fd(n.wi), 0.91.
 LOOM_HD inline float specularLobeProbability(const BrdfInputs& in, float NdotV) {
     const float cosV = glm::clamp(NdotV, 0.f, 1.f);
     const float spec = luminance(specularAlbedo(brdfF0(in), cosV, in.roughness));
-    const float diffuse = (1.f - in.metallic) * (1.f - kDielectricF0) * luminance(in.baseColor);
+    const float diffuse = (1.f - in.metallic) * (1.f - schlickWeight(cosV) * (1.f - kDielectricF0) - kDielectricF0) *
+                          0.91f * luminance(in.baseColor);
     if (!(diffuse > 0.f)) return 1.f;
     return glm::clamp(spec / (spec + diffuse), 0.1f, 0.9f);
 }
@@ -256,8 +255,10 @@ LOOM_HD inline glm::vec3 evalBrdfLocal(const BrdfInputs& in, glm::vec3 wo, glm::
     // Schlick's F is linear in f0, so mix(dielectric, metal, metallic) needs one specular evaluation with mixed f0.
     const glm::vec3 fSpec = brdfF0(in) + (glm::vec3(1.f) - brdfF0(in)) * w;
     const glm::vec3 specular = fSpec * (ggxD(h, alpha) * ggxVisibility(wi.z, wo.z, alpha));
-    const float fDielectric = kDielectricF0 + (1.f - kDielectricF0) * w;
-    const glm::vec3 diffuse = ((1.f - in.metallic) * (1.f - fDielectric) * kInvPi) * in.baseColor;
+    // Energy-conserving coupling (see the header): what the interface reflects never reaches the diffuse layer.
+    const float transmitIn = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wi.z));
+    const float transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wo.z));
+    const glm::vec3 diffuse = ((1.f - in.metallic) * transmitIn * transmitOut * kInvPi) * in.baseColor;
     return specular + diffuse;
 }
 
