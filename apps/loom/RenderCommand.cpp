@@ -101,7 +101,7 @@ void runRender(const RenderOptions& o) {
         frame.frameIndex = o.startFrame + i;
         frame.time = double(frame.frameIndex) / o.fps;
         if (scene) {
-            beginSceneFrame(*scene, frame.frameIndex, frame.time, width, height);
+            beginSceneFrame(*scene, frame.frameIndex, frame.time, width, height, i == 0);
             frame.scene = scene.get();
             frame.camera = &scene->camera;
         }

@@ -61,10 +61,13 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
     return scene;
 }
 
-void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height) {
+void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height,
+                     bool firstFrame) {
     scene.update(time);
+    if (firstFrame) scene.cutMotion();
     scene.camera.aspect = float(width) / float(height);
     scene.camera.beginFrame(frameIndex);
+    if (firstFrame) scene.camera.cut();
 }
 
 }  // namespace loom::cli

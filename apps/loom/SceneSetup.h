@@ -24,7 +24,9 @@ void addSceneOptions(CLI::App* cmd, SceneOptions& o);
 /// Loads the scene and applies the options; nullptr when no --scene was given.
 /// Throws loom::Error (BadInput) for bad values.
 std::shared_ptr<Scene> loadScene(const SceneOptions& o);
-/// Animates the scene to `time` and sets the camera for this frame.
-void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height);
+/// Animates the scene to `time` and sets the camera for this frame. The first
+/// frame of a sequence has no motion (prev = current).
+void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height,
+                     bool firstFrame);
 
 }  // namespace loom::cli

@@ -365,6 +365,11 @@ void Scene::cutMotion() {
     rebuildView();
 }
 
+void Scene::setCameraPose(const glm::mat4& world) {
+    mCameraBase = world;
+    camera.world = world;
+}
+
 Bounds Scene::bounds() const {
     Bounds b;
     for (const Instance& inst : instances) {

@@ -140,6 +140,12 @@ std::string cleanTinyMessage(const std::string& msg) {
     return out.empty() ? "unknown error" : out;
 }
 
+/// o[key] when it is an integer, else `fallback` (the JSON under diagnosis may have any types).
+int64_t intOr(const nlohmann::json& o, const char* key, int64_t fallback) {
+    if (!o.is_object() || !o.contains(key) || !o[key].is_number_integer()) return fallback;
+    return o[key].get<int64_t>();
+}
+
 /// tinygltf stops at the first problem with a terse message. Re-reads the
 /// JSON to name the glTF object at fault, then throws.
 [[noreturn]] void failLoad(const fs::path& path, bool binary, const std::string& tinyErr) {
@@ -188,91 +194,97 @@ std::string cleanTinyMessage(const std::string& msg) {
     }
     if (!j.is_object()) throwBadInput("JSON", "the top level is not an object", "a glTF JSON object", {}, file);
 
-    if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array()) {
-        std::vector<std::string> required;
-        for (const auto& e : j["extensionsRequired"])
-            if (e.is_string()) required.push_back(e.get<std::string>());
-        checkRequiredExtensions(required, file);
-    }
-
-    auto arraySize = [&](const char* key) { return j.contains(key) && j[key].is_array() ? j[key].size() : 0; };
-    auto nameOf = [](const nlohmann::json& o) {
-        return o.is_object() && o.contains("name") && o["name"].is_string() ? o["name"].get<std::string>() : "";
-    };
-
-    // Buffers: the usual failure is data shorter than byteLength (a truncated .bin or data URI).
-    for (size_t i = 0; i < arraySize("buffers"); ++i) {
-        const auto& b = j["buffers"][i];
-        if (!b.is_object()) continue;
-        const std::string where = labelOf("buffers", i, nameOf(b));
-        const uint64_t byteLength = b.value("byteLength", uint64_t(0));
-        const std::string uri = b.value("uri", std::string());
-        uint64_t have = 0;
-        if (uri.empty()) {
-            if (!binary || i != 0 || !binChunk)
-                throwBadInput(where, "the buffer has no uri and there is no GLB BIN chunk for it",
-                              "a uri, or the GLB's BIN chunk for buffer 0", {}, file);
-            have = *binChunk;
-        } else if (uri.rfind("data:", 0) == 0) {
-            const size_t comma = uri.find(";base64,");
-            if (comma == std::string::npos)
-                throwBadInput(where, "the data URI is not base64", "data:application/octet-stream;base64,...", {},
-                              file);
-            have = base64DecodedSize(uri.substr(comma + 8));
-            if (have > byteLength)
-                throwBadInput(where,
-                              "the data URI holds " + std::to_string(have) + " bytes but byteLength says " +
-                                  std::to_string(byteLength),
-                              "byteLength equal to the data size", "fix byteLength or the data", file);
-        } else {
-            const fs::path binPath = path.parent_path() / percentDecode(uri);
-            std::error_code ec;
-            if (!fs::is_regular_file(binPath, ec))
-                throwBadInput(where, "buffer file '" + binPath.string() + "' not found", "the file next to the glTF",
-                              "copy the .bin with the .gltf", file);
-            have = fs::file_size(binPath, ec);
-            if (have > byteLength && !ec)
-                throwBadInput(where,
-                              "buffer file '" + binPath.string() + "' is " + std::to_string(have) +
-                                  " bytes but byteLength says " + std::to_string(byteLength),
-                              "a file of exactly byteLength bytes",
-                              "the .bin does not belong to this .gltf, or byteLength is wrong", file);
+    // The checks read the JSON without trusting its types: a type surprise only means there is no better
+    // diagnosis than tinygltf's own message.
+    try {
+        if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array()) {
+            std::vector<std::string> required;
+            for (const auto& e : j["extensionsRequired"])
+                if (e.is_string()) required.push_back(e.get<std::string>());
+            checkRequiredExtensions(required, file);
         }
-        if (have < byteLength)
-            throwBadInput(where,
-                          "byteLength is " + std::to_string(byteLength) + " bytes but the data holds only " +
-                              std::to_string(have),
-                          "at least byteLength bytes of data", "the buffer is truncated: copy or export the file again",
-                          file);
-    }
-    // Index accessors (tinygltf checks them before anything else in meshes).
-    const size_t accessorCount = arraySize("accessors");
-    for (size_t m = 0; m < arraySize("meshes"); ++m) {
-        const auto& mesh = j["meshes"][m];
-        if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
-        for (size_t p = 0; p < mesh["primitives"].size(); ++p) {
-            const auto& prim = mesh["primitives"][p];
-            if (!prim.is_object() || !prim.contains("indices") || !prim["indices"].is_number_integer()) continue;
-            const int64_t a = prim["indices"].get<int64_t>();
-            const std::string where =
-                labelOf("meshes", m, nameOf(mesh)) + "/primitives[" + std::to_string(p) + "]/indices";
-            if (a < 0 || uint64_t(a) >= accessorCount)
-                throwBadInput(where, "accessor " + std::to_string(a) + " does not exist",
-                              "an accessor index below " + std::to_string(accessorCount), {}, file);
-            const auto& acc = j["accessors"][size_t(a)];
-            const int64_t view = acc.is_object() ? acc.value("bufferView", int64_t(-1)) : -1;
+
+        auto arraySize = [&](const char* key) { return j.contains(key) && j[key].is_array() ? j[key].size() : 0; };
+        auto nameOf = [](const nlohmann::json& o) {
+            return o.is_object() && o.contains("name") && o["name"].is_string() ? o["name"].get<std::string>() : "";
+        };
+
+        // Buffers: the usual failure is data shorter than byteLength (a truncated .bin or data URI).
+        for (size_t i = 0; i < arraySize("buffers"); ++i) {
+            const auto& b = j["buffers"][i];
+            if (!b.is_object()) continue;
+            const std::string where = labelOf("buffers", i, nameOf(b));
+            const int64_t byteLength = intOr(b, "byteLength", 0);
+            const std::string uri = b.contains("uri") && b["uri"].is_string() ? b["uri"].get<std::string>() : "";
+            int64_t have = 0;
+            if (uri.empty()) {
+                if (!binary || i != 0 || !binChunk)
+                    throwBadInput(where, "the buffer has no uri and there is no GLB BIN chunk for it",
+                                  "a uri, or the GLB's BIN chunk for buffer 0", {}, file);
+                have = int64_t(*binChunk);
+            } else if (uri.rfind("data:", 0) == 0) {
+                const size_t comma = uri.find(";base64,");
+                if (comma == std::string::npos)
+                    throwBadInput(where, "the data URI is not base64", "data:application/octet-stream;base64,...", {},
+                                  file);
+                have = int64_t(base64DecodedSize(uri.substr(comma + 8)));
+                if (have > byteLength)
+                    throwBadInput(where,
+                                  "the data URI holds " + std::to_string(have) + " bytes but byteLength says " +
+                                      std::to_string(byteLength),
+                                  "byteLength equal to the data size", "fix byteLength or the data", file);
+            } else {
+                const fs::path binPath = path.parent_path() / percentDecode(uri);
+                std::error_code ec;
+                if (!fs::is_regular_file(binPath, ec))
+                    throwBadInput(where, "buffer file '" + binPath.string() + "' not found",
+                                  "the file next to the glTF", "copy the .bin with the .gltf", file);
+                have = int64_t(fs::file_size(binPath, ec));
+                if (have > byteLength && !ec)
+                    throwBadInput(where,
+                                  "buffer file '" + binPath.string() + "' is " + std::to_string(have) +
+                                      " bytes but byteLength says " + std::to_string(byteLength),
+                                  "a file of exactly byteLength bytes",
+                                  "the .bin does not belong to this .gltf, or byteLength is wrong", file);
+            }
+            if (have < byteLength)
+                throwBadInput(where,
+                              "byteLength is " + std::to_string(byteLength) + " bytes but the data holds only " +
+                                  std::to_string(have),
+                              "at least byteLength bytes of data",
+                              "the buffer is truncated: copy or export the file again", file);
+        }
+        // Index accessors (tinygltf checks them before anything else in meshes).
+        const size_t accessorCount = arraySize("accessors");
+        for (size_t m = 0; m < arraySize("meshes"); ++m) {
+            const auto& mesh = j["meshes"][m];
+            if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
+            for (size_t p = 0; p < mesh["primitives"].size(); ++p) {
+                const auto& prim = mesh["primitives"][p];
+                if (!prim.is_object() || !prim.contains("indices") || !prim["indices"].is_number_integer()) continue;
+                const int64_t a = prim["indices"].get<int64_t>();
+                const std::string where =
+                    labelOf("meshes", m, nameOf(mesh)) + "/primitives[" + std::to_string(p) + "]/indices";
+                if (a < 0 || uint64_t(a) >= accessorCount)
+                    throwBadInput(where, "accessor " + std::to_string(a) + " does not exist",
+                                  "an accessor index below " + std::to_string(accessorCount), {}, file);
+                const auto& acc = j["accessors"][size_t(a)];
+                const int64_t view = intOr(acc, "bufferView", -1);
+                if (view < 0 || uint64_t(view) >= arraySize("bufferViews"))
+                    throwBadInput(where, "index accessor " + std::to_string(a) + " has no valid bufferView",
+                                  "an index accessor stored in a bufferView", {}, file);
+            }
+        }
+        for (size_t i = 0; i < arraySize("images"); ++i) {
+            const auto& img = j["images"][i];
+            if (!img.is_object() || !img.contains("bufferView")) continue;
+            const int64_t view = intOr(img, "bufferView", -1);
             if (view < 0 || uint64_t(view) >= arraySize("bufferViews"))
-                throwBadInput(where, "index accessor " + std::to_string(a) + " has no valid bufferView",
-                              "an index accessor stored in a bufferView", {}, file);
+                throwBadInput(labelOf("images", i, nameOf(img)),
+                              "bufferView " + std::to_string(view) + " does not exist",
+                              "a bufferView index below " + std::to_string(arraySize("bufferViews")), {}, file);
         }
-    }
-    for (size_t i = 0; i < arraySize("images"); ++i) {
-        const auto& img = j["images"][i];
-        if (!img.is_object() || !img.contains("bufferView")) continue;
-        const int64_t view = img.value("bufferView", int64_t(-1));
-        if (view < 0 || uint64_t(view) >= arraySize("bufferViews"))
-            throwBadInput(labelOf("images", i, nameOf(img)), "bufferView " + std::to_string(view) + " does not exist",
-                          "a bufferView index below " + std::to_string(arraySize("bufferViews")), {}, file);
+    } catch (const nlohmann::json::exception&) {
     }
     throwBadInput({}, "tinygltf cannot load the file: " + cleanTinyMessage(tinyErr), "a valid glTF 2.0 file",
                   "check it with the Khronos glTF Validator (https://github.khronos.org/glTF-Validator/)", file);
@@ -718,6 +730,10 @@ std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primInde
 
     const std::vector<float> pos = readAccessor<float>(posAcc, label + "/POSITION", TINYGLTF_TYPE_VEC3);
     const size_t vertexCount = pos.size() / 3;
+    if (vertexCount == 0) {
+        warn(label + ": POSITION has no vertices; the primitive is skipped");
+        return std::nullopt;
+    }
     mesh.positions.resize(vertexCount);
     std::memcpy(mesh.positions.data(), pos.data(), pos.size() * sizeof(float));
 

@@ -84,10 +84,8 @@ void GBufferRT::execute(PassContext& ctx) {
                     const InstanceView& inst = view.instances[hit.instance];
                     const MaterialData& mat = view.materials[view.meshes[inst.mesh].material];
                     bool skip = false;
-                    if (cullBack && !mat.doubleSided) {
-                        const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
-                        skip = !s.frontFacing;
-                    }
+                    if (cullBack && !mat.doubleSided)
+                        skip = !facesRay(view, hit.instance, hit.primitive, dir);
                     if (!skip && alphaTest && mat.alphaMask) {
                         const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
                         skip = s.alpha < mat.alphaCutoff;

@@ -976,6 +976,15 @@ TEST_F(SceneFiles, EmptyScene) {
     EXPECT_NE(msg.find("scene has no triangles"), std::string::npos) << msg;
 }
 
+TEST_F(SceneFiles, PrimitiveWithoutVerticesIsSkipped) {
+    Gltf g = triangleScene();
+    const int empty = g.accessor(0, kFloat, 0, "VEC3");
+    g.j["meshes"][0]["primitives"].push_back({{"attributes", {{"POSITION", empty}}}});
+    auto s = load(g);
+    EXPECT_EQ(s->meshes.size(), 1u);
+    EXPECT_TRUE(hasWarning(*s, "'Tri'/primitives[1]", "no vertices"));
+}
+
 TEST_F(SceneFiles, NotGltf) {
     std::string msg = loadError(write("junk.gltf", std::string("{ this is not json")));
     EXPECT_NE(msg.find("JSON"), std::string::npos) << msg;

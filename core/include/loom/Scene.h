@@ -216,6 +216,10 @@ public:
     /// triangles, a default camera when there is none, and the ray scene.
     void finalize();
 
+    /// Places the render camera (the pose a camera path starts from; an
+    /// animated glTF camera ignores it). Takes effect now and at every update.
+    void setCameraPose(const glm::mat4& world);
+
     Bounds bounds() const;  ///< world bounds at the last update
     float animationLength() const;  ///< longest animation, seconds
     size_t triangleCount() const;  ///< over instances

@@ -54,6 +54,17 @@ LOOM_HD inline glm::vec3 specularAlbedo(glm::vec3 f0, float NdotV, float roughne
     return glm::clamp(f0 * a + b, 0.f, 1.f);
 }
 
+/// Does the front face (counter-clockwise winding) of a triangle face a ray
+/// travelling along rayDir? Cheaper than evalSurface, for culling.
+LOOM_HD inline bool facesRay(const SceneView& scene, uint32_t instance, uint32_t prim, glm::vec3 rayDir) {
+    const InstanceView& inst = scene.instances[instance];
+    const MeshView& mesh = scene.meshes[inst.mesh];
+    const uint32_t* idx = mesh.indices + 3 * prim;
+    const glm::vec3 p0 = mesh.positions[idx[0]];
+    const glm::vec3 n = inst.normalMatrix * glm::cross(mesh.positions[idx[1]] - p0, mesh.positions[idx[2]] - p0);
+    return glm::dot(n, rayDir) < 0.f;
+}
+
 /// A primary or secondary hit, evaluated.
 struct SurfaceHit {
     glm::vec3 posW{0.f};

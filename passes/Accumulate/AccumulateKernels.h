@@ -1,0 +1,150 @@
+#pragma once
+// Per-pixel running-mean arithmetic for AccumulatePass: plain functions over a
+// plain per-pixel state, so the same code compiles for CUDA (see loom/Kernel.h).
+//
+// Three ways to keep the running sum, chosen by the pass's `precision`:
+// - Float:  one float sum. Once the sum is large, each new sample loses the
+//           bits below the sum's ulp (after 2^24 samples of 1.0, adding 1.0
+//           does nothing at all).
+// - Kahan:  a float sum plus a float compensation term that collects the
+//           rounding error of every addition (Neumaier's variant of Kahan
+//           summation, which stays correct when a sample is larger than the
+//           sum: A. Neumaier, ZAMM 54, 1974). Error bounded independently of
+//           the frame count, to first order.
+// - Double: a double sum. Every float sample is added exactly until the sum
+//           needs more than 53 bits, so for references of any practical length
+//           the only rounding is the final division.
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <glm/glm.hpp>
+
+#include "loom/Kernel.h"
+
+namespace loom::accumulate {
+
+enum class Precision : uint32_t { Float, Kahan, Double };
+
+/// The running state of one pixel. Which members carry the state depends on
+/// the precision: Float uses `sum`, Kahan `sum` and `compensation`, Double
+/// `sumDouble`; all use `count`.
+struct PixelState {
+    glm::vec4 sum{0.f};
+    glm::vec4 compensation{0.f};
+    glm::dvec4 sumDouble{0.0};
+    uint32_t count = 0;  ///< finite samples in the sum
+};
+
+/// True unless the float is a NaN or an infinity (all exponent bits set). A
+/// bit test rather than std::isfinite, so it holds under any math flags and
+/// in device code.
+LOOM_HD inline bool isFinite(float v) {
+    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
+}
+
+LOOM_HD inline bool isFinite(const glm::vec4& v) {
+    return isFinite(v.x) && isFinite(v.y) && isFinite(v.z) && isFinite(v.w);
+}
+
+/// sum + compensation accumulates x with the rounding error of the float
+/// addition carried in compensation (Neumaier). The error term is exact: for
+/// |a| >= |b|, (a - (a + b)) + b is the rounding error of a + b in IEEE float.
+LOOM_HD inline void neumaierAdd(float& sum, float& compensation, float x) {
+    const float t = sum + x;
+    if (std::fabs(sum) >= std::fabs(x))
+        compensation += (sum - t) + x;
+    else
+        compensation += (x - t) + sum;
+    sum = t;
+}
+
+/// Adds one sample to the state. A sample with any non-finite channel is
+/// skipped as a whole (channels stay consistent, and one NaN cannot poison the
+/// mean forever); returns false then.
+LOOM_HD inline bool addSample(Precision precision, PixelState& s, const glm::vec4& x) {
+    if (!isFinite(x)) return false;
+    switch (precision) {
+        case Precision::Float:
+            s.sum += x;
+            break;
+        case Precision::Kahan:
+            for (int c = 0; c < 4; ++c) neumaierAdd(s.sum[c], s.compensation[c], x[c]);
+            break;
+        case Precision::Double:
+            s.sumDouble += glm::dvec4(x);
+            break;
+    }
+    ++s.count;
+    return true;
+}
+
+/// The mean of the samples in the state; zero while there are none (a pixel
+/// whose every sample so far was non-finite), so the output stays finite.
+LOOM_HD inline glm::vec4 mean(Precision precision, const PixelState& s) {
+    if (s.count == 0) return glm::vec4(0.f);
+    switch (precision) {
+        case Precision::Float:
+            return s.sum / float(s.count);
+        case Precision::Kahan:
+            // The compensated sum is sum + compensation; forming it in double keeps
+            // the correction from being rounded away before the division.
+            return glm::vec4((glm::dvec4(s.sum) + glm::dvec4(s.compensation)) / double(s.count));
+        case Precision::Double:
+        default:
+            return glm::vec4(s.sumDouble / double(s.count));
+    }
+}
+
+/// The running sum as a float, whatever the precision: what the `sum` field
+/// shows when the state itself is kept elsewhere (Double).
+LOOM_HD inline glm::vec4 sumAsFloat(Precision precision, const PixelState& s) {
+    switch (precision) {
+        case Precision::Kahan:
+            return glm::vec4(glm::dvec4(s.sum) + glm::dvec4(s.compensation));
+        case Precision::Double:
+            return glm::vec4(s.sumDouble);
+        case Precision::Float:
+        default:
+            return s.sum;
+    }
+}
+
+// A double sum lives in RGBA32U history texels: two doubles per texel, each as
+// (low word, high word) of its IEEE-754 bits. Field `sumRG` holds R in xy and
+// G in zw; `sumBA` holds B in xy and A in zw.
+
+LOOM_HD inline glm::uvec2 doubleToWords(double d) {
+    uint64_t bits;
+    std::memcpy(&bits, &d, sizeof bits);
+    return glm::uvec2(uint32_t(bits), uint32_t(bits >> 32));
+}
+
+LOOM_HD inline double wordsToDouble(uint32_t lo, uint32_t hi) {
+    const uint64_t bits = uint64_t(lo) | (uint64_t(hi) << 32);
+    double d;
+    std::memcpy(&d, &bits, sizeof d);
+    return d;
+}
+
+/// Packs two doubles into one RGBA32U texel.
+LOOM_HD inline glm::uvec4 packDoublePair(double a, double b) {
+    const glm::uvec2 wa = doubleToWords(a), wb = doubleToWords(b);
+    return glm::uvec4(wa.x, wa.y, wb.x, wb.y);
+}
+
+LOOM_HD inline glm::dvec2 unpackDoublePair(const glm::uvec4& t) {
+    return glm::dvec2(wordsToDouble(t.x, t.y), wordsToDouble(t.z, t.w));
+}
+
+/// The double sum from the `sumRG` and `sumBA` texels, and back.
+LOOM_HD inline glm::dvec4 unpackDoubleSum(const glm::uvec4& rg, const glm::uvec4& ba) {
+    const glm::dvec2 a = unpackDoublePair(rg), b = unpackDoublePair(ba);
+    return glm::dvec4(a.x, a.y, b.x, b.y);
+}
+
+LOOM_HD inline void packDoubleSum(const glm::dvec4& sum, glm::uvec4& rg, glm::uvec4& ba) {
+    rg = packDoublePair(sum.x, sum.y);
+    ba = packDoublePair(sum.z, sum.w);
+}
+
+}  // namespace loom::accumulate

@@ -1,0 +1,57 @@
+#pragma once
+// AccumulatePass: the running mean of its input since the last reset, for
+// reference images. All running state lives in graph history fields, so it can
+// be dumped (`--dump 'Accumulate.*'`) and survives recompiles like any other
+// history.
+//
+// State (every field is declared whatever the precision, since reflection must
+// not depend on parameters; a precision leaves the fields it does not use zero):
+//   sum           RGBA32F  float, kahan: the running sum; double: the double sum
+//                          rounded to float, only for inspection
+//   compensation  RGBA32F  kahan: the rounding error of `sum` (Neumaier)
+//   sumRG, sumBA  RGBA32U  double: the sum as doubles, two per texel, each as the
+//                          (low, high) 32-bit words of its bits: R, G | B, A
+//   count         R32U     per pixel: finite samples in the sum. Per pixel so a
+//                          skipped non-finite sample leaves the other pixels alone
+//   frames        R32U 1x1 frames accumulated since the reset; what maxFrames caps
+//
+// A new mean starts when the graph resets history (ctx.historyValid() false:
+// first frame, resetHistory(), resize, new scene), when `precision` changes,
+// when the pass is enabled again, when maxFrames is lowered below `frames`, and,
+// with autoReset, when the camera or a scene instance moved in this frame.
+#include "AccumulateKernels.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+class AccumulatePass final : public RenderPass {
+public:
+    using Precision = accumulate::Precision;
+
+    void reflect(Reflection& r, const CompileInfo& info) const override;
+    void declareParams(ParamList& p) override;
+    void execute(PassContext& ctx) override;
+
+private:
+    /// Has the camera or any scene instance moved in this frame?
+    static bool sceneMoved(const PassContext& ctx);
+    /// Zeroes this frame's side of the history fields the current precision does not use.
+    void clearUnusedState(PassContext& ctx) const;
+
+    // Parameters.
+    Precision mPrecision = Precision::Double;
+    int mMaxFrames = 0;
+    bool mAutoReset = true;
+    bool mEnabled = true;
+
+    // The precision the state in the history fields was accumulated with: a
+    // different one cannot continue it.
+    Precision mStatePrecision = Precision::Double;
+    // Set while disabled: accumulation restarts when enabled again.
+    bool mRestartPending = false;
+    // Frames for which the fields of a previous precision still need zeroing
+    // (two: both sides of each history pair hold stale values).
+    int mStaleFrames = 0;
+};
+
+}  // namespace loom

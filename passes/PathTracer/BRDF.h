@@ -1,0 +1,353 @@
+#pragma once
+// The path tracer's BRDF: glTF 2.0 metallic-roughness, as written in the glTF 2.0 specification, Appendix B
+// ("BRDF Implementation"), with importance sampling and the matching pdf for multiple importance sampling.
+//
+// Conventions
+//   n   the shading normal, unit length, on the viewer's side of the surface.
+//   wo  unit direction from the shading point toward the viewer (the previous path vertex).
+//   wi  unit direction from the shading point toward the light (the next path vertex).
+//   The functions taking (n, wo, wi) work in a local frame where n is +z (makeFrame()); the *Local functions take
+//   local directions directly. evalBrdf() is f(wo, wi) without the cosine: the integrator multiplies by n.wi.
+//   Reflection only: f = 0 when n.wo <= 0 or n.wi <= 0.
+//
+// Model (glTF 2.0 Appendix B.3, "Specular BRDF", "Fresnel", "Metal BRDF and Dielectric BRDF")
+//   alpha = max(roughness^2, kMinAlpha)
+//   D     GGX / Trowbridge-Reitz normal distribution (Walter et al. 2007, "Microfacet Models for Refraction through
+//         Rough Surfaces", eq. 33).
+//   V     height-correlated Smith visibility, V = G2 / (4 |n.wi| |n.wo|), G2 = 1 / (1 + Lambda(wo) + Lambda(wi))
+//         (Heitz 2014, "Understanding the Masking-Shadowing Function in Microfacet-Based BRDFs", JCGT 3(2); the
+//         closed form is glTF Appendix B, "Specular BRDF").
+//   F(f0) Schlick 1994 with VdotH: f0 + (1 - f0) (1 - |wo.h|)^5, h = normalize(wo + wi).
+//   specular   = F(mix(0.04, baseColor, metallic)) D V      (Schlick's F is linear in f0, so the spec's
+//                                                           mix(dielectric, metal, metallic) is one evaluation)
+//   diffuse    = (1 - metallic) baseColor / pi (1 - Fd(n.wi)) (1 - Fd(n.wo)),  Fd = Schlick with f0 = 0.04
+//   f          = specular + diffuse
+//
+//   The diffuse coupling is the one the glTF spec suggests for energy conservation (Appendix B.3.6.3, "Coupling
+//   diffuse and specular reflection"; Burley 2012 / Shirley et al. 1997): light that the dielectric interface
+//   reflects at either direction does not reach the diffuse layer. The spec's reference weight 1 - F(VdotH) creates
+//   energy at grazing views (a white smooth dielectric reflected 1.85x at 89 degrees); this form is reciprocal and
+//   keeps every white albedo <= 1 (test_brdf.cpp, WhiteAlbedoIsAtMostOne, all views up to 89 degrees), at the
+//   price of a slightly darker diffuse lobe (about 0.9 of Lambert head-on).
+//   Single scattering only: rough metals lose the energy of multiple bounces between microfacets, as in the spec.
+//
+// Sampling: a one-sample mixture (Veach 1997, thesis section 9.2.4, "the one-sample model") of cosine-weighted
+// hemisphere sampling for the diffuse lobe and GGX visible-normal sampling for the specular lobe (Heitz 2018,
+// "Sampling the GGX Distribution of Visible Normals", JCGT 7(4)). The pdf that samples carry and pdfBrdf() returns is
+// the density of the whole mixture, which is what MIS with light sampling needs. Visible-normal sampling can reflect
+// below the surface; such samples are returned invalid (the path ends), and pdfBrdf() keeps their density so that it
+// integrates to 1 over the sphere.
+//
+// This is kernel code (see loom/Kernel.h): plain inline functions over plain structs, so nvcc can compile it.
+#include <cmath>
+#include <glm/glm.hpp>
+
+#include "loom/Kernel.h"
+#include "loom/SurfaceKernels.h"
+
+namespace loom::pt {
+
+inline constexpr float kPi = 3.14159265358979323846f;
+inline constexpr float kInvPi = 0.31830988618379067154f;
+
+/// Reflectance at normal incidence of the glTF dielectric (index of refraction 1.5: ((1.5 - 1) / (1.5 + 1))^2).
+inline constexpr float kDielectricF0 = 0.04f;
+
+/// Smallest GGX alpha used. roughness = 0 would make D a Dirac delta, which evalBrdf() cannot represent and which
+/// would give 0/0 in the pdf; alpha = 1e-3 is a mirror for any practical purpose (lobe about 0.1 degree wide) while
+/// D's peak 1 / (pi alpha^2) ~ 3e5 stays far from float overflow.
+inline constexpr float kMinAlpha = 1e-3f;
+
+/// Luminance of linear sRGB / Rec. 709 primaries (ITU-R BT.709, Y coefficients).
+LOOM_HD inline float luminance(glm::vec3 c) {
+    return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b;
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
+// Local frame
+
+/// Orthonormal basis (t, b, n) with t x b = n.
+struct Frame {
+    glm::vec3 t, b, n;
+
+    LOOM_HD glm::vec3 toLocal(glm::vec3 v) const { return glm::vec3(glm::dot(v, t), glm::dot(v, b), glm::dot(v, n)); }
+    LOOM_HD glm::vec3 toWorld(glm::vec3 v) const { return t * v.x + b * v.y + n * v.z; }
+};
+
+/// Basis around a unit normal (Duff et al. 2017, "Building an Orthonormal Basis, Revisited", JCGT 6(1): Frisvad's
+/// construction with a copysign instead of a branch, accurate for every n including n near -z). Its discontinuity
+/// where n.z changes sign is harmless: BRDFs here are isotropic, so only n matters.
+LOOM_HD inline Frame makeFrame(glm::vec3 n) {
+    const float sign = std::copysign(1.f, n.z);
+    const float a = -1.f / (sign + n.z);
+    const float b = n.x * n.y * a;
+    Frame f;
+    f.t = glm::vec3(1.f + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    f.b = glm::vec3(b, sign + n.y * n.y * a, -n.y);
+    f.n = n;
+    return f;
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
+// Hemisphere sampling
+
+/// Maps the unit square to the unit disk, preserving area and keeping strata compact (Shirley and Chiu 1997, "A Low
+/// Distortion Map Between Disk and Square").
+LOOM_HD inline glm::vec2 sampleConcentricDisk(glm::vec2 u) {
+    const float a = 2.f * u.x - 1.f, b = 2.f * u.y - 1.f;
+    if (a == 0.f && b == 0.f) return glm::vec2(0.f);
+    float r, phi;
+    if (std::fabs(a) > std::fabs(b)) {
+        r = a;
+        phi = 0.25f * kPi * (b / a);
+    } else {
+        r = b;
+        phi = 0.5f * kPi - 0.25f * kPi * (a / b);
+    }
+    return glm::vec2(r * std::cos(phi), r * std::sin(phi));
+}
+
+/// Cosine-weighted direction about +z: a uniform disk point lifted to the hemisphere (Malley's method, as in Pharr
+/// et al., "Physically Based Rendering"). pdf = cos(theta) / pi.
+LOOM_HD inline glm::vec3 sampleCosineHemisphere(glm::vec2 u) {
+    const glm::vec2 d = sampleConcentricDisk(u);
+    return glm::vec3(d.x, d.y, std::sqrt(std::fmax(0.f, 1.f - d.x * d.x - d.y * d.y)));
+}
+
+/// Solid-angle pdf of sampleCosineHemisphere() for a direction with n.w = cosTheta.
+LOOM_HD inline float cosineHemispherePdf(float cosTheta) {
+    return cosTheta > 0.f ? cosTheta * kInvPi : 0.f;
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
+// GGX microfacet terms (local frame, n = +z)
+
+/// GGX alpha from glTF perceptual roughness: alpha = roughness^2 (glTF Appendix B, "Specular BRDF"), clamped to
+/// kMinAlpha.
+LOOM_HD inline float alphaFromRoughness(float roughness) {
+    return std::fmax(roughness * roughness, kMinAlpha);
+}
+
+/// GGX normal distribution D(h) for a unit local half vector (Walter et al. 2007, eq. 33), written as
+/// 1 / (pi alpha^2 (x^2/alpha^2 + y^2/alpha^2 + z^2)^2) (Heitz 2018, eq. 1): with the tangential components kept
+/// apart it does not lose precision to 1 - cos^2 when alpha is tiny.
+LOOM_HD inline float ggxD(glm::vec3 h, float alpha) {
+    if (h.z <= 0.f) return 0.f;
+    const float a2 = alpha * alpha;
+    const float t = (h.x * h.x + h.y * h.y) / a2 + h.z * h.z;
+    return 1.f / (kPi * a2 * t * t);
+}
+
+/// Smith masking G1 = 1 / (1 + Lambda) for GGX, with Lambda = (sqrt(1 + alpha^2 tan^2) - 1) / 2 (Heitz 2014;
+/// Walter et al. 2007, eq. 34), rewritten in cosines: 2 cos / (cos + sqrt(alpha^2 + (1 - alpha^2) cos^2)).
+LOOM_HD inline float ggxG1(float cosTheta, float alpha) {
+    if (cosTheta <= 0.f) return 0.f;
+    const float a2 = alpha * alpha;
+    return 2.f * cosTheta / (cosTheta + std::sqrt(a2 + (1.f - a2) * cosTheta * cosTheta));
+}
+
+/// Height-correlated Smith visibility V = G2 / (4 NdotL NdotV) for GGX, G2 = 1 / (1 + Lambda(wo) + Lambda(wi))
+/// (Heitz 2014); the closed form is glTF Appendix B, "Specular BRDF".
+LOOM_HD inline float ggxVisibility(float NdotL, float NdotV, float alpha) {
+    if (NdotL <= 0.f || NdotV <= 0.f) return 0.f;
+    const float a2 = alpha * alpha;
+    const float gv = NdotL * std::sqrt(NdotV * NdotV * (1.f - a2) + a2);
+    const float gl = NdotV * std::sqrt(NdotL * NdotL * (1.f - a2) + a2);
+    return 0.5f / (gv + gl);
+}
+
+/// Schlick's weight (1 - cos)^5 (Schlick 1994, "An Inexpensive BRDF Model for Physically-based Rendering").
+LOOM_HD inline float schlickWeight(float cosTheta) {
+    const float m = glm::clamp(1.f - cosTheta, 0.f, 1.f);
+    const float m2 = m * m;
+    return m2 * m2 * m;
+}
+
+/// Schlick's Fresnel approximation f0 + (1 - f0) (1 - cos)^5.
+LOOM_HD inline glm::vec3 schlickFresnel(glm::vec3 f0, float cosTheta) {
+    return f0 + (glm::vec3(1.f) - f0) * schlickWeight(cosTheta);
+}
+
+/// Samples a microfacet normal from the GGX distribution of normals visible from wo (wo.z > 0), with density
+/// D_wo(h) = G1(wo) max(0, wo.h) D(h) / wo.z (Heitz 2018, eq. 2), by Heitz 2018's algorithm: stretch the view to the
+/// alpha = 1 configuration, sample the projected area of the hemisphere (a disk whose far half is foreshortened by
+/// the view), lift the point to the hemisphere and unstretch the normal.
+LOOM_HD inline glm::vec3 sampleGgxVndf(glm::vec3 wo, float alpha, glm::vec2 u) {
+    const glm::vec3 vh = glm::normalize(glm::vec3(alpha * wo.x, alpha * wo.y, wo.z));
+    // Basis around the stretched view; any t1 works when the view is along +z.
+    const float lenSq = vh.x * vh.x + vh.y * vh.y;
+    const glm::vec3 t1 = lenSq > 0.f ? glm::vec3(-vh.y, vh.x, 0.f) / std::sqrt(lenSq) : glm::vec3(1.f, 0.f, 0.f);
+    const glm::vec3 t2 = glm::cross(vh, t1);
+    // Uniform point on the disk, then warp t2 so the density matches the hemisphere's projected area seen from the
+    // view: the half of the disk beyond the horizon is foreshortened by (1 + vh.z) / 2.
+    const float r = std::sqrt(u.x), phi = 2.f * kPi * u.y;
+    const float p1 = r * std::cos(phi);
+    const float s = 0.5f * (1.f + vh.z);
+    const float p2 = (1.f - s) * std::sqrt(std::fmax(0.f, 1.f - p1 * p1)) + s * r * std::sin(phi);
+    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(std::fmax(0.f, 1.f - p1 * p1 - p2 * p2)) * vh;
+    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, std::fmax(0.f, nh.z)));
+}
+
+/// Solid-angle density of wi = reflect(-wo, h) for h drawn by sampleGgxVndf(): D_wo(h) / (4 wo.h) (Heitz 2018; the
+/// Jacobian of reflection dh/dwi = 1 / (4 wi.h) is Walter et al. 2007, eq. 14). With G1 written out, wo.h and wo.z
+/// cancel: D(h) / (2 (wo.z + sqrt(alpha^2 + (1 - alpha^2) wo.z^2))). Defined for wi below the surface too.
+LOOM_HD inline float ggxReflectionPdf(glm::vec3 wo, glm::vec3 wi, float alpha) {
+    if (wo.z <= 0.f) return 0.f;
+    const glm::vec3 hSum = wo + wi;
+    const float lenSq = glm::dot(hSum, hSum);
+    if (!(lenSq > 1e-12f)) return 0.f;
+    const glm::vec3 h = hSum / std::sqrt(lenSq);
+    const float a2 = alpha * alpha;
+    return ggxD(h, alpha) / (2.f * (wo.z + std::sqrt(a2 + (1.f - a2) * wo.z * wo.z)));
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
+// The material
+
+/// The glTF metallic-roughness inputs of the BRDF (linear baseColor; metallic and roughness in [0, 1]).
+struct BrdfInputs {
+    glm::vec3 baseColor{1.f};
+    float metallic = 0.f;
+    float roughness = 1.f;
+};
+
+/// The BRDF inputs of an evaluated surface hit (evalSurface() has applied the textures and clamped the factors).
+LOOM_HD inline BrdfInputs brdfInputs(const SurfaceHit& hit) {
+    BrdfInputs in;
+    in.baseColor = hit.baseColor;
+    in.metallic = hit.metallic;
+    in.roughness = hit.roughness;
+    return in;
+}
+
+/// Specular reflectance at normal incidence: mix(0.04, baseColor, metallic) (glTF Appendix B, "Metal BRDF and
+/// Dielectric BRDF"; the same as specularF0(SurfaceHit)).
+LOOM_HD inline glm::vec3 brdfF0(const BrdfInputs& in) {
+    return glm::mix(glm::vec3(kDielectricF0), in.baseColor, in.metallic);
+}
+
+/// Probability that sampleBrdf() samples the specular lobe, seen from a view with n.wo = NdotV. A heuristic that
+/// only affects variance: the luminance of the specular lobe's directional albedo (Karis' fit, specularAlbedo())
+/// against the diffuse lobe's, clamped to [0.1, 0.9] so neither lobe is starved, or 1 without a diffuse lobe. The
+/// diffuse albedo is (1 - metallic) baseColor (1 - Fd(n.wo)) times the cosine-weighted mean of 1 - Fd(n.wi), 0.91.
+LOOM_HD inline float specularLobeProbability(const BrdfInputs& in, float NdotV) {
+    const float cosV = glm::clamp(NdotV, 0.f, 1.f);
+    const float spec = luminance(specularAlbedo(brdfF0(in), cosV, in.roughness));
+    const float diffuse = (1.f - in.metallic) * (1.f - schlickWeight(cosV) * (1.f - kDielectricF0) - kDielectricF0) *
+                          0.91f * luminance(in.baseColor);
+    if (!(diffuse > 0.f)) return 1.f;
+    return glm::clamp(spec / (spec + diffuse), 0.1f, 0.9f);
+}
+
+/// The BRDF value and the sampling pdf for one pair of directions.
+struct BrdfEval {
+    glm::vec3 f{0.f};  ///< BRDF value (without the cosine)
+    float pdf = 0.f;   ///< solid-angle density of sampleBrdf() producing wi
+};
+
+/// The BRDF f(wo, wi) in the local frame (see the model at the top of this file).
+LOOM_HD inline glm::vec3 evalBrdfLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec3 wi) {
+    if (wo.z <= 0.f || wi.z <= 0.f) return glm::vec3(0.f);
+    const glm::vec3 h = glm::normalize(wo + wi);
+    const float VdotH = std::fabs(glm::dot(wo, h));
+    const float alpha = alphaFromRoughness(in.roughness);
+    const float w = schlickWeight(VdotH);
+    // Schlick's F is linear in f0, so mix(dielectric, metal, metallic) needs one specular evaluation with mixed f0.
+    const glm::vec3 fSpec = brdfF0(in) + (glm::vec3(1.f) - brdfF0(in)) * w;
+    const glm::vec3 specular = fSpec * (ggxD(h, alpha) * ggxVisibility(wi.z, wo.z, alpha));
+    // Energy-conserving coupling (see the header): what the interface reflects never reaches the diffuse layer.
+    const float transmitIn = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wi.z));
+    const float transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wo.z));
+    const glm::vec3 diffuse = ((1.f - in.metallic) * transmitIn * transmitOut * kInvPi) * in.baseColor;
+    return specular + diffuse;
+}
+
+/// Solid-angle pdf of sampleBrdfLocal() producing wi: the full lobe mixture. Nonzero below the surface where the
+/// specular lobe reaches there (those samples are invalid), so that it integrates to 1 over the sphere.
+LOOM_HD inline float pdfBrdfLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec3 wi) {
+    if (wo.z <= 0.f) return 0.f;
+    const float pSpec = specularLobeProbability(in, wo.z);
+    const float alpha = alphaFromRoughness(in.roughness);
+    return pSpec * ggxReflectionPdf(wo, wi, alpha) + (1.f - pSpec) * cosineHemispherePdf(wi.z);
+}
+
+/// f and pdf in the local frame, for light samples that need both (MIS).
+LOOM_HD inline BrdfEval evalBrdfAndPdfLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec3 wi) {
+    BrdfEval e;
+    e.f = evalBrdfLocal(in, wo, wi);
+    e.pdf = pdfBrdfLocal(in, wo, wi);
+    return e;
+}
+
+/// BRDF value f(wo, wi) without the cosine (world directions; n the unit shading normal).
+LOOM_HD inline glm::vec3 evalBrdf(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo, glm::vec3 wi) {
+    const Frame frame = makeFrame(n);
+    return evalBrdfLocal(in, frame.toLocal(wo), frame.toLocal(wi));
+}
+
+/// Solid-angle pdf with which sampleBrdf() produces wi (the full mixture; use it as the BRDF pdf in MIS weights).
+LOOM_HD inline float pdfBrdf(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo, glm::vec3 wi) {
+    const Frame frame = makeFrame(n);
+    return pdfBrdfLocal(in, frame.toLocal(wo), frame.toLocal(wi));
+}
+
+/// f and pdf at once (world directions), cheaper than evalBrdf() and pdfBrdf() apart.
+LOOM_HD inline BrdfEval evalBrdfAndPdf(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo, glm::vec3 wi) {
+    const Frame frame = makeFrame(n);
+    return evalBrdfAndPdfLocal(in, frame.toLocal(wo), frame.toLocal(wi));
+}
+
+/// A sampled continuation direction.
+struct BrdfSample {
+    glm::vec3 wi{0.f};      ///< unit direction toward the next vertex
+    glm::vec3 weight{0.f};  ///< f(wo, wi) |n.wi| / pdf: the path throughput factor
+    float pdf = 0.f;        ///< solid-angle pdf of the whole mixture (pdfBrdf(in, n, wo, wi))
+    bool valid = false;     ///< false: no direction (wo or the sample below the surface); end the path
+};
+
+/// Draws a direction from the lobe mixture in the local frame (Veach 1997's one-sample model, section 9.2.4):
+/// uLobe < specularLobeProbability() picks the specular lobe, then u samples it. The result may point below the
+/// surface (z <= 0) when a visible normal reflects wo downward.
+LOOM_HD inline glm::vec3 sampleBrdfDirectionLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec2 u, float uLobe) {
+    if (uLobe < specularLobeProbability(in, wo.z)) {
+        const glm::vec3 h = sampleGgxVndf(wo, alphaFromRoughness(in.roughness), u);
+        return glm::normalize(2.f * glm::dot(wo, h) * h - wo);
+    }
+    return sampleCosineHemisphere(u);
+}
+
+/// The sample record for a drawn direction wi (local frame): the weight divides by the mixture pdf, not by the chosen
+/// lobe's, so it is right whichever lobe produced wi.
+LOOM_HD inline BrdfSample brdfSampleLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec3 wi) {
+    BrdfSample s;
+    if (wo.z <= 0.f || wi.z <= 0.f) return s;  // wi.z <= 0: a specular sample reflected below the surface
+    const float pdf = pdfBrdfLocal(in, wo, wi);
+    if (!(pdf > 0.f) || !std::isfinite(pdf)) return s;
+    s.wi = wi;
+    s.pdf = pdf;
+    s.weight = evalBrdfLocal(in, wo, wi) * (wi.z / pdf);
+    s.valid = true;
+    return s;
+}
+
+/// Samples wi in the local frame. u: two uniform numbers in [0, 1) for the direction; uLobe: one more for the lobe.
+LOOM_HD inline BrdfSample sampleBrdfLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec2 u, float uLobe) {
+    if (wo.z <= 0.f) return BrdfSample{};
+    return brdfSampleLocal(in, wo, sampleBrdfDirectionLocal(in, wo, u, uLobe));
+}
+
+/// Samples wi (world directions; n the unit shading normal, wo toward the viewer). See sampleBrdfLocal().
+/// f and the pdf are evaluated for wi after its trip to world space, exactly as evalBrdf() and pdfBrdf() see it:
+/// near a narrow lobe the rounding of the frame change moves the pdf by up to ~1e-3 relative, and MIS weights
+/// computed later from pdfBrdf(n, wo, s.wi) should agree with s.pdf exactly.
+LOOM_HD inline BrdfSample sampleBrdf(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo, glm::vec2 u, float uLobe) {
+    const Frame frame = makeFrame(n);
+    const glm::vec3 woLocal = frame.toLocal(wo);
+    if (woLocal.z <= 0.f) return BrdfSample{};
+    const glm::vec3 wi = frame.toWorld(sampleBrdfDirectionLocal(in, woLocal, u, uLobe));
+    BrdfSample s = brdfSampleLocal(in, woLocal, frame.toLocal(wi));
+    if (s.valid) s.wi = wi;
+    return s;
+}
+
+}  // namespace loom::pt

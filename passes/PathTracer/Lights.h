@@ -1,0 +1,218 @@
+#pragma once
+// Light sampling for next-event estimation: emissive triangles chosen in
+// proportion to their power, punctual lights (KHR_lights_punctual), and the
+// environment (importance-sampled when it is an HDR map). Plain views built
+// by the pass each frame (emissive triangles move with their instances).
+#include <cmath>
+#include <cstdint>
+
+#include <glm/glm.hpp>
+
+#include "BRDF.h"  // kPi, kInvPi, luminance
+#include "loom/Kernel.h"
+#include "loom/SceneView.h"
+
+namespace loom::pt {
+
+struct EmissiveTri {
+    glm::vec3 p0, e1, e2;   ///< world space: p0, p1 - p0, p2 - p0
+    glm::vec3 normal;       ///< unit geometric normal (front side)
+    float area = 0.f;
+    float power = 0.f;      ///< selection weight: area * luminance(emission)
+    uint32_t instance = 0, primitive = 0;
+    uint32_t doubleSided = 0;
+};
+
+enum PunctualType : uint32_t { kPoint = 0, kSpot = 1, kDirectional = 2 };
+
+struct PunctualLight {
+    uint32_t type = kPoint;
+    glm::vec3 position{0.f};
+    glm::vec3 direction{0.f, 0.f, -1.f};  ///< where the light points
+    glm::vec3 intensity{0.f};             ///< colour * intensity (cd, or lux for directional)
+    float cosInner = 1.f, cosOuter = 0.f;
+    float range = 0.f;                    ///< 0 = infinite
+};
+
+/// Equirectangular environment: u = 0.5 + atan2(d.x, -d.z) / 2pi, v = acos(d.y) / pi (row 0 = +Y).
+struct EnvView {
+    const glm::vec3* texels = nullptr;  ///< nullptr: constant colour
+    uint32_t width = 0, height = 0;
+    glm::vec3 color{0.f};
+    float intensity = 1.f;
+    const float* marginalCdf = nullptr;     ///< height + 1 entries
+    const float* conditionalCdf = nullptr;  ///< height rows of width + 1 entries
+    float weightSum = 0.f;                  ///< sum of texel weights (luminance * sin(theta))
+};
+
+struct LightsView {
+    const EmissiveTri* tris = nullptr;
+    const float* triCdf = nullptr;      ///< triCount + 1 entries, triCdf[triCount] = 1
+    const uint32_t* instanceTriBase = nullptr;  ///< per instance: index of its first triangle in tris, or ~0u
+    uint32_t triCount = 0;
+    float triPowerSum = 0.f;
+    const PunctualLight* punctual = nullptr;
+    uint32_t punctualCount = 0;
+    EnvView env;
+    bool hasEnv = false;
+    float pTris = 0.f, pPunctual = 0.f, pEnv = 0.f;  ///< category selection probabilities
+};
+
+LOOM_HD inline glm::vec2 envUv(glm::vec3 d) {
+    const float u = 0.5f + std::atan2(d.x, -d.z) * (0.5f * kInvPi);
+    const float v = std::acos(glm::clamp(d.y, -1.f, 1.f)) * kInvPi;
+    return {u, v};
+}
+LOOM_HD inline glm::vec3 envDir(glm::vec2 uv) {
+    const float phi = (uv.x - 0.5f) * 2.f * kPi, theta = uv.y * kPi;
+    const float s = std::sin(theta);
+    return {s * std::sin(phi), std::cos(theta), -s * std::cos(phi)};
+}
+
+LOOM_HD inline glm::vec3 envRadiance(const EnvView& env, glm::vec3 d) {
+    if (!env.texels) return env.color * env.intensity;
+    const glm::vec2 uv = envUv(d);
+    const uint32_t x = glm::min(uint32_t(uv.x * float(env.width)), env.width - 1);
+    const uint32_t y = glm::min(uint32_t(uv.y * float(env.height)), env.height - 1);
+    return env.texels[size_t(y) * env.width + x] * env.intensity;
+}
+
+/// First index i with cdf[i + 1] > u, for cdf of n + 1 increasing entries from 0 to 1.
+LOOM_HD inline uint32_t searchCdf(const float* cdf, uint32_t n, float u) {
+    uint32_t lo = 0, hi = n;
+    while (lo + 1 < hi) {
+        const uint32_t mid = (lo + hi) / 2;
+        if (cdf[mid] <= u) lo = mid; else hi = mid;
+    }
+    return lo;
+}
+
+/// Solid-angle pdf of sampling direction d from the environment.
+LOOM_HD inline float envPdf(const EnvView& env, glm::vec3 d) {
+    if (!env.texels) return 1.f / (4.f * kPi);
+    if (env.weightSum <= 0.f) return 0.f;
+    const glm::vec2 uv = envUv(d);
+    const uint32_t x = glm::min(uint32_t(uv.x * float(env.width)), env.width - 1);
+    const uint32_t y = glm::min(uint32_t(uv.y * float(env.height)), env.height - 1);
+    const float* row = env.conditionalCdf + size_t(y) * (env.width + 1);
+    const float pRow = env.marginalCdf[y + 1] - env.marginalCdf[y];
+    const float pCol = row[x + 1] - row[x];
+    const float sinTheta = std::sqrt(glm::max(0.f, 1.f - d.y * d.y));
+    if (sinTheta <= 1e-7f) return 0.f;
+    // Uniform in (u, v) within the texel; dω = 2π² sinθ du dv.
+    return pRow * pCol * float(env.width) * float(env.height) / (2.f * kPi * kPi * sinTheta);
+}
+
+struct LightSample {
+    glm::vec3 wi{0.f};     ///< unit direction from the shading point to the light
+    glm::vec3 Li{0.f};     ///< incident radiance (or irradiance-like value for delta lights)
+    float pdf = 0.f;       ///< solid-angle pdf including the light selection; 1 for delta lights
+    float distance = 0.f;  ///< to the light point (infinity for the environment and directional lights)
+    bool delta = false;
+    bool valid = false;
+    uint32_t instance = 0, primitive = 0;  ///< emissive triangle (for evaluating textured emission)
+    glm::vec2 bary{0.f};
+    bool isTriangle = false;
+};
+
+/// Area pdf of a triangle light point converted to solid angle, with selection.
+LOOM_HD inline float triLightPdf(const LightsView& L, const EmissiveTri& t, float dist2, float cosLight) {
+    if (cosLight <= 0.f || L.triPowerSum <= 0.f) return 0.f;
+    return L.pTris * (t.power / L.triPowerSum) / t.area * dist2 / cosLight;
+}
+
+/// Samples a light for shading point p. u: four uniform numbers.
+/// Triangle radiance is left to the caller (Li = 0, isTriangle = true), which
+/// evaluates the material's emission at the sampled point.
+LOOM_HD inline LightSample sampleLight(const LightsView& L, glm::vec3 p, float u0, float u1, float u2, float u3) {
+    LightSample s;
+    if (u0 < L.pTris) {
+        const uint32_t i = searchCdf(L.triCdf, L.triCount, u1);
+        const EmissiveTri& t = L.tris[i];
+        // Uniform point on the triangle (Shirley's square-root mapping).
+        const float su = std::sqrt(u2);
+        const float bu = su * (1.f - u3), bv = su * u3;
+        const glm::vec3 q = t.p0 + bu * t.e1 + bv * t.e2;
+        glm::vec3 d = q - p;
+        const float dist2 = glm::dot(d, d);
+        if (dist2 <= 1e-12f) return s;
+        const float dist = std::sqrt(dist2);
+        d /= dist;
+        float cosLight = -glm::dot(t.normal, d);
+        if (t.doubleSided) cosLight = std::fabs(cosLight);
+        s.pdf = triLightPdf(L, t, dist2, cosLight);
+        if (s.pdf <= 0.f) return s;
+        s.wi = d;
+        s.distance = dist;
+        s.instance = t.instance;
+        s.primitive = t.primitive;
+        s.bary = glm::vec2(bu, bv);
+        s.isTriangle = true;
+        s.valid = true;
+        return s;
+    }
+    u0 -= L.pTris;
+    if (u0 < L.pPunctual) {
+        const uint32_t i = glm::min(uint32_t(u1 * float(L.punctualCount)), L.punctualCount - 1);
+        const PunctualLight& l = L.punctual[i];
+        const float select = L.pPunctual / float(L.punctualCount);
+        s.delta = true;
+        s.pdf = select;
+        if (l.type == kDirectional) {
+            s.wi = -l.direction;
+            s.distance = 1e30f;
+            s.Li = l.intensity;
+        } else {
+            glm::vec3 d = l.position - p;
+            const float dist2 = glm::dot(d, d);
+            if (dist2 <= 1e-12f) return s;
+            const float dist = std::sqrt(dist2);
+            d /= dist;
+            float atten = 1.f / dist2;
+            if (l.range > 0.f) {
+                // glTF's recommended smooth range falloff (KHR_lights_punctual).
+                const float r = dist / l.range;
+                atten *= glm::clamp(1.f - r * r * r * r, 0.f, 1.f);
+            }
+            if (l.type == kSpot) {
+                const float cd = glm::dot(-d, l.direction);
+                const float t = glm::clamp((cd - l.cosOuter) / glm::max(l.cosInner - l.cosOuter, 1e-4f), 0.f, 1.f);
+                atten *= t * t;
+            }
+            s.wi = d;
+            s.distance = dist;
+            s.Li = l.intensity * atten;
+        }
+        s.valid = glm::dot(s.Li, s.Li) > 0.f;
+        return s;
+    }
+    if (!L.hasEnv) return s;
+    u0 -= L.pPunctual;
+    const float uJitter = glm::clamp(u0 / glm::max(L.pEnv, 1e-12f), 0.f, 0.99999994f);  // reuse of the selector
+    const EnvView& env = L.env;
+    if (!env.texels) {
+        // Uniform sphere for a constant environment.
+        const float z = 1.f - 2.f * u1, r = std::sqrt(glm::max(0.f, 1.f - z * z)), phi = 2.f * kPi * u2;
+        s.wi = glm::vec3(r * std::cos(phi), z, r * std::sin(phi));
+    } else {
+        const uint32_t y = searchCdf(env.marginalCdf, env.height, u1);
+        const float* row = env.conditionalCdf + size_t(y) * (env.width + 1);
+        const uint32_t x = searchCdf(row, env.width, u2);
+        s.wi = envDir(glm::vec2((float(x) + u3) / float(env.width), (float(y) + uJitter) / float(env.height)));
+    }
+    const float pdf = envPdf(env, s.wi);
+    if (pdf <= 0.f) return s;
+    s.pdf = L.pEnv * pdf;
+    s.distance = 1e30f;
+    s.Li = envRadiance(env, s.wi);
+    s.valid = true;
+    return s;
+}
+
+/// Power heuristic (Veach 1997, eq. 9.13) with beta = 2.
+LOOM_HD inline float powerHeuristic(float a, float b) {
+    const float a2 = a * a, b2 = b * b;
+    return a2 + b2 > 0.f ? a2 / (a2 + b2) : 0.f;
+}
+
+}  // namespace loom::pt

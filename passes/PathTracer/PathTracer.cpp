@@ -1,0 +1,310 @@
+#include "PathTracer.h"
+
+#include <atomic>
+#include <cmath>
+
+#include <spdlog/spdlog.h>
+
+#include "PathTracerKernels.h"
+#include "loom/CameraKernels.h"
+#include "loom/Error.h"
+#include "loom/Parallel.h"
+#include "loom/RayScene.h"
+#include "loom/Scene.h"
+
+namespace loom {
+
+namespace {
+const char kVBuffer[] = "vbuffer";
+const char kColor[] = "color";
+const char kAlbedo[] = "albedo";
+const char kSpecAlbedo[] = "specAlbedo";
+const char kEmission[] = "emission";
+const char kDirect[] = "direct";
+const char kIndirect[] = "indirect";
+
+/// Adapts RayScene to the integrator's tracer interface.
+struct EmbreeTracer {
+    const RayScene& rays;
+    RayHit intersect(glm::vec3 o, glm::vec3 d) const { return rays.intersect(o, d, 0.f, 1e30f); }
+    bool occluded(glm::vec3 o, glm::vec3 d, float tMin, float tMax) const { return rays.occluded(o, d, tMin, tMax); }
+};
+
+bool finite(glm::vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+}  // namespace
+
+void PathTracer::reflect(Reflection& r, const CompileInfo&) const {
+    r.input(kVBuffer, Format::RGBA32U).optional().doc("primary hits from a G-buffer (else camera rays)");
+    r.output(kColor, Format::RGBA32F).doc("path-traced radiance, mean over samplesPerPixel");
+    r.output(kAlbedo, Format::RGBA32F).optional().doc("diffuse reflectance at the primary hit");
+    r.output(kSpecAlbedo, Format::RGBA32F).optional().doc("directional specular reflectance at the primary hit");
+    r.output(kEmission, Format::RGBA32F).optional().doc("emitted radiance at the primary hit");
+    r.output(kDirect, Format::RGBA32F).optional().doc("direct lighting part of color");
+    r.output(kIndirect, Format::RGBA32F).optional().doc("indirect lighting part of color");
+}
+
+void PathTracer::declareParams(ParamList& p) {
+    p.add("maxBounces", &mMaxBounces, 3).range(0, 64).doc("scattering events per path (0: emission seen directly)");
+    p.add("samplesPerPixel", &mSamplesPerPixel, 1).range(1, 4096).doc("paths per pixel per frame");
+    p.add("rrStartBounce", &mRrStartBounce, 2).range(0, 64).doc("Russian roulette from this bounce on");
+    p.addEnum("lightSampling", &mLightSampling, LightSamplingMode::Mis, {"mis", "nee", "bsdf"})
+        .doc("direct light by MIS of light and BRDF sampling, light sampling only, or BRDF sampling only");
+    p.add("lambertOnly", &mLambertOnly, false).doc("replace the glTF BRDF by baseColor/pi (validation)");
+    p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda"})
+        .doc("where to run; without a usable CUDA device, auto and cuda run on the CPU");
+    p.add("seed", &mSeed, 0).range(0, 1 << 30).doc("decorrelates runs that share frame indices");
+}
+
+void PathTracer::compile(const CompileInfo&) {
+    // This build has no CUDA backend (the kernel headers compile with nvcc; a test checks that). Say so once per
+    // process, not once per pass or frame.
+    static std::atomic<bool> reported{false};
+    if (mDevice != Device::Cpu && !reported.exchange(true))
+        spdlog::info("PathTracer: device '{}' requested but no usable CUDA device; running on the CPU",
+                     mDevice == Device::Cuda ? "cuda" : "auto");
+}
+
+void PathTracer::setScene(const std::shared_ptr<const Scene>&) { mEnvSource = nullptr; }
+
+void PathTracer::buildEnvironment(const Scene& scene) {
+    const Environment& env = scene.environment;
+    pt::EnvView& v = mLights.env;
+    v = pt::EnvView{};
+    v.color = env.color;
+    v.intensity = env.intensity;
+    mEnvMarginal.clear();
+    mEnvConditional.clear();
+    if (!env.isConstant()) {
+        v.texels = env.texels.data();
+        v.width = env.width;
+        v.height = env.height;
+        // Piecewise-constant 2D distribution over texels, weight = luminance * sin(theta)
+        // (pbrt-v3, 13.6.7, "Piecewise-Constant 2D Distributions").
+        mEnvConditional.resize(size_t(env.height) * (env.width + 1));
+        mEnvMarginal.resize(env.height + 1);
+        double total = 0.0;
+        std::vector<double> rowSums(env.height);
+        for (uint32_t y = 0; y < env.height; ++y) {
+            const double sinTheta = std::sin((y + 0.5) / env.height * pt::kPi);
+            double acc = 0.0;
+            float* row = &mEnvConditional[size_t(y) * (env.width + 1)];
+            row[0] = 0.f;
+            for (uint32_t x = 0; x < env.width; ++x) {
+                acc += double(pt::luminance(env.texels[size_t(y) * env.width + x])) * sinTheta;
+                row[x + 1] = float(acc);
+            }
+            for (uint32_t x = 1; x <= env.width; ++x)
+                row[x] = acc > 0.0 ? float(row[x] / acc) : float(x) / float(env.width);
+            row[env.width] = 1.f;
+            rowSums[y] = acc;
+            total += acc;
+        }
+        mEnvMarginal[0] = 0.f;
+        double acc = 0.0;
+        for (uint32_t y = 0; y < env.height; ++y) {
+            acc += rowSums[y];
+            mEnvMarginal[y + 1] = total > 0.0 ? float(acc / total) : float(y + 1) / float(env.height);
+        }
+        mEnvMarginal[env.height] = 1.f;
+        v.marginalCdf = mEnvMarginal.data();
+        v.conditionalCdf = mEnvConditional.data();
+        v.weightSum = float(total);
+        mLights.hasEnv = total > 0.0;
+    } else {
+        mLights.hasEnv = pt::luminance(env.color * env.intensity) > 0.f;
+    }
+    mEnvSource = &scene;
+}
+
+void PathTracer::buildLights(const Scene& scene) {
+    const SceneView& view = scene.view();
+    mTris.clear();
+    mInstanceTriBase.assign(scene.instances.size(), 0xFFFFFFFFu);
+    for (uint32_t i = 0; i < scene.instances.size(); ++i) {
+        const Instance& inst = scene.instances[i];
+        const Mesh& mesh = scene.meshes[inst.mesh];
+        const Material& mat = scene.materials[mesh.material];
+        if (!mat.isEmissive()) continue;
+        mInstanceTriBase[i] = uint32_t(mTris.size());
+        const MaterialData& md = view.materials[mesh.material];
+        // Selection weight: mean emitted luminance (texture mean when textured) times area.
+        float texMean = 1.f;
+        if (md.emissiveTexture >= 0) {
+            const SceneImage& img = scene.images[size_t(md.emissiveTexture)];
+            double sum = 0.0;
+            for (const auto& t : img.texels)
+                sum += pt::luminance(glm::vec3(srgbToLinear(t.r / 255.f), srgbToLinear(t.g / 255.f),
+                                               srgbToLinear(t.b / 255.f)));
+            texMean = img.texels.empty() ? 1.f : float(sum / double(img.texels.size()));
+        }
+        const float lum = pt::luminance(mat.emissiveFactor) * texMean;
+        for (uint32_t t = 0; t < mesh.triangleCount(); ++t) {
+            const glm::vec3 a = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t]], 1.f));
+            const glm::vec3 b = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t + 1]], 1.f));
+            const glm::vec3 c = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t + 2]], 1.f));
+            pt::EmissiveTri e;
+            e.p0 = a;
+            e.e1 = b - a;
+            e.e2 = c - a;
+            const glm::vec3 cr = glm::cross(e.e1, e.e2);
+            const float len = glm::length(cr);
+            e.area = 0.5f * len;
+            e.normal = len > 0.f ? cr / len : glm::vec3(0.f, 1.f, 0.f);
+            e.power = e.area > 0.f ? e.area * lum : 0.f;
+            e.instance = i;
+            e.primitive = t;
+            e.doubleSided = mat.doubleSided ? 1u : 0u;
+            mTris.push_back(e);
+        }
+    }
+    mTriCdf.assign(mTris.size() + 1, 0.f);
+    double total = 0.0;
+    for (size_t i = 0; i < mTris.size(); ++i) total += mTris[i].power;
+    double acc = 0.0;
+    for (size_t i = 0; i < mTris.size(); ++i) {
+        acc += mTris[i].power;
+        mTriCdf[i + 1] = total > 0.0 ? float(acc / total) : float(i + 1) / float(mTris.size());
+    }
+    if (!mTris.empty()) mTriCdf.back() = 1.f;
+
+    mPunctual.clear();
+    for (const Light& l : scene.lights) {
+        pt::PunctualLight p;
+        p.type = l.type == LightType::Point ? pt::kPoint : l.type == LightType::Spot ? pt::kSpot : pt::kDirectional;
+        p.position = l.position;
+        p.direction = glm::normalize(l.direction);
+        p.intensity = l.color * l.intensity;
+        p.cosInner = std::cos(l.innerConeAngle);
+        p.cosOuter = std::cos(l.outerConeAngle);
+        p.range = l.range;
+        if (pt::luminance(p.intensity) > 0.f) mPunctual.push_back(p);
+    }
+
+    pt::LightsView& L = mLights;
+    L.tris = mTris.data();
+    L.triCdf = mTriCdf.data();
+    L.instanceTriBase = mInstanceTriBase.data();
+    L.triCount = uint32_t(mTris.size());
+    L.triPowerSum = float(total);
+    L.punctual = mPunctual.data();
+    L.punctualCount = uint32_t(mPunctual.size());
+    // Each kind of light present gets an equal share of the samples.
+    const float kinds = float((total > 0.0) + !mPunctual.empty() + L.hasEnv);
+    L.pTris = total > 0.0 ? 1.f / kinds : 0.f;
+    L.pPunctual = !mPunctual.empty() ? 1.f / kinds : 0.f;
+    L.pEnv = L.hasEnv ? 1.f / kinds : 0.f;
+}
+
+void PathTracer::execute(PassContext& ctx) {
+    const Scene* scene = ctx.scene();
+    if (!scene || !ctx.camera())
+        throwBadInput(ctx.passName(), "the path tracer needs a scene", "a scene given with --scene",
+                      "render with `loom render --scene data/scenes/cornell_box.gltf ...`");
+    if (mEnvSource != scene) buildEnvironment(*scene);
+    buildLights(*scene);
+
+    const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
+    Camera camera = *ctx.camera();
+    camera.aspect = float(w) / float(h);
+    const CameraData cam = makeCameraData(camera, w, h);
+    const SceneView& view = scene->view();
+    const EmbreeTracer tracer{scene->rayScene()};
+    pt::PathTracerSettings set;
+    set.maxBounces = uint32_t(mMaxBounces);
+    set.rrStartBounce = uint32_t(mRrStartBounce);
+    set.lightSampling = uint32_t(mLightSampling);
+    set.lambertOnly = mLambertOnly;
+    const uint32_t spp = uint32_t(mSamplesPerPixel);
+    const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
+    const pt::LightsView lights = mLights;
+
+    const Texture* vbTex = ctx.input(kVBuffer);
+    const ImageView<const glm::uvec4> vbuffer = vbTex ? vbTex->view<glm::uvec4>() : ImageView<const glm::uvec4>{};
+    auto view4 = [&](const char* name) {
+        Texture* t = ctx.output(name);
+        return t ? t->view<glm::vec4>() : ImageView<glm::vec4>{};
+    };
+    const ImageView<glm::vec4> color = view4(kColor), albedo = view4(kAlbedo), specAlbedo = view4(kSpecAlbedo),
+                               emission = view4(kEmission), direct = view4(kDirect), indirect = view4(kIndirect);
+    const bool wantsPrimary = albedo.data || specAlbedo.data || emission.data;
+    const bool split = direct.data || indirect.data;
+
+    // Per-tile counters, summed in tile order afterwards (deterministic).
+    const uint32_t tilesX = (w + kDefaultTileSize - 1) / kDefaultTileSize;
+    const uint32_t tilesY = (h + kDefaultTileSize - 1) / kDefaultTileSize;
+    std::vector<uint64_t> tileRays(size_t(tilesX) * tilesY, 0), tileDropped(size_t(tilesX) * tilesY, 0);
+
+    parallelFor2D(w, h, [&](const Tile& tile) {
+        const size_t tileIndex = size_t(tile.y0 / kDefaultTileSize) * tilesX + tile.x0 / kDefaultTileSize;
+        uint64_t rays = 0, dropped = 0;
+        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
+            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
+                // The same (unnormalised) primary ray as GBufferRT, so hits from its vbuffer and from
+                // camera rays are bit-identical.
+                const glm::vec3 rawDir = pixelRayDir(cam, x, y);
+                const glm::vec3 dir = glm::normalize(rawDir);
+                RayHit primary;
+                if (vbuffer.data) {
+                    const glm::uvec4 vb = vbuffer.at(x, y);
+                    if (vb.x != kInvalidId) {
+                        primary.instance = vb.x;
+                        primary.primitive = vb.y;
+                        primary.u = bitsToFloat(vb.z);
+                        primary.v = bitsToFloat(vb.w);
+                    }
+                } else {
+                    primary = tracer.intersect(cam.origin, rawDir);
+                    ++rays;
+                }
+                // Double sums: many finite samples near FLT_MAX must not overflow to Inf.
+                glm::dvec3 sum(0.0), sumDirect(0.0), sumIndirect(0.0);
+                uint32_t kept = 0;
+                for (uint32_t s = 0; s < spp; ++s) {
+                    pt::PathRng rng(y * w + x, frame, s);
+                    const pt::PathResult r = pt::tracePath(tracer, view, lights, set, cam.origin, dir, primary, rng);
+                    rays += r.rays;
+                    if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) {
+                        ++dropped;  // never written: a NaN would spread through every filter downstream
+                        continue;
+                    }
+                    sum += glm::dvec3(r.color);
+                    sumDirect += glm::dvec3(r.direct);
+                    sumIndirect += glm::dvec3(r.indirect);
+                    ++kept;
+                }
+                const double inv = kept ? 1.0 / double(kept) : 0.0;
+                color.at(x, y) = glm::vec4(glm::vec3(sum * inv), 1.f);
+                if (split) {
+                    if (direct.data) direct.at(x, y) = glm::vec4(glm::vec3(sumDirect * inv), 1.f);
+                    if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(sumIndirect * inv), 1.f);
+                }
+                if (wantsPrimary) {
+                    glm::vec4 a(0.f), sa(0.f), e(0.f);
+                    if (primary.hit()) {
+                        const SurfaceHit hs = evalSurface(view, primary.instance, primary.primitive, primary.u,
+                                                          primary.v, dir);
+                        a = glm::vec4(diffuseAlbedo(hs), 1.f);
+                        const float NdotV = glm::clamp(glm::dot(hs.normalW, -dir), 0.f, 1.f);
+                        sa = glm::vec4(specularAlbedo(specularF0(hs), NdotV, hs.roughness), 1.f);
+                        e = glm::vec4(pt::emittedRadiance(view, hs, dir), 1.f);
+                    }
+                    if (albedo.data) albedo.at(x, y) = a;
+                    if (specAlbedo.data) specAlbedo.at(x, y) = sa;
+                    if (emission.data) emission.at(x, y) = e;
+                }
+            }
+        }
+        tileRays[tileIndex] = rays;
+        tileDropped[tileIndex] = dropped;
+    });
+    uint64_t rays = 0, dropped = 0;
+    for (size_t i = 0; i < tileRays.size(); ++i) {
+        rays += tileRays[i];
+        dropped += tileDropped[i];
+    }
+    ctx.stats().set("rays", double(rays));
+    ctx.stats().set("paths", double(uint64_t(w) * h * spp));
+    ctx.stats().set("nonFiniteSamplesDropped", double(dropped));
+}
+
+}  // namespace loom

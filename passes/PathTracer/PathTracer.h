@@ -1,0 +1,50 @@
+#pragma once
+// PathTracer (also registered as CUDAPathTracer): unidirectional path tracing
+// with NEE and MIS over emissive triangles, punctual lights and the
+// environment. Runs on the CPU (Embree + oneTBB); `device` selects a CUDA
+// backend where one is usable.
+#include <memory>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "Lights.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+class PathTracer final : public RenderPass {
+public:
+    void reflect(Reflection& r, const CompileInfo& info) const override;
+    void declareParams(ParamList& p) override;
+    void compile(const CompileInfo& info) override;
+    void execute(PassContext& ctx) override;
+    void setScene(const std::shared_ptr<const Scene>& scene) override;
+
+    enum class Device { Auto, Cpu, Cuda };
+    enum class LightSamplingMode { Mis, Nee, Bsdf };
+
+private:
+    void buildLights(const Scene& scene);
+    void buildEnvironment(const Scene& scene);
+
+    // Parameters.
+    int mMaxBounces = 3;
+    int mSamplesPerPixel = 1;
+    int mRrStartBounce = 2;
+    LightSamplingMode mLightSampling = LightSamplingMode::Mis;
+    bool mLambertOnly = false;
+    Device mDevice = Device::Auto;
+    int mSeed = 0;
+
+    // Light data, rebuilt per frame (triangles) or per scene (environment).
+    std::vector<pt::EmissiveTri> mTris;
+    std::vector<float> mTriCdf;
+    std::vector<uint32_t> mInstanceTriBase;
+    std::vector<pt::PunctualLight> mPunctual;
+    std::vector<float> mEnvMarginal, mEnvConditional;
+    const void* mEnvSource = nullptr;  // the scene whose environment the CDFs describe
+    pt::LightsView mLights;
+};
+
+}  // namespace loom

@@ -1,0 +1,183 @@
+#pragma once
+// The path tracer's per-pixel integrator: unidirectional path tracing with
+// next-event estimation and multiple importance sampling (Veach 1997, ch. 9),
+// Russian roulette, and a Lambert-only mode for analytic validation. The ray
+// tracer is a template parameter so the same code can run over Embree on the
+// CPU or a device tracer later.
+#include <cmath>
+#include <cstdint>
+
+#include <glm/glm.hpp>
+
+#include "BRDF.h"
+#include "Lights.h"
+#include "Random.h"
+#include "loom/Kernel.h"
+#include "loom/RayScene.h"
+#include "loom/SceneView.h"
+#include "loom/SurfaceKernels.h"
+
+namespace loom::pt {
+
+enum LightSampling : uint32_t { kMis = 0, kNeeOnly = 1, kBsdfOnly = 2 };
+
+struct PathTracerSettings {
+    uint32_t maxBounces = 3;     ///< scattering events; 0 shows only what the camera sees directly
+    uint32_t rrStartBounce = 2;  ///< Russian roulette from this bounce on
+    uint32_t lightSampling = kMis;
+    bool lambertOnly = false;    ///< f = baseColor / pi, for analytic tests
+};
+
+struct PathResult {
+    glm::vec3 color{0.f};
+    glm::vec3 direct{0.f};    ///< emission seen directly, NEE at the first hit, and emission one bounce away
+    glm::vec3 indirect{0.f};  ///< everything else
+    uint32_t rays = 0;
+};
+
+/// Offsets a ray origin off a surface along its geometric normal, scaled
+/// with the position's magnitude so it works far from the origin.
+LOOM_HD inline glm::vec3 offsetOrigin(glm::vec3 p, glm::vec3 n) {
+    const float scale = 1e-4f * (1.f + glm::max(glm::max(std::fabs(p.x), std::fabs(p.y)), std::fabs(p.z)));
+    return p + n * scale;
+}
+
+/// Emission of the surface at a hit, seen from direction `toViewer` (front
+/// faces only, unless the material is double-sided).
+LOOM_HD inline glm::vec3 emittedRadiance(const SceneView& scene, const SurfaceHit& s, glm::vec3 rayDir) {
+    if (s.emission == glm::vec3(0.f)) return glm::vec3(0.f);
+    const bool doubleSided = scene.materials[s.material].doubleSided != 0;
+    return (s.frontFacing || doubleSided) ? s.emission : glm::vec3(0.f);
+}
+
+/// Lambert-only mode: f = baseColor / pi, cosine-weighted sampling.
+LOOM_HD inline glm::vec3 lambertEval(const SurfaceHit& s, glm::vec3 n, glm::vec3 wi) {
+    return glm::dot(n, wi) > 0.f ? s.baseColor * kInvPi : glm::vec3(0.f);
+}
+
+template <class Tracer>
+LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const LightsView& lights,
+                             const PathTracerSettings& set, glm::vec3 origin, glm::vec3 dir, RayHit hit,
+                             PathRng& rng) {
+    PathResult r;
+    glm::vec3 throughput(1.f);
+    glm::vec3 rayOrigin = origin, rayDir = glm::normalize(dir);
+    float prevBsdfPdf = 0.f;  // solid-angle pdf of the BSDF sample that produced this ray
+    bool prevDelta = true;    // camera ray: emission always counts fully
+    for (uint32_t bounce = 0;; ++bounce) {
+        const bool directSlot = bounce <= 1;  // emission reached here belongs to "direct"
+        if (!hit.hit()) {
+            const glm::vec3 Le = envRadiance(lights.env, rayDir);
+            float w = 1.f;
+            if (!prevDelta && lights.hasEnv) {
+                if (set.lightSampling == kNeeOnly) w = 0.f;
+                else if (set.lightSampling == kMis)
+                    w = powerHeuristic(prevBsdfPdf, lights.pEnv * envPdf(lights.env, rayDir));
+            }
+            const glm::vec3 c = throughput * Le * w;
+            r.color += c;
+            (directSlot ? r.direct : r.indirect) += c;
+            break;
+        }
+        const SurfaceHit s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir);
+        const glm::vec3 Le = emittedRadiance(scene, s, rayDir);
+        if (Le != glm::vec3(0.f)) {
+            float w = 1.f;
+            if (!prevDelta) {
+                if (set.lightSampling == kNeeOnly) {
+                    w = 0.f;
+                } else if (set.lightSampling == kMis && lights.instanceTriBase &&
+                           lights.instanceTriBase[hit.instance] != 0xFFFFFFFFu) {
+                    const EmissiveTri& t = lights.tris[lights.instanceTriBase[hit.instance] + hit.primitive];
+                    const glm::vec3 d = s.posW - rayOrigin;
+                    float cosLight = -glm::dot(t.normal, rayDir);
+                    if (t.doubleSided) cosLight = std::fabs(cosLight);
+                    w = powerHeuristic(prevBsdfPdf, triLightPdf(lights, t, glm::dot(d, d), cosLight));
+                }
+            }
+            const glm::vec3 c = throughput * Le * w;
+            r.color += c;
+            (directSlot ? r.direct : r.indirect) += c;
+        }
+        if (bounce >= set.maxBounces) break;
+        rng.startBounce(bounce);
+
+        // Shade on the side the ray arrived from.
+        const glm::vec3 wo = -rayDir;
+        glm::vec3 fn = s.faceNormalW, n = s.normalW;
+        if (glm::dot(fn, wo) < 0.f) {
+            fn = -fn;
+            n = -n;
+        }
+        if (glm::dot(n, wo) <= 0.f) n = fn;  // shading normal beyond the silhouette: fall back to geometry
+        const glm::vec3 p = offsetOrigin(s.posW, fn);
+        const BrdfInputs brdf = brdfInputs(s);
+        const bool nearSurface = bounce == 0;
+
+        // Next-event estimation.
+        const float l0 = rng.next(), l1 = rng.next(), l2 = rng.next(), l3 = rng.next();
+        LightSample ls = sampleLight(lights, p, l0, l1, l2, l3);
+        if (ls.valid && (set.lightSampling != kBsdfOnly || ls.delta)) {
+            const float cosI = glm::dot(n, ls.wi);
+            if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
+                glm::vec3 Li = ls.Li;
+                if (ls.isTriangle) {
+                    const SurfaceHit e = evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi);
+                    Li = emittedRadiance(scene, e, ls.wi);
+                }
+                if (Li != glm::vec3(0.f)) {
+                    const glm::vec3 f = set.lambertOnly ? lambertEval(s, n, ls.wi) : evalBrdf(brdf, n, wo, ls.wi);
+                    if (f != glm::vec3(0.f)) {
+                        ++r.rays;
+                        const float tMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
+                        if (!tracer.occluded(p, ls.wi, 0.f, tMax)) {
+                            float w = 1.f;
+                            if (!ls.delta && set.lightSampling == kMis) {
+                                const float bsdfPdf =
+                                    set.lambertOnly ? cosI * kInvPi : pdfBrdf(brdf, n, wo, ls.wi);
+                                w = powerHeuristic(ls.pdf, bsdfPdf);
+                            }
+                            const glm::vec3 c = throughput * f * cosI * Li * (w / ls.pdf);
+                            r.color += c;
+                            (nearSurface ? r.direct : r.indirect) += c;
+                        }
+                    }
+                }
+            }
+        }
+
+        // Continue the path by sampling the BRDF.
+        const float b0 = rng.next(), b1 = rng.next(), b2 = rng.next();
+        glm::vec3 wi;
+        if (set.lambertOnly) {
+            const glm::vec3 local = sampleCosineHemisphere(glm::vec2(b0, b1));
+            wi = makeFrame(n).toWorld(local);
+            const float cosI = glm::dot(n, wi);
+            if (cosI <= 0.f || glm::dot(fn, wi) <= 0.f) break;
+            throughput *= s.baseColor;  // f cos / pdf = (a/pi) cos / (cos/pi)
+            prevBsdfPdf = cosI * kInvPi;
+        } else {
+            const BrdfSample bs = sampleBrdf(brdf, n, wo, glm::vec2(b0, b1), b2);
+            if (!bs.valid || glm::dot(fn, bs.wi) <= 0.f) break;
+            wi = bs.wi;
+            throughput *= bs.weight;
+            prevBsdfPdf = bs.pdf;
+        }
+        prevDelta = false;
+
+        // Russian roulette (unbiased: survivors are reweighted by 1 / q).
+        if (bounce + 1 >= set.rrStartBounce) {
+            const float q = glm::min(glm::max(glm::max(throughput.x, throughput.y), throughput.z), 0.95f);
+            if (rng.next() >= q) break;
+            throughput /= q;
+        }
+        if (throughput == glm::vec3(0.f)) break;
+        rayOrigin = p;
+        rayDir = wi;
+        ++r.rays;
+        hit = tracer.intersect(p, wi);
+    }
+    return r;
+}
+
+}  // namespace loom::pt

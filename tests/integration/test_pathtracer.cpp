@@ -1,0 +1,365 @@
+// PathTracer: properties, not snapshots. A closed emissive sphere converges to
+// its analytic radiance; a diffuse plane under a point light matches the
+// analytic irradiance; NEE, BSDF and MIS estimates agree; error falls as
+// 1/sqrt(spp); output is identical for any thread count and with primary hits
+// from a vbuffer; non-finite samples are dropped.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <nlohmann/json.hpp>
+
+#include "loom/CameraKernels.h"
+#include "loom/Graph.h"
+#include "loom/Parallel.h"
+#include "loom/Plugin.h"
+#include "loom/RenderGraph.h"
+#include "loom/Scene.h"
+
+using namespace loom;
+
+namespace {
+
+PluginRegistry& registry() {
+    static PluginRegistry r({LOOM_TEST_PLUGIN_DIR}, false);
+    return r;
+}
+
+std::string scenePath(const std::string& name) { return std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + name; }
+
+/// A graph of one PathTracer marking `color`, with params.
+std::unique_ptr<RenderGraph> ptGraph(const nlohmann::json& params, uint32_t w, uint32_t h,
+                                     const std::shared_ptr<Scene>& scene, bool split = false) {
+    nlohmann::json g = {{"loom_graph", 1},
+                        {"name", "pt"},
+                        {"passes", {{{"name", "PT"}, {"type", "PathTracer"}, {"params", params}}}},
+                        {"outputs", {"PT.color"}}};
+    if (split) {
+        g["outputs"].push_back("PT.direct");
+        g["outputs"].push_back("PT.indirect");
+    }
+    auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), registry());
+    graph->setScene(scene);
+    CompileOptions o;
+    o.width = w;
+    o.height = h;
+    graph->compile(o);
+    return graph;
+}
+
+void frame(RenderGraph& g, Scene& scene, uint64_t index, uint32_t w, uint32_t h) {
+    scene.update(0.0);
+    scene.camera.aspect = float(w) / float(h);
+    scene.camera.beginFrame(index);
+    g.execute(FrameInfo{index, 0.0, &scene, &scene.camera});
+}
+
+/// Mean of `frames` frames of PT.color (as double per pixel, RGB).
+std::vector<glm::dvec3> averageFrames(RenderGraph& g, Scene& scene, uint32_t w, uint32_t h, uint64_t first,
+                                      uint32_t frames) {
+    std::vector<glm::dvec3> acc(size_t(w) * h, glm::dvec3(0.0));
+    for (uint32_t f = 0; f < frames; ++f) {
+        frame(g, scene, first + f, w, h);
+        auto c = g.fieldTexture("PT.color")->view<glm::vec4>();
+        for (uint32_t y = 0; y < h; ++y)
+            for (uint32_t x = 0; x < w; ++x) acc[size_t(y) * w + x] += glm::dvec3(glm::vec3(c.at(x, y)));
+    }
+    for (auto& v : acc) v /= double(frames);
+    return acc;
+}
+
+/// A UV sphere of radius r whose front faces (and normals) point inward.
+Mesh insideOutSphere(float r, uint32_t segments, uint32_t rings) {
+    Mesh m;
+    m.name = "sphere";
+    for (uint32_t j = 0; j <= rings; ++j) {
+        const float theta = float(j) / float(rings) * 3.14159265f;
+        for (uint32_t i = 0; i <= segments; ++i) {
+            const float phi = float(i) / float(segments) * 6.2831853f;
+            const glm::vec3 d(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi));
+            m.positions.push_back(r * d);
+            m.normals.push_back(-d);
+            m.tangents.push_back(glm::vec4(1.f, 0.f, 0.f, 1.f));
+            m.uvs.push_back(glm::vec2(0.f));
+        }
+    }
+    for (uint32_t j = 0; j < rings; ++j) {
+        for (uint32_t i = 0; i < segments; ++i) {
+            const uint32_t a = j * (segments + 1) + i, b = a + segments + 1;
+            // Counter-clockwise seen from inside (the normal's side).
+            if (j != 0) m.indices.insert(m.indices.end(), {a, b, a + 1});
+            if (j + 1 != rings) m.indices.insert(m.indices.end(), {a + 1, b, b + 1});
+        }
+    }
+    for (const auto& p : m.positions) m.bounds.extend(p);
+    return m;
+}
+
+Mesh quad(glm::vec3 corner, glm::vec3 u, glm::vec3 v) {
+    Mesh m;
+    m.name = "quad";
+    const glm::vec3 n = glm::normalize(glm::cross(u, v));
+    for (glm::vec3 p : {corner, corner + u, corner + u + v, corner + v}) {
+        m.positions.push_back(p);
+        m.normals.push_back(n);
+        m.tangents.push_back(glm::vec4(glm::normalize(u), 1.f));
+        m.uvs.push_back(glm::vec2(0.f));
+        m.bounds.extend(p);
+    }
+    m.indices = {0, 1, 2, 0, 2, 3};
+    return m;
+}
+
+std::shared_ptr<Scene> sceneOf(std::vector<Mesh> meshes, std::vector<Material> materials) {
+    auto s = std::make_shared<Scene>();
+    s->name = "test";
+    for (size_t i = 0; i < meshes.size(); ++i) {
+        meshes[i].material = uint32_t(std::min(i, materials.size() - 1));
+        s->meshes.push_back(std::move(meshes[i]));
+        Node n;
+        n.name = "n" + std::to_string(i);
+        n.meshes = {uint32_t(i)};
+        s->nodes.push_back(n);
+        s->roots.push_back(int(i));
+    }
+    s->materials = std::move(materials);
+    return s;
+}
+
+Material lambert(glm::vec3 color, glm::vec3 emission = glm::vec3(0.f)) {
+    Material m;
+    m.baseColorFactor = glm::vec4(color, 1.f);
+    m.metallicFactor = 0.f;
+    m.roughnessFactor = 1.f;
+    m.emissiveFactor = emission;
+    return m;
+}
+
+void lookAt(Scene& s, glm::vec3 eye, glm::vec3 target, float fovY) {
+    s.setCameraPose(glm::inverse(glm::lookAt(eye, target, glm::vec3(0.f, 0.f, -1.f))));
+    s.camera.fovY = fovY;
+}
+
+double meanLuminance(const std::vector<glm::dvec3>& img) {
+    double sum = 0.0;
+    for (const auto& v : img) sum += 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
+    return sum / double(img.size());
+}
+
+}  // namespace
+
+// Inside a closed sphere whose surface emits E and reflects a fraction a
+// diffusely (Lambert), radiance everywhere is E (1 + a + ... + a^N) after N
+// bounces: the white-furnace test of the whole integrator (NEE, MIS, RR).
+TEST(PathTracer, ClosedEmissiveSphereConvergesToAnalyticRadiance) {
+    const float a = 0.6f, E = 0.5f;
+    for (int maxBounces : {0, 1, 4}) {
+        auto scene = sceneOf({insideOutSphere(2.f, 48, 24)}, {lambert(glm::vec3(a), glm::vec3(E))});
+        scene->finalize();
+        scene->setCameraPose(glm::mat4(1.f));
+        scene->camera.fovY = 1.2f;
+        const uint32_t W = 24, H = 24;
+        auto g = ptGraph({{"maxBounces", maxBounces}, {"samplesPerPixel", 16}, {"lambertOnly", true}}, W, H, scene);
+        const auto img = averageFrames(*g, *scene, W, H, 0, 4);
+        double expected = 0.0;
+        for (int k = 0; k <= maxBounces; ++k) expected += E * std::pow(a, k);
+        const double got = meanLuminance(img);
+        std::printf("furnace maxBounces=%d: %.5f expected %.5f\n", maxBounces, got, expected);
+        EXPECT_NEAR(got, expected, 0.01 * expected) << "maxBounces " << maxBounces;
+    }
+}
+
+// A Lambertian plane under a point light: L = a/pi * I cos(theta) / d^2 at
+// every pixel (one bounce; the light is a delta, so the estimate is exact).
+TEST(PathTracer, DiffusePlaneUnderPointLightMatchesAnalyticIrradiance) {
+    const float albedo = 0.7f, intensity = 5.f;
+    const glm::vec3 lightPos(0.3f, 2.f, -0.2f);
+    auto scene = sceneOf({quad(glm::vec3(-4.f, 0.f, 4.f), glm::vec3(8.f, 0.f, 0.f), glm::vec3(0.f, 0.f, -8.f))},
+                         {lambert(glm::vec3(albedo))});
+    Light l;
+    l.type = LightType::Point;
+    l.intensity = intensity;
+    l.position = lightPos;
+    scene->lights.push_back(l);
+    scene->finalize();
+    lookAt(*scene, glm::vec3(0.f, 3.f, 0.f), glm::vec3(0.f, 0.f, 0.f), 1.0f);
+    const uint32_t W = 32, H = 32;
+    auto g = ptGraph({{"maxBounces", 1}, {"lambertOnly", true}}, W, H, scene);
+    frame(*g, *scene, 0, W, H);
+    const CameraData cam = makeCameraData(scene->camera, W, H);
+    auto c = g->fieldTexture("PT.color")->view<glm::vec4>();
+    int checked = 0;
+    for (uint32_t y = 0; y < H; ++y) {
+        for (uint32_t x = 0; x < W; ++x) {
+            const glm::vec3 d = pixelRayDir(cam, x, y);
+            ASSERT_LT(d.y, 0.f);
+            const glm::vec3 p = cam.origin + d * (-cam.origin.y / d.y);
+            const glm::vec3 toLight = lightPos - p;
+            const float dist2 = glm::dot(toLight, toLight);
+            const float cosTheta = toLight.y / std::sqrt(dist2);
+            const float expected = albedo / 3.14159265f * intensity * cosTheta / dist2;
+            EXPECT_NEAR(c.at(x, y).r, expected, 2e-3f * expected) << x << "," << y;
+            ++checked;
+        }
+    }
+    EXPECT_EQ(checked, int(W * H));
+}
+
+// Light sampling only, BRDF sampling only and their MIS combination are
+// three unbiased estimators of the same image: per 8x8 block and overall,
+// their means agree within 4.5 standard errors (estimated from the spread of
+// independent frames).
+TEST(PathTracer, NeeBsdfAndMisConvergeToTheSameImage) {
+    const uint32_t W = 32, H = 32, frames = 24, B = 8;
+    const uint32_t blocks = (W / B) * (H / B) + 1;  // the last one is the whole image
+    // mean[mode][block], stderr[mode][block]
+    std::vector<std::vector<double>> mean(3, std::vector<double>(blocks)), se(3, std::vector<double>(blocks));
+    const char* modes[] = {"mis", "nee", "bsdf"};
+    for (int k = 0; k < 3; ++k) {
+        auto scene = Scene::load(scenePath("cornell_box.gltf"));
+        auto g = ptGraph({{"maxBounces", 2}, {"samplesPerPixel", 16}, {"lightSampling", modes[k]}}, W, H, scene);
+        std::vector<double> sum(blocks, 0.0), sumSq(blocks, 0.0);
+        for (uint32_t f = 0; f < frames; ++f) {
+            const auto img = averageFrames(*g, *scene, W, H, f, 1);
+            std::vector<double> m(blocks, 0.0);
+            for (uint32_t y = 0; y < H; ++y)
+                for (uint32_t x = 0; x < W; ++x) {
+                    const glm::dvec3 v = img[size_t(y) * W + x];
+                    const double lum = 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
+                    m[(y / B) * (W / B) + x / B] += lum / double(B * B);
+                    m[blocks - 1] += lum / double(W * H);
+                }
+            for (uint32_t i = 0; i < blocks; ++i) {
+                sum[i] += m[i];
+                sumSq[i] += m[i] * m[i];
+            }
+        }
+        for (uint32_t i = 0; i < blocks; ++i) {
+            mean[k][i] = sum[i] / frames;
+            const double var = std::max(0.0, (sumSq[i] - sum[i] * sum[i] / frames) / (frames - 1));
+            se[k][i] = std::sqrt(var / frames);
+        }
+        std::printf("%s: image mean %.5f +- %.5f\n", modes[k], mean[k][blocks - 1], se[k][blocks - 1]);
+    }
+    for (int k = 1; k < 3; ++k) {
+        for (uint32_t i = 0; i < blocks; ++i) {
+            const double tol = 4.5 * std::sqrt(se[0][i] * se[0][i] + se[k][i] * se[k][i]) + 1e-6;
+            EXPECT_NEAR(mean[k][i], mean[0][i], tol) << modes[k] << " vs mis, block " << i;
+        }
+        // The statistical tolerance must be tight enough to mean something: under 5% of the image mean.
+        EXPECT_LT(4.5 * std::sqrt(se[0][blocks - 1] * se[0][blocks - 1] + se[k][blocks - 1] * se[k][blocks - 1]),
+                  0.05 * mean[0][blocks - 1]);
+    }
+}
+
+// RMSE against a long reference falls as spp^-1/2: the fitted log-log slope
+// is near -0.5.
+TEST(PathTracer, ErrorFallsAsInverseSquareRootOfSamples) {
+    const uint32_t W = 24, H = 24;
+    auto scene = Scene::load(scenePath("cornell_box.gltf"));
+    auto ref = ptGraph({{"maxBounces", 3}, {"samplesPerPixel", 256}, {"seed", 7}}, W, H, scene);
+    const auto reference = averageFrames(*ref, *scene, W, H, 0, 8);  // 2048 spp
+    std::vector<double> xs, ys;
+    for (int spp : {1, 4, 16, 64}) {
+        // Average the squared error over several independent frames for a stable RMSE.
+        auto g = ptGraph({{"maxBounces", 3}, {"samplesPerPixel", spp}, {"seed", 1}}, W, H, scene);
+        double se = 0.0;
+        const int repeats = 4;
+        for (int r = 0; r < repeats; ++r) {
+            const auto img = averageFrames(*g, *scene, W, H, uint64_t(100 + r), 1);
+            for (size_t i = 0; i < img.size(); ++i) {
+                const glm::dvec3 d = img[i] - reference[i];
+                se += glm::dot(d, d) / 3.0;
+            }
+        }
+        const double rmse = std::sqrt(se / (double(repeats) * double(W * H)));
+        xs.push_back(std::log(double(spp)));
+        ys.push_back(std::log(rmse));
+        std::printf("spp %3d: RMSE %.5f\n", spp, rmse);
+    }
+    double mx = 0, my = 0;
+    for (size_t i = 0; i < xs.size(); ++i) {
+        mx += xs[i] / xs.size();
+        my += ys[i] / ys.size();
+    }
+    double sxy = 0, sxx = 0;
+    for (size_t i = 0; i < xs.size(); ++i) {
+        sxy += (xs[i] - mx) * (ys[i] - my);
+        sxx += (xs[i] - mx) * (xs[i] - mx);
+    }
+    const double slope = sxy / sxx;
+    std::printf("fitted slope %.3f\n", slope);
+    EXPECT_NEAR(slope, -0.5, 0.08);
+}
+
+// The same image for any thread count, and with primary hits from GBufferRT's
+// vbuffer instead of camera rays.
+TEST(PathTracer, IdenticalForThreadCountsAndVBufferPrimaryHits) {
+    const uint32_t W = 48, H = 40;
+    auto render = [&](unsigned threads, bool viaVBuffer) {
+        ThreadLimit limit(threads);
+        auto scene = Scene::load(scenePath("cornell_box.gltf"));
+        scene->camera.jitterPattern = JitterPattern::Halton;
+        nlohmann::json g = {{"loom_graph", 1},
+                            {"name", "pt"},
+                            {"passes", {{{"name", "PT"}, {"type", "PathTracer"}, {"params", {{"samplesPerPixel", 2}}}}}},
+                            {"outputs", {"PT.color"}}};
+        if (viaVBuffer) g["passes"].push_back({{"name", "GBuffer"}, {"type", "GBufferRT"}});
+        RenderGraph graph(parseGraph(g.dump()), registry());
+        graph.setScene(scene);
+        CompileOptions o;
+        o.width = W;
+        o.height = H;
+        graph.compile(o);
+        EXPECT_EQ(graph.plan().order.size(), viaVBuffer ? 2u : 1u);  // vbuffer wired by name
+        frame(graph, *scene, 5, W, H);
+        const Texture* c = graph.fieldTexture("PT.color");
+        Texture copy(c->width(), c->height(), c->format());
+        copy.copyFrom(*c);
+        return copy;
+    };
+    const Texture one = render(1, false), two = render(2, false), vb = render(2, true);
+    EXPECT_TRUE(one.samePixels(two));
+    EXPECT_TRUE(one.samePixels(vb));
+}
+
+// A sample that overflows to Inf is dropped and counted; nothing non-finite
+// reaches the output.
+TEST(PathTracer, NonFiniteSamplesAreDroppedAndCounted) {
+    auto scene = sceneOf({insideOutSphere(1.f, 16, 8)}, {lambert(glm::vec3(0.5f), glm::vec3(3e38f))});
+    scene->finalize();
+    scene->setCameraPose(glm::mat4(1.f));
+    const uint32_t W = 8, H = 8;
+    auto g = ptGraph({{"maxBounces", 2}}, W, H, scene);
+    frame(*g, *scene, 0, W, H);
+    auto c = g->fieldTexture("PT.color")->view<glm::vec4>();
+    for (uint32_t y = 0; y < H; ++y)
+        for (uint32_t x = 0; x < W; ++x)
+            for (int k = 0; k < 4; ++k) ASSERT_TRUE(std::isfinite(c.at(x, y)[k])) << x << "," << y;
+    EXPECT_GT(g->lastStats().at("PT").at("nonFiniteSamplesDropped"), 0.0);
+}
+
+// color = direct + indirect.
+TEST(PathTracer, DirectPlusIndirectIsColor) {
+    const uint32_t W = 16, H = 16;
+    auto scene = Scene::load(scenePath("cornell_box.gltf"));
+    auto g = ptGraph({{"maxBounces", 4}}, W, H, scene, true);
+    frame(*g, *scene, 0, W, H);
+    auto c = g->fieldTexture("PT.color")->view<glm::vec4>();
+    auto d = g->fieldTexture("PT.direct")->view<glm::vec4>();
+    auto i = g->fieldTexture("PT.indirect")->view<glm::vec4>();
+    double indirectSum = 0.0;
+    for (uint32_t y = 0; y < H; ++y)
+        for (uint32_t x = 0; x < W; ++x) {
+            const glm::vec4 s = d.at(x, y) + i.at(x, y);
+            for (int k = 0; k < 3; ++k) EXPECT_NEAR(c.at(x, y)[k], s[k], 1e-5f * (1.f + std::fabs(s[k])));
+            indirectSum += i.at(x, y).r;
+        }
+    EXPECT_GT(indirectSum, 0.0);
+}
