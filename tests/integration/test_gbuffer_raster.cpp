@@ -115,12 +115,9 @@ std::shared_ptr<Scene> oneMeshScene(Mesh mesh, Material material, glm::vec3 tran
     n.name = "node";
     n.translation = translation;
     n.rotation = rotation;
+    n.meshes = {0};
     s->nodes.push_back(n);
     s->roots = {0};
-    Instance inst;
-    inst.node = 0;
-    inst.mesh = 0;
-    s->instances.push_back(inst);
     s->finalize();
     s->update(0.0);
     return s;
@@ -540,9 +537,9 @@ TEST(GBufferRaster, SurfaceMatchesSurfaceKernels) {
     Node n;
     n.translation = glm::vec3(0.1f, 0.f, -2.5f);
     n.rotation = glm::angleAxis(0.6f, glm::normalize(glm::vec3(1.f, 0.5f, 0.f)));
+    n.meshes = {0};
     scene->nodes.push_back(n);
     scene->roots = {0};
-    scene->instances.push_back(Instance{0, 0, glm::mat4(1.f), glm::mat4(1.f)});
     scene->finalize();
     scene->update(0.0);
 
