@@ -7,6 +7,8 @@
 
 #include <glm/glm.hpp>
 
+#include "loom/Kernel.h"
+
 namespace loom {
 
 class Scene;
@@ -18,7 +20,7 @@ struct RayHit {
     uint32_t primitive = kInvalidId; ///< triangle index within the instance's mesh
     float u = 0.f, v = 0.f;          ///< barycentrics: p = (1-u-v) p0 + u p1 + v p2
     float t = 0.f;                   ///< distance along the (unnormalised) direction
-    bool hit() const { return instance != kInvalidId; }
+    LOOM_HD bool hit() const { return instance != kInvalidId; }
 };
 
 class RayScene {
