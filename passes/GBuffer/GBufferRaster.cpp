@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <map>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -503,6 +505,13 @@ enum : GLint {
 constexpr GLuint kBindFrame = 0;
 
 constexpr size_t kChannelCount = std::size(kChannels);
+
+constexpr uint32_t channelBit(std::string_view name) {
+    for (size_t c = 0; c < kChannelCount; ++c)
+        if (name == kChannels[c].name) return 1u << c;
+    return 0;
+}
+constexpr uint32_t kVBufferBit = channelBit(kVBuffer), kMeshIdBit = channelBit(kMeshId);
 // Shader variants: bits 0..10 select channel outputs (at locations in channel
 // order), plus these flags.
 constexpr uint32_t kVariantAlphaTest = 1u << 16;
@@ -969,7 +978,12 @@ void GBufferRaster::execute(PassContext& ctx) {
         ctx.stats().set("uploadMs", msSince(t0));
         t0 = std::chrono::steady_clock::now();
     }
-    g.ensureTargets(mask, width, height);
+    // meshId is vbuffer's first component: with both consumed, it is read
+    // from vbuffer's attachment (GL_RED_INTEGER) rather than rendered, which
+    // saves an attachment and, at 9 channels, a second geometry pass.
+    const bool meshIdFromVBuffer = (mask & kVBufferBit) && (mask & kMeshIdBit);
+    const uint32_t renderMask = meshIdFromVBuffer ? mask & ~kMeshIdBit : mask;
+    g.ensureTargets(renderMask, width, height);
 
     // Per-frame data: the camera, and materials (small, and editable between
     // frames). Instance transforms are read per draw (animation moves them).
@@ -1128,6 +1142,11 @@ void GBufferRaster::execute(PassContext& ctx) {
             glNamedFramebufferReadBuffer(group.fbo, GLenum(GL_COLOR_ATTACHMENT0 + slot));
             glPixelStorei(GL_PACK_ROW_LENGTH, GLint(t->rowPitch() / formatInfo(t->format()).bytesPerPixel));
             glReadPixels(0, 0, GLsizei(width), GLsizei(height), f.format, f.type, t->data());
+            if (meshIdFromVBuffer && (1u << group.channels[slot]) == kVBufferBit) {
+                Texture* ids = outputs[size_t(std::countr_zero(kMeshIdBit))];
+                glPixelStorei(GL_PACK_ROW_LENGTH, GLint(ids->rowPitch() / sizeof(uint32_t)));
+                glReadPixels(0, 0, GLsizei(width), GLsizei(height), GL_RED_INTEGER, GL_UNSIGNED_INT, ids->data());
+            }
         }
     }
     glPixelStorei(GL_PACK_ROW_LENGTH, 0);

@@ -832,3 +832,16 @@ TEST(GBufferRaster, NoEglIsAClearRuntimeError) {
     EXPECT_NE(output.find("OpenGL 4.5"), std::string::npos) << output;
     EXPECT_NE(output.find("GBufferRT"), std::string::npos) << output;  // the alternative
 }
+
+// meshId is read from vbuffer's attachment when both are consumed: nine
+// channels still fit one geometry pass (llvmpipe has 8 draw buffers).
+TEST(GBufferRaster, MeshIdSharesVBufferAttachment) {
+    auto scene = oneMeshScene(rectMesh(-1.f, -1.f, 1.f, 1.f), plainMaterial(), glm::vec3(0.f, 0.f, -2.f));
+    Camera cam = makeCamera();
+    auto graph = makeGraph({"posW", "normW", "faceNormalW", "linearZ", "mvec", "albedo", "specAlbedo", "vbuffer",
+                            "meshId"});
+    graph->execute(FrameInfo{0, 0.0, scene.get(), &cam});
+    EXPECT_EQ(graph->lastStats().at("GBuffer").at("geometryPasses"), 1.0);
+    EXPECT_EQ(texel<uint32_t>(field(*graph, "meshId"), kW / 2, kH / 2), 0u);
+    EXPECT_EQ(texel<uint32_t>(field(*graph, "meshId"), 0, 0), kMissId);
+}
