@@ -2,6 +2,22 @@
 // GBufferRaster: the standard G-buffer channels rasterized with OpenGL 4.5 in
 // a headless EGL context (llvmpipe on machines without a GPU), read back into
 // the graph's host textures. Only consumed channels are drawn and read.
+//
+// What it writes, and where it differs from GBufferRT:
+// - Values at a hit (posW, normals, vbuffer barycentrics, material channels,
+//   mvec) come from the triangle fetched by gl_PrimitiveID and the pixel's
+//   exact camera ray, by SurfaceKernels.h's formulas: they match GBufferRT
+//   to float rounding (textures: to GL's 8-bit filtering weights).
+// - Derivatives (linearZ.y, pnFwidth) are GL's fine dFdx/dFdy: differences
+//   within each 2x2 pixel quad, so backward differences in odd columns and
+//   rows where GBufferRT always differences forward. pnFwidth.y is that of
+//   the interpolated vertex normal (before normal mapping), as in GBufferRT.
+// - Misses: posW, normals, albedo, specAlbedo, emission 0 (w 0 too),
+//   linearZ (-1, 0), vbuffer and meshId ~0u, and mvec the motion of the
+//   pixel's direction at infinity under the previous camera's rotation
+//   (CameraKernels.h missMotion), as GBufferRT.
+// - Geometry closer than the camera's nearZ is clipped; there is no far plane.
+// The context is current only inside execute/setScene (and restored after).
 #include <memory>
 
 #include "loom/RenderPass.h"
