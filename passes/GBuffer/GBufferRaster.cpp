@@ -69,7 +69,7 @@ layout(std140, binding = 0) uniform FrameBlock {
 layout(location = 0) uniform uvec4 uDraw;
 layout(location = 1) uniform mat4 uWorld;
 layout(location = 2) uniform mat4 uPrevWorld;
-layout(location = 4) uniform mat3 uNormalMatrix;  // inverse transpose of uWorld's upper 3x3
+layout(location = 3) uniform mat3 uNormalMatrix;  // inverse transpose of uWorld's upper 3x3
 )glsl";
 
 constexpr char kGeometryVS[] = R"glsl(
@@ -102,11 +102,11 @@ void main() {
 
 constexpr char kGeometryFS[] = R"glsl(
 // The drawn material (MaterialGpu on the C++ side).
-layout(location = 5) uniform vec4 uBaseColorFactor;
-layout(location = 6) uniform vec4 uEmissive;      // xyz: emissiveFactor, w: normalScale
-layout(location = 7) uniform vec4 uMaterialParams; // x: metallic, y: roughness, z: alphaCutoff
-layout(location = 8) uniform ivec4 uTextures;      // baseColor, metallicRoughness, normal, emissive (-1 = none)
-layout(location = 9) uniform uvec4 uFlags;         // x: doubleSided, y: alpha mask
+layout(location = 4) uniform vec4 uBaseColorFactor;
+layout(location = 5) uniform vec4 uEmissive;      // xyz: emissiveFactor, w: normalScale
+layout(location = 6) uniform vec4 uMaterialParams; // x: metallic, y: roughness, z: alphaCutoff
+layout(location = 7) uniform ivec4 uTextures;      // baseColor, metallicRoughness, normal, emissive (-1 = none)
+layout(location = 8) uniform uvec4 uFlags;         // x: doubleSided, y: alpha mask
 
 // The drawn mesh's vertex arrays and triangles, as buffer textures (views of
 // its buffers). Buffer textures rather than storage buffers: llvmpipe
@@ -132,8 +132,8 @@ in vec3 vNormalW;
 // The camera ray in the drawn instance's object space: origin, and the
 // direction of image position ndc as uObjRayBasis * (1, ndc.x, ndc.y)
 // (CameraKernels.h cameraRayDir through the inverse world matrix).
-layout(location = 10) uniform vec3 uObjRayOrigin;
-layout(location = 11) uniform mat3 uObjRayBasis;
+layout(location = 9) uniform vec3 uObjRayOrigin;
+layout(location = 10) uniform mat3 uObjRayBasis;
 
 #ifdef OUT_POSW
 layout(location = OUT_POSW) out vec4 oPosW;
@@ -456,15 +456,17 @@ void main() {
 )glsl";
 
 // ---------------------------------------------------------------------------
-// GPU-side structures (std140 / std430 layouts above)
+// Data handed to the shaders
 // ---------------------------------------------------------------------------
 
+/// FrameBlock, std140: mat4 and vec4 members need no padding.
 struct FrameGpu {
     glm::mat4 viewProj, prevViewProj, view, prevView, proj;
     glm::vec4 camOrigin, camRight, camUp, camForward, lens, viewport, jitter;
 };
 static_assert(sizeof(FrameGpu) == 5 * 64 + 7 * 16);
 
+/// A material as the per-draw uniforms uBaseColorFactor ... uFlags carry it.
 struct MaterialGpu {
     glm::vec4 baseColorFactor;
     glm::vec4 emissive;
@@ -472,9 +474,8 @@ struct MaterialGpu {
     glm::ivec4 textures;
     glm::uvec4 flags;
 };
-static_assert(sizeof(MaterialGpu) == 80);
 
-// Texture units, uniform locations and block bindings used by the shaders.
+// Texture units, uniform locations and the uniform-block binding used by the shaders.
 enum : GLuint {
     kUnitBaseColor = 0,
     kUnitMetalRough = 1,
@@ -490,14 +491,14 @@ enum : GLint {
     kLocDraw = 0,
     kLocWorld = 1,
     kLocPrevWorld = 2,
-    kLocNormalMatrix = 4,
-    kLocBaseColorFactor = 5,
-    kLocEmissive = 6,
-    kLocMaterialParams = 7,
-    kLocTextures = 8,
-    kLocFlags = 9,
-    kLocObjRayOrigin = 10,
-    kLocObjRayBasis = 11
+    kLocNormalMatrix = 3,
+    kLocBaseColorFactor = 4,
+    kLocEmissive = 5,
+    kLocMaterialParams = 6,
+    kLocTextures = 7,
+    kLocFlags = 8,
+    kLocObjRayOrigin = 9,
+    kLocObjRayBasis = 10
 };
 constexpr GLuint kBindFrame = 0;
 

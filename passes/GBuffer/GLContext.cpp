@@ -84,8 +84,9 @@ EGLDisplay acquireDisplay() {
     const char* clientExt = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
     if (!clientExt) failEgl("eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS) (no client extensions: EGL < 1.5?)");
     if (!hasExtension(clientExt, "EGL_MESA_platform_surfaceless"))
-        fail("eglGetPlatformDisplayEXT", "the EGL client extension EGL_MESA_platform_surfaceless is missing "
-                                         "(client extensions: " + std::string(clientExt) + ")");
+        fail("eglGetPlatformDisplayEXT",
+             "the EGL client extension EGL_MESA_platform_surfaceless is missing (client extensions: " +
+                 (*clientExt ? std::string(clientExt) : std::string("none; GLVND found no EGL vendor library")) + ")");
     auto getPlatformDisplay =
         reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
     if (!getPlatformDisplay) fail("eglGetProcAddress(\"eglGetPlatformDisplayEXT\")", "EGL_EXT_platform_base missing");

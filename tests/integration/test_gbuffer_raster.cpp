@@ -1,7 +1,12 @@
 // GBufferRaster (OpenGL 4.5 through headless EGL): channel values against
 // analytic expectations and against SurfaceKernels.h on tiny scenes built in
 // code, run through the real plugin and RenderGraph.
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -104,7 +109,7 @@ Mesh rectMesh(float x0, float y0, float x1, float y1, uint32_t material = 0) {
     return m;
 }
 
-/// A scene of one instance of `mesh` placed by one root node.
+/// A scene of one instance of `mesh` placed by one root node (finalize makes the instance).
 std::shared_ptr<Scene> oneMeshScene(Mesh mesh, Material material, glm::vec3 translation,
                                     glm::quat rotation = glm::quat(1.f, 0.f, 0.f, 0.f)) {
     auto s = std::make_shared<Scene>();
@@ -641,4 +646,189 @@ TEST(GBufferRaster, ChannelValuesIndependentOfConsumedSet) {
         one->execute(FrameInfo{0, 0.0, scene.get(), &cam});
         EXPECT_TRUE(field(*one, c).samePixels(field(*all, c))) << c;
     }
+}
+
+namespace {
+
+struct FineDerivatives {
+    float linearZ = 0.f;
+    glm::vec2 pnFwidth{0.f};
+};
+
+/// What fine screen-space derivatives of depth, position and interpolated
+/// normal give at pixel (x, y) on triangle `prim` of an instance: the
+/// differences between the pixels of its 2x2 quad, on the triangle's plane.
+FineDerivatives fineDerivatives(const Scene& scene, const Camera& cam, uint32_t w, uint32_t h, uint32_t instance,
+                                uint32_t prim, uint32_t x, uint32_t y) {
+    const Instance& inst = scene.instances[instance];
+    const Mesh& mesh = scene.meshes[inst.mesh];
+    const uint32_t* idx = mesh.indices.data() + 3 * prim;
+    glm::vec3 p[3], n[3];
+    const glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(inst.world)));
+    for (int k = 0; k < 3; ++k) {
+        p[k] = glm::vec3(inst.world * glm::vec4(mesh.positions[idx[k]], 1.f));
+        n[k] = mesh.normals[idx[k]];
+    }
+    const glm::vec3 fn = glm::cross(p[1] - p[0], p[2] - p[0]);
+    const CameraData cd = makeCameraData(cam, w, h);
+    struct OnPlane {
+        glm::vec3 pos, normal;
+        float depth;
+    };
+    auto at = [&](uint32_t px, uint32_t py) {
+        const glm::vec3 d = cameraRayDir(cd, px + 0.5f + cam.jitter.x, py + 0.5f + cam.jitter.y);
+        const glm::vec3 q = cd.origin + d * (glm::dot(p[0] - cd.origin, fn) / glm::dot(d, fn));
+        // Barycentrics of q, then the interpolated normal (GBufferRT's interpolatedNormal).
+        const glm::vec3 e1 = p[1] - p[0], e2 = p[2] - p[0], r = q - p[0];
+        const float d11 = glm::dot(e1, e1), d12 = glm::dot(e1, e2), d22 = glm::dot(e2, e2);
+        const float det = d11 * d22 - d12 * d12;
+        const float u = (d22 * glm::dot(r, e1) - d12 * glm::dot(r, e2)) / det;
+        const float v = (d11 * glm::dot(r, e2) - d12 * glm::dot(r, e1)) / det;
+        const glm::vec3 nw = glm::normalize(normalMatrix * ((1.f - u - v) * n[0] + u * n[1] + v * n[2]));
+        return OnPlane{q, nw, glm::dot(q - cd.origin, cd.forward)};
+    };
+    const uint32_t x0 = x & ~1u, y0 = y & ~1u;
+    const OnPlane ax = at(x0, y), bx = at(x0 + 1, y), ay = at(x, y0), by = at(x, y0 + 1);
+    FineDerivatives f;
+    f.linearZ = std::max(std::fabs(bx.depth - ax.depth), std::fabs(by.depth - ay.depth));
+    f.pnFwidth.x = glm::length(glm::abs(bx.pos - ax.pos) + glm::abs(by.pos - ay.pos));
+    f.pnFwidth.y = glm::length(glm::abs(bx.normal - ax.normal) + glm::abs(by.normal - ay.normal));
+    return f;
+}
+
+/// Renders a shipped scene with GBufferRaster and GBufferRT in one graph and
+/// compares them pixel by pixel where both see the same triangle.
+void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, glm::vec2 jitter) {
+    auto scene = Scene::load(std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + sceneFile);
+    const uint32_t w = 96, h = 72;
+    scene->update(t0);
+    scene->update(t1);
+    Camera cam = scene->camera;
+    cam.aspect = float(w) / float(h);
+    cam.jitter = jitter;
+
+    nlohmann::json g = {{"loom_graph", 1},
+                        {"name", "RasterVsRT"},
+                        {"passes",
+                         {{{"name", "Raster"}, {"type", "GBufferRaster"}}, {{"name", "RT"}, {"type", "GBufferRT"}}}},
+                        {"edges", nlohmann::json::array()},
+                        {"outputs", nlohmann::json::array()}};
+    for (const char* c : kAllChannels) {
+        g["outputs"].push_back(std::string("Raster.") + c);
+        g["outputs"].push_back(std::string("RT.") + c);
+    }
+    RenderGraph graph(parseGraph(g.dump()), registry());
+    CompileOptions o;
+    o.width = w;
+    o.height = h;
+    graph.compile(o);
+    graph.execute(FrameInfo{1, t1, scene.get(), &cam});
+    auto tex = [&](const char* pass, const char* c) -> const Texture& {
+        const Texture* t = graph.fieldTexture(std::string(pass) + "." + c);
+        if (!t) throw std::runtime_error(std::string(pass) + "." + c + " missing");
+        return *t;
+    };
+    auto close4 = [](glm::vec4 a, glm::vec4 b, float tol) {
+        return glm::all(glm::lessThanEqual(glm::abs(a - b), glm::vec4(tol)));
+    };
+    int same = 0, differ = 0;
+    for (uint32_t y = 0; y < h; ++y) {
+        for (uint32_t x = 0; x < w; ++x) {
+            const glm::uvec4 vr = texel<glm::uvec4>(tex("Raster", "vbuffer"), x, y);
+            const glm::uvec4 vt = texel<glm::uvec4>(tex("RT", "vbuffer"), x, y);
+            if (vr.x != vt.x || vr.y != vt.y) {
+                ++differ;  // a silhouette or shared edge: either triangle is right
+                continue;
+            }
+            ++same;
+            SCOPED_TRACE(sceneFile + " pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")");
+            if (vr.x == kMissId) {
+                EXPECT_EQ(vr, vt);
+                const glm::vec2 mr = texel<glm::vec2>(tex("Raster", "mvec"), x, y);
+                const glm::vec2 mt = texel<glm::vec2>(tex("RT", "mvec"), x, y);
+                EXPECT_NEAR(mr.x * w, mt.x * w, 1e-3f);
+                EXPECT_NEAR(mr.y * h, mt.y * h, 1e-3f);
+                continue;
+            }
+            EXPECT_NEAR(bitsToFloat(vr.z), bitsToFloat(vt.z), 1e-4f);
+            EXPECT_NEAR(bitsToFloat(vr.w), bitsToFloat(vt.w), 1e-4f);
+            const glm::vec4 pr = texel<glm::vec4>(tex("Raster", "posW"), x, y);
+            const glm::vec4 pt = texel<glm::vec4>(tex("RT", "posW"), x, y);
+            const glm::vec2 zr = texel<glm::vec2>(tex("Raster", "linearZ"), x, y);
+            const glm::vec2 zt = texel<glm::vec2>(tex("RT", "linearZ"), x, y);
+            EXPECT_TRUE(close4(pr, pt, 1e-4f * zt.x)) << "posW";
+            EXPECT_LT(relErr(zr.x, zt.x), 1e-4f);
+            EXPECT_TRUE(close4(texel<glm::vec4>(tex("Raster", "faceNormalW"), x, y),
+                               texel<glm::vec4>(tex("RT", "faceNormalW"), x, y), 1e-5f))
+                << "faceNormalW";
+            EXPECT_TRUE(close4(texel<glm::vec4>(tex("Raster", "normW"), x, y),
+                               texel<glm::vec4>(tex("RT", "normW"), x, y), 1e-2f))
+                << "normW";
+            for (const char* c : {"albedo", "specAlbedo", "emission"}) {
+                const glm::vec4 a = texel<glm::vec4>(tex("Raster", c), x, y);
+                const glm::vec4 b = texel<glm::vec4>(tex("RT", c), x, y);
+                EXPECT_TRUE(close4(a, b, 2e-2f * std::max(1.f, glm::length(b)))) << c;
+            }
+            const glm::vec2 mr = texel<glm::vec2>(tex("Raster", "mvec"), x, y);
+            const glm::vec2 mt = texel<glm::vec2>(tex("RT", "mvec"), x, y);
+            EXPECT_NEAR(mr.x * w, mt.x * w, 1e-3f);
+            EXPECT_NEAR(mr.y * h, mt.y * h, 1e-3f);
+            EXPECT_EQ(texel<uint32_t>(tex("Raster", "meshId"), x, y), texel<uint32_t>(tex("RT", "meshId"), x, y));
+            // Derivatives: GL's fine dFdx/dFdy difference the pixel with its
+            // neighbour in its 2x2 quad (forward in even columns and rows,
+            // backward in odd ones), GBufferRT with the next pixel (always
+            // forward). Both evaluate the triangle's plane, so the raster's
+            // values are checked against the quad differences on the plane.
+            const FineDerivatives e = fineDerivatives(*scene, cam, w, h, vr.x, vr.y, x, y);
+            const glm::vec2 fr = texel<glm::vec2>(tex("Raster", "pnFwidth"), x, y);
+            EXPECT_NEAR(zr.y, e.linearZ, 1e-3f * e.linearZ + 1e-6f * zt.x) << "linearZ.y";
+            EXPECT_NEAR(fr.x, e.pnFwidth.x, 1e-3f * e.pnFwidth.x + 1e-6f * zt.x) << "pnFwidth.x";
+            EXPECT_NEAR(fr.y, e.pnFwidth.y, 1e-3f * e.pnFwidth.y + 1e-4f) << "pnFwidth.y";
+        }
+    }
+    EXPECT_GT(same, int(0.97 * w * h)) << "differ " << differ;
+}
+
+}  // namespace
+
+// The two G-buffer passes are interchangeable: same triangles, same values.
+TEST(GBufferRaster, MatchesGBufferRTOnCornellDynamic) {
+    compareWithRayTracer("cornell_dynamic.gltf", 1.0, 1.0 + 1.0 / 30.0, glm::vec2(0.2f, -0.35f));
+}
+
+TEST(GBufferRaster, MatchesGBufferRTOnMaterials) {
+    compareWithRayTracer("materials.gltf", 0.0, 0.0, glm::vec2(0.f));
+}
+
+namespace {
+
+/// Runs the loom CLI with a shell prefix (environment), capturing its output.
+int runLoom(const std::string& prefix, const std::string& args, std::string& output) {
+    const std::string cmd = prefix + " '" + std::string(LOOM_TEST_LOOM_EXE) + "' " + args + " 2>&1 </dev/null";
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    if (!pipe) return -1;
+    char buffer[4096];
+    size_t n;
+    while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) output.append(buffer, n);
+    const int status = ::pclose(pipe);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace
+
+// Without a usable EGL (here: GLVND pointed at no vendor library) the run
+// fails with a runtime error that names EGL and says what to do.
+TEST(GBufferRaster, NoEglIsAClearRuntimeError) {
+    const auto out = std::filesystem::temp_directory_path() / ("loom_test_noegl_" + std::to_string(::getpid()));
+    std::string output;
+    const int code = runLoom("__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent/vendor.json",
+                             "render -q --size 16x16 --graph '" + std::string(LOOM_TEST_SOURCE_DIR) +
+                                 "/graphs/GBufferRaster.json' --scene '" + std::string(LOOM_TEST_SOURCE_DIR) +
+                                 "/data/scenes/cornell_box.gltf' --out '" + out.string() + "'",
+                             output);
+    std::filesystem::remove_all(out);
+    EXPECT_EQ(code, 1) << output;
+    EXPECT_NE(output.find("EGL"), std::string::npos) << output;
+    EXPECT_NE(output.find("OpenGL 4.5"), std::string::npos) << output;
+    EXPECT_NE(output.find("GBufferRT"), std::string::npos) << output;  // the alternative
 }
