@@ -21,6 +21,8 @@ struct EmissiveTri {
     float power = 0.f;      ///< selection weight: area * luminance(emission)
     uint32_t instance = 0, primitive = 0;
     uint32_t doubleSided = 0;
+    uint32_t textured = 0;  ///< emission varies over the triangle (emissive texture): evaluate the material
+    glm::vec3 radiance{0.f};  ///< emitted radiance when not textured
 };
 
 enum PunctualType : uint32_t { kPoint = 0, kSpot = 1, kDirectional = 2 };
@@ -122,8 +124,8 @@ LOOM_HD inline float triLightPdf(const LightsView& L, const EmissiveTri& t, floa
 }
 
 /// Samples a light for shading point p. u: four uniform numbers.
-/// Triangle radiance is left to the caller (Li = 0, isTriangle = true), which
-/// evaluates the material's emission at the sampled point.
+/// For a textured emissive triangle the radiance is left to the caller
+/// (isTriangle = true), which evaluates the material at the sampled point.
 LOOM_HD inline LightSample sampleLight(const LightsView& L, glm::vec3 p, float u0, float u1, float u2, float u3) {
     LightSample s;
     if (u0 < L.pTris) {
@@ -147,7 +149,8 @@ LOOM_HD inline LightSample sampleLight(const LightsView& L, glm::vec3 p, float u
         s.instance = t.instance;
         s.primitive = t.primitive;
         s.bary = glm::vec2(bu, bv);
-        s.isTriangle = true;
+        s.isTriangle = t.textured != 0;  // untextured: the radiance is known
+        s.Li = t.radiance;
         s.valid = true;
         return s;
     }

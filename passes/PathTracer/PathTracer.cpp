@@ -154,6 +154,8 @@ void PathTracer::buildLights(const Scene& scene) {
             e.instance = i;
             e.primitive = t;
             e.doubleSided = mat.doubleSided ? 1u : 0u;
+            e.textured = md.emissiveTexture >= 0 ? 1u : 0u;
+            e.radiance = mat.emissiveFactor;
             mTris.push_back(e);
         }
     }

@@ -126,17 +126,22 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
                     Li = emittedRadiance(scene, e, ls.wi);
                 }
                 if (Li != glm::vec3(0.f)) {
-                    const glm::vec3 f = set.lambertOnly ? lambertEval(s, n, ls.wi) : evalBrdf(brdf, n, wo, ls.wi);
+                    glm::vec3 f;
+                    float bsdfPdf;
+                    if (set.lambertOnly) {
+                        f = lambertEval(s, n, ls.wi);
+                        bsdfPdf = cosI * kInvPi;
+                    } else {
+                        const BrdfEval e = evalBrdfAndPdf(brdf, n, wo, ls.wi);
+                        f = e.f;
+                        bsdfPdf = e.pdf;
+                    }
                     if (f != glm::vec3(0.f)) {
                         ++r.rays;
                         const float tMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
                         if (!tracer.occluded(p, ls.wi, 0.f, tMax)) {
-                            float w = 1.f;
-                            if (!ls.delta && set.lightSampling == kMis) {
-                                const float bsdfPdf =
-                                    set.lambertOnly ? cosI * kInvPi : pdfBrdf(brdf, n, wo, ls.wi);
-                                w = powerHeuristic(ls.pdf, bsdfPdf);
-                            }
+                            const float w =
+                                (!ls.delta && set.lightSampling == kMis) ? powerHeuristic(ls.pdf, bsdfPdf) : 1.f;
                             const glm::vec3 c = throughput * f * cosI * Li * (w / ls.pdf);
                             r.color += c;
                             (nearSurface ? r.direct : r.indirect) += c;

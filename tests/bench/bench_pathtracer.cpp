@@ -1,0 +1,55 @@
+// PathTracer throughput: paths per second at 1280x720, 1 spp, on the data
+// Cornell box, for path lengths 1, 3 and 8. "Path length" L follows the Embree
+// tutorial path tracer (the anchor, tools/anchor_embree_pathtracer.sh): light
+// transport over paths of up to L + 1 segments, i.e. direct light at up to L
+// surface hits. In Loom that is maxBounces = L. Russian roulette is off, as
+// in the tutorial. Loom also traces the BRDF-sampled ray after the last NEE
+// (for MIS), so it traces one more closest-hit ray per path than the anchor.
+#include <benchmark/benchmark.h>
+
+#include <string>
+
+#include "loom/Parallel.h"
+#include "loom/RenderGraph.h"
+#include "loom/Scene.h"
+
+using namespace loom;
+
+namespace {
+
+PluginRegistry& registry() {
+    static PluginRegistry r({LOOM_TEST_PLUGIN_DIR}, false);
+    return r;
+}
+
+void BM_PathTracer(benchmark::State& state) {
+    const int pathLength = int(state.range(0));
+    const uint32_t W = 1280, H = 720;
+    auto scene = Scene::load(std::string(LOOM_SOURCE_DIR) + "/data/scenes/cornell_box.gltf");
+    const std::string graphText = R"({"loom_graph": 1, "passes": [{"name": "PT", "type": "PathTracer", "params":
+        {"maxBounces": )" + std::to_string(pathLength) + R"(, "rrStartBounce": 64, "samplesPerPixel": 1}}],
+        "outputs": ["PT.color"]})";
+    RenderGraph graph(parseGraph(graphText), registry());
+    graph.setScene(scene);
+    CompileOptions o;
+    o.width = W;
+    o.height = H;
+    graph.compile(o);
+    scene->camera.aspect = float(W) / float(H);
+    uint64_t frame = 0;
+    double rays = 0;
+    for (auto _ : state) {
+        scene->camera.beginFrame(frame);
+        graph.execute(FrameInfo{frame, 0.0, scene.get(), &scene->camera});
+        rays += graph.lastStats().at("PT").at("rays");
+        ++frame;
+    }
+    state.counters["paths/s"] = benchmark::Counter(double(W) * H * double(frame), benchmark::Counter::kIsRate);
+    state.counters["Mrays/s"] = benchmark::Counter(rays * 1e-6, benchmark::Counter::kIsRate);
+    state.counters["rays/path"] = rays / (double(W) * H * double(frame));
+}
+BENCHMARK(BM_PathTracer)->Arg(1)->Arg(3)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(3.0);
+
+}  // namespace
+
+BENCHMARK_MAIN();
