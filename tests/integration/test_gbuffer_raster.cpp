@@ -700,7 +700,7 @@ FineDerivatives fineDerivatives(const Scene& scene, const Camera& cam, uint32_t 
 /// compares them pixel by pixel where both see the same triangle.
 void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, glm::vec2 jitter) {
     auto scene = Scene::load(std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + sceneFile);
-    const uint32_t w = 96, h = 72;
+    const uint32_t w = 160, h = 120;
     scene->update(t0);
     scene->update(t1);
     Camera cam = scene->camera;
@@ -750,12 +750,15 @@ void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, gl
                 EXPECT_NEAR(mr.y * h, mt.y * h, 1e-3f);
                 continue;
             }
-            EXPECT_NEAR(bitsToFloat(vr.z), bitsToFloat(vt.z), 1e-4f);
-            EXPECT_NEAR(bitsToFloat(vr.w), bitsToFloat(vt.w), 1e-4f);
             const glm::vec4 pr = texel<glm::vec4>(tex("Raster", "posW"), x, y);
             const glm::vec4 pt = texel<glm::vec4>(tex("RT", "posW"), x, y);
             const glm::vec2 zr = texel<glm::vec2>(tex("Raster", "linearZ"), x, y);
             const glm::vec2 zt = texel<glm::vec2>(tex("RT", "linearZ"), x, y);
+            // At grazing angles (depth changing by a large fraction per pixel) ray-plane intersection in float
+            // loses digits in both passes; tolerances widen with that relative slope.
+            const float grazing = zt.y / std::max(zt.x, 1e-6f);
+            EXPECT_NEAR(bitsToFloat(vr.z), bitsToFloat(vt.z), 1e-4f * (1.f + 10.f * grazing));
+            EXPECT_NEAR(bitsToFloat(vr.w), bitsToFloat(vt.w), 1e-4f * (1.f + 10.f * grazing));
             EXPECT_TRUE(close4(pr, pt, 1e-4f * zt.x)) << "posW";
             EXPECT_LT(relErr(zr.x, zt.x), 1e-4f);
             EXPECT_TRUE(close4(texel<glm::vec4>(tex("Raster", "faceNormalW"), x, y),
@@ -781,12 +784,15 @@ void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, gl
             // values are checked against the quad differences on the plane.
             const FineDerivatives e = fineDerivatives(*scene, cam, w, h, vr.x, vr.y, x, y);
             const glm::vec2 fr = texel<glm::vec2>(tex("Raster", "pnFwidth"), x, y);
-            EXPECT_NEAR(zr.y, e.linearZ, 1e-3f * e.linearZ + 1e-6f * zt.x) << "linearZ.y";
-            EXPECT_NEAR(fr.x, e.pnFwidth.x, 1e-3f * e.pnFwidth.x + 1e-6f * zt.x) << "pnFwidth.x";
+            EXPECT_NEAR(zr.y, e.linearZ, 1e-3f * (1.f + grazing) * e.linearZ + 1e-6f * zt.x) << "linearZ.y";
+            EXPECT_NEAR(fr.x, e.pnFwidth.x, 1e-3f * (1.f + grazing) * e.pnFwidth.x + 1e-6f * zt.x) << "pnFwidth.x";
             EXPECT_NEAR(fr.y, e.pnFwidth.y, 1e-3f * e.pnFwidth.y + 1e-4f) << "pnFwidth.y";
         }
     }
-    EXPECT_GT(same, int(0.97 * w * h)) << "differ " << differ;
+    // The bar: the vbuffer names the same triangle on at least 99.5% of pixels.
+    std::printf("%s: vbuffer identical on %d of %d pixels (%.3f%%)\n", sceneFile.c_str(), same, int(w * h),
+                100.0 * same / double(w * h));
+    EXPECT_GE(same, int(0.995 * w * h)) << "differ " << differ;
 }
 
 }  // namespace
@@ -794,6 +800,10 @@ void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, gl
 // The two G-buffer passes are interchangeable: same triangles, same values.
 TEST(GBufferRaster, MatchesGBufferRTOnCornellDynamic) {
     compareWithRayTracer("cornell_dynamic.gltf", 1.0, 1.0 + 1.0 / 30.0, glm::vec2(0.2f, -0.35f));
+}
+
+TEST(GBufferRaster, MatchesGBufferRTOnCornellBox) {
+    compareWithRayTracer("cornell_box.gltf", 0.0, 0.0, glm::vec2(-0.3f, 0.15f));
 }
 
 TEST(GBufferRaster, MatchesGBufferRTOnMaterials) {
