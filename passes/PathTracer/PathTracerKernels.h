@@ -113,6 +113,9 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
         const glm::vec3 p = offsetOrigin(s.posW, fn);
         const BrdfInputs brdf = brdfInputs(s);
         const bool nearSurface = bounce == 0;
+        // At the last scattering vertex no BRDF-sampled ray follows, so light sampling alone estimates direct
+        // light there (weight 1): unbiased, and it saves a closest-hit ray per path. BRDF-only mode still traces it.
+        const bool lastVertex = bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
 
         // Next-event estimation.
         const float l0 = rng.next(), l1 = rng.next(), l2 = rng.next(), l3 = rng.next();
@@ -140,8 +143,9 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
                         ++r.rays;
                         const float tMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
                         if (!tracer.occluded(p, ls.wi, 0.f, tMax)) {
-                            const float w =
-                                (!ls.delta && set.lightSampling == kMis) ? powerHeuristic(ls.pdf, bsdfPdf) : 1.f;
+                            const float w = (!ls.delta && set.lightSampling == kMis && !lastVertex)
+                                                ? powerHeuristic(ls.pdf, bsdfPdf)
+                                                : 1.f;
                             const glm::vec3 c = throughput * f * cosI * Li * (w / ls.pdf);
                             r.color += c;
                             (nearSurface ? r.direct : r.indirect) += c;
@@ -150,6 +154,8 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
                 }
             }
         }
+
+        if (lastVertex) break;
 
         // Continue the path by sampling the BRDF.
         const float b0 = rng.next(), b1 = rng.next(), b2 = rng.next();
