@@ -51,7 +51,6 @@ void gbuffer(benchmark::State& state, const char* type) {
         ++frame;
     }
     state.SetLabel(kScenes[state.range(0)]);
-    state.counters["Mpix/s"] = benchmark::Counter(double(W) * H * 1e-6, benchmark::Counter::kIsRate);
 }
 
 void BM_GBufferRT(benchmark::State& state) { gbuffer(state, "GBufferRT"); }
