@@ -74,6 +74,44 @@ layout(location = 2) uniform mat4 uPrevWorld;
 layout(location = 3) uniform mat3 uNormalMatrix;  // inverse transpose of uWorld's upper 3x3
 )glsl";
 
+// Fragment outputs of the consumed channels (OUT_<CHANNEL> is defined to the
+// attachment index of each one), shared by the geometry and miss shaders.
+constexpr char kFragmentOutputs[] = R"glsl(
+#ifdef OUT_POSW
+layout(location = OUT_POSW) out vec4 oPosW;
+#endif
+#ifdef OUT_NORMW
+layout(location = OUT_NORMW) out vec4 oNormW;
+#endif
+#ifdef OUT_FACENORMALW
+layout(location = OUT_FACENORMALW) out vec4 oFaceNormalW;
+#endif
+#ifdef OUT_LINEARZ
+layout(location = OUT_LINEARZ) out vec2 oLinearZ;
+#endif
+#ifdef OUT_PNFWIDTH
+layout(location = OUT_PNFWIDTH) out vec2 oPnFwidth;
+#endif
+#ifdef OUT_MVEC
+layout(location = OUT_MVEC) out vec2 oMvec;
+#endif
+#ifdef OUT_ALBEDO
+layout(location = OUT_ALBEDO) out vec4 oAlbedo;
+#endif
+#ifdef OUT_SPECALBEDO
+layout(location = OUT_SPECALBEDO) out vec4 oSpecAlbedo;
+#endif
+#ifdef OUT_EMISSION
+layout(location = OUT_EMISSION) out vec4 oEmission;
+#endif
+#ifdef OUT_VBUFFER
+layout(location = OUT_VBUFFER) out uvec4 oVBuffer;
+#endif
+#ifdef OUT_MESHID
+layout(location = OUT_MESHID) out uint oMeshId;
+#endif
+)glsl";
+
 constexpr char kGeometryVS[] = R"glsl(
 layout(location = 0) in vec3 aPosition;
 layout(location = 1) in vec3 aNormal;
@@ -137,39 +175,6 @@ in vec3 vNormalW;
 layout(location = 9) uniform vec3 uObjRayOrigin;
 layout(location = 10) uniform mat3 uObjRayBasis;
 
-#ifdef OUT_POSW
-layout(location = OUT_POSW) out vec4 oPosW;
-#endif
-#ifdef OUT_NORMW
-layout(location = OUT_NORMW) out vec4 oNormW;
-#endif
-#ifdef OUT_FACENORMALW
-layout(location = OUT_FACENORMALW) out vec4 oFaceNormalW;
-#endif
-#ifdef OUT_LINEARZ
-layout(location = OUT_LINEARZ) out vec2 oLinearZ;
-#endif
-#ifdef OUT_PNFWIDTH
-layout(location = OUT_PNFWIDTH) out vec2 oPnFwidth;
-#endif
-#ifdef OUT_MVEC
-layout(location = OUT_MVEC) out vec2 oMvec;
-#endif
-#ifdef OUT_ALBEDO
-layout(location = OUT_ALBEDO) out vec4 oAlbedo;
-#endif
-#ifdef OUT_SPECALBEDO
-layout(location = OUT_SPECALBEDO) out vec4 oSpecAlbedo;
-#endif
-#ifdef OUT_EMISSION
-layout(location = OUT_EMISSION) out vec4 oEmission;
-#endif
-#ifdef OUT_VBUFFER
-layout(location = OUT_VBUFFER) out uvec4 oVBuffer;
-#endif
-#ifdef OUT_MESHID
-layout(location = OUT_MESHID) out uint oMeshId;
-#endif
 
 vec3 fetchPosition(uint i) { return texelFetch(uPositions, int(i)).xyz; }
 vec3 fetchNormal(uint i) { return texelFetch(uNormals, int(i)).xyz; }
@@ -369,39 +374,6 @@ void main() {
 )glsl";
 
 constexpr char kMissFS[] = R"glsl(
-#ifdef OUT_POSW
-layout(location = OUT_POSW) out vec4 oPosW;
-#endif
-#ifdef OUT_NORMW
-layout(location = OUT_NORMW) out vec4 oNormW;
-#endif
-#ifdef OUT_FACENORMALW
-layout(location = OUT_FACENORMALW) out vec4 oFaceNormalW;
-#endif
-#ifdef OUT_LINEARZ
-layout(location = OUT_LINEARZ) out vec2 oLinearZ;
-#endif
-#ifdef OUT_PNFWIDTH
-layout(location = OUT_PNFWIDTH) out vec2 oPnFwidth;
-#endif
-#ifdef OUT_MVEC
-layout(location = OUT_MVEC) out vec2 oMvec;
-#endif
-#ifdef OUT_ALBEDO
-layout(location = OUT_ALBEDO) out vec4 oAlbedo;
-#endif
-#ifdef OUT_SPECALBEDO
-layout(location = OUT_SPECALBEDO) out vec4 oSpecAlbedo;
-#endif
-#ifdef OUT_EMISSION
-layout(location = OUT_EMISSION) out vec4 oEmission;
-#endif
-#ifdef OUT_VBUFFER
-layout(location = OUT_VBUFFER) out uvec4 oVBuffer;
-#endif
-#ifdef OUT_MESHID
-layout(location = OUT_MESHID) out uint oMeshId;
-#endif
 
 bool clipToUv(vec4 clip, out vec2 uv) {
     uv = vec2(0.5 * clip.x / clip.w + 0.5, 0.5 - 0.5 * clip.y / clip.w);
@@ -723,8 +695,8 @@ struct GBufferRaster::Gpu {
         std::string common = kShaderCommon;
         const size_t afterVersion = common.find('\n', common.find("#version")) + 1;
         common.insert(afterVersion, defines);
-        GLuint p = miss ? linkProgram(common + kMissVS, common + kMissFS)
-                        : linkProgram(common + kGeometryVS, common + kGeometryFS);
+        GLuint p = miss ? linkProgram(common + kMissVS, common + kFragmentOutputs + kMissFS)
+                        : linkProgram(common + kGeometryVS, common + kFragmentOutputs + kGeometryFS);
         programs.emplace(variant, p);
         return p;
     }

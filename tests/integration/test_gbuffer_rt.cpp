@@ -2,6 +2,8 @@
 // motion vectors that really lead to the same surface point last frame.
 #include <gtest/gtest.h>
 
+#include "TestUtil.h"
+
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -20,12 +22,8 @@ using namespace loom;
 
 namespace {
 
-PluginRegistry& registry() {
-    static PluginRegistry r({LOOM_TEST_PLUGIN_DIR}, false);
-    return r;
-}
-
-std::string scenePath(const std::string& name) { return std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + name; }
+PluginRegistry& registry() { return test::pluginRegistry(); }
+std::string scenePath(const std::string& name) { return test::dataScene(name); }
 
 /// A GBufferRT graph marking the given channels.
 std::unique_ptr<RenderGraph> gbufferGraph(const std::vector<std::string>& channels, uint32_t w, uint32_t h,

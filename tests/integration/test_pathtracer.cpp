@@ -5,6 +5,8 @@
 // from a vbuffer; non-finite samples are dropped.
 #include <gtest/gtest.h>
 
+#include "TestUtil.h"
+
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -26,12 +28,8 @@ using namespace loom;
 
 namespace {
 
-PluginRegistry& registry() {
-    static PluginRegistry r({LOOM_TEST_PLUGIN_DIR}, false);
-    return r;
-}
-
-std::string scenePath(const std::string& name) { return std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + name; }
+PluginRegistry& registry() { return test::pluginRegistry(); }
+std::string scenePath(const std::string& name) { return test::dataScene(name); }
 
 /// A graph of one PathTracer marking `color`, with params.
 std::unique_ptr<RenderGraph> ptGraph(const nlohmann::json& params, uint32_t w, uint32_t h,

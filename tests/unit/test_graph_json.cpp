@@ -1,5 +1,7 @@
 // The graph file format: parseGraph, loadGraph, graphToJson, saveGraph, and their errors.
 #include <gtest/gtest.h>
+
+#include "TestUtil.h"
 #include <unistd.h>
 
 #include <algorithm>
@@ -43,20 +45,7 @@ bool contains(const std::string& haystack, const std::string& needle) {
     return haystack.find(needle) != std::string::npos;
 }
 
-/// Runs `fn`, expects a loom::Error, and returns it.
-template <class Fn>
-Error expectError(Fn&& fn) {
-    try {
-        fn();
-    } catch (const Error& e) {
-        return e;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "expected loom::Error, got another exception: " << e.what();
-        return Error({});
-    }
-    ADD_FAILURE() << "expected loom::Error, nothing was thrown";
-    return Error({});
-}
+using test::expectError;
 
 /// Parses `text` as kFile and checks the error: BadInput, exit code 2, the file named in what(),
 /// the JSON path `where`, and `needle` in the message. Returns the error for further checks.

@@ -1,6 +1,8 @@
 // Typed parameters (ParamList), command-line values, and the did-you-mean helpers in Error.h.
 #include <gtest/gtest.h>
 
+#include "TestUtil.h"
+
 #include <cmath>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
@@ -43,20 +45,7 @@ struct Owner {
     }
 };
 
-/// Runs `fn`, expects a loom::Error, and returns it (a default-constructed one when nothing was thrown).
-template <class Fn>
-Error expectError(Fn&& fn) {
-    try {
-        fn();
-    } catch (const Error& e) {
-        return e;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "expected loom::Error, got another exception: " << e.what();
-        return Error({});
-    }
-    ADD_FAILURE() << "expected loom::Error, nothing was thrown";
-    return Error({});
-}
+using test::expectError;
 
 bool contains(const std::string& haystack, const std::string& needle) {
     return haystack.find(needle) != std::string::npos;

@@ -2,6 +2,8 @@
 // Loaded libraries stay loaded for the process lifetime and a registry registers each type once, so every test
 // uses its own PluginRegistry.
 #include <gtest/gtest.h>
+
+#include "TestUtil.h"
 #include <unistd.h>
 
 #include <algorithm>
@@ -43,20 +45,7 @@ bool hasType(const std::vector<std::string>& types, const std::string& t) {
     return std::find(types.begin(), types.end(), t) != types.end();
 }
 
-/// Runs `fn`, expects a loom::Error, and returns it.
-template <class Fn>
-Error expectError(Fn&& fn) {
-    try {
-        fn();
-    } catch (const Error& e) {
-        return e;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "expected loom::Error, got another exception: " << e.what();
-        return Error({});
-    }
-    ADD_FAILURE() << "expected loom::Error, nothing was thrown";
-    return Error({});
-}
+using test::expectError;
 
 /// Sets an environment variable for one scope and restores the previous value.
 class ScopedEnv {
