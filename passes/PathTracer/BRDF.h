@@ -399,25 +399,33 @@ LOOM_HD inline BrdfEval evalBrdfVertexLocal(const BrdfVertex& v, glm::vec3 wi) {
     const glm::vec3 wo = v.wo;
     const glm::vec3 hSum = wo + wi;
     const float lenSq = glm::dot(hSum, hSum);
-    float D = 0.f;
-    glm::vec3 h(0.f);
-    if (lenSq > 1e-12f) {
-        h = hSum * (1.f / std::sqrt(lenSq));
-        if (h.z > 0.f) {  // ggxD() with the per-vertex divisions hoisted
-            const float t = (h.x * h.x + h.y * h.y) * v.invA2 + h.z * h.z;
-            D = v.invPiA2 / (t * t);
-        }
+    // With s = wo + wi unnormalised (h = s / |s|), ggxD(h) = invPiA2 |s|^4 / ts^2, ts = (s.x^2 + s.y^2) / a2 + s.z^2:
+    // no square root on the way to D (latency), the per-vertex divisions hoisted, and D and V share one division.
+    float ts2 = 0.f;  // 0: D = 0 (h below the surface or undefined)
+    if (lenSq > 1e-12f && hSum.z > 0.f) {
+        const float ts = (hSum.x * hSum.x + hSum.y * hSum.y) * v.invA2 + hSum.z * hSum.z;
+        ts2 = ts * ts;
     }
-    e.pdf = v.specPdfScale * D + (1.f - v.pSpec) * cosineHemispherePdf(wi.z);
-    if (wi.z <= 0.f) return e;
-    const float w = schlickWeight(std::fabs(glm::dot(wo, h)));
+    const float lenSq2 = lenSq * lenSq;
+    if (wi.z <= 0.f) {
+        e.pdf = ts2 > 0.f ? v.specPdfScale * (v.invPiA2 * lenSq2 / ts2) : 0.f;
+        return e;
+    }
+    // Height-correlated Smith visibility (ggxVisibility()) V = 0.5 / g, with the wo-side root precomputed.
+    const float g = wi.z * v.smithWo + wo.z * std::sqrt(wi.z * wi.z * (1.f - v.a2) + v.a2);
+    float D = 0.f, DV = 0.f;
+    if (ts2 > 0.f) {
+        const float r = v.invPiA2 * lenSq2 / (ts2 * g);
+        D = r * g;
+        DV = 0.5f * r;
+    }
+    // |wo.h| = |wo.s| / |s| (Schlick's weight; off D's critical path).
+    const float VdotH = lenSq > 1e-12f ? std::fabs(glm::dot(wo, hSum)) / std::sqrt(lenSq) : 0.f;
+    e.pdf = v.specPdfScale * D + (1.f - v.pSpec) * (wi.z * kInvPi);
+    const float w = schlickWeight(VdotH);
     const glm::vec3 fSpec = v.f0 + (glm::vec3(1.f) - v.f0) * w;
-    // Height-correlated Smith visibility (ggxVisibility()), with the wo-side root precomputed.
-    const float gv = wi.z * v.smithWo;
-    const float gl = wo.z * std::sqrt(wi.z * wi.z * (1.f - v.a2) + v.a2);
-    const float V = 0.5f / (gv + gl);
     const float transmitIn = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wi.z));
-    e.f = fSpec * (D * V) + ((1.f - v.metallic) * transmitIn * v.transmitOut * kInvPi) * v.baseColor;
+    e.f = fSpec * DV + ((1.f - v.metallic) * transmitIn * v.transmitOut * kInvPi) * v.baseColor;
     return e;
 }
 

@@ -195,6 +195,8 @@ void PathTracer::buildLights(const Scene& scene) {
     L.pTris = total > 0.0 ? 1.f / kinds : 0.f;
     L.pPunctual = !mPunctual.empty() ? 1.f / kinds : 0.f;
     L.pEnv = L.hasEnv ? 1.f / kinds : 0.f;
+    for (pt::EmissiveTri& t : mTris)
+        t.pdfArea = t.area > 0.f ? L.pTris * (t.power / L.triPowerSum) / t.area : 0.f;
 }
 
 void PathTracer::execute(PassContext& ctx) {
