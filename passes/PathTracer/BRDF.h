@@ -350,4 +350,111 @@ LOOM_HD inline BrdfSample sampleBrdf(const BrdfInputs& in, glm::vec3 n, glm::vec
     return s;
 }
 
+// ---------------------------------------------------------------------------------------------------------------------
+// Per-vertex evaluation: the integrator shades one vertex with the same (n, wo) several times (light sample f and pdf,
+// then a BRDF sample); BrdfVertex holds what depends only on the vertex (frame, local wo, alpha, f0, the lobe
+// probability, the wo-side Fresnel and Smith terms), computed once. The results are the same model as the functions
+// above (evalBrdf, pdfBrdf, sampleBrdf), with the half vector and D shared between f and the pdf.
+
+struct BrdfVertex {
+    Frame frame;
+    glm::vec3 wo{0.f};        ///< local
+    glm::vec3 baseColor{1.f};
+    glm::vec3 f0{0.04f};
+    float metallic = 0.f;
+    float alpha = 1.f, a2 = 1.f;
+    float pSpec = 1.f;        ///< specularLobeProbability(in, wo.z)
+    float invA2 = 1.f;        ///< 1 / a2
+    float invPiA2 = kInvPi;   ///< 1 / (pi a2): D = invPiA2 / t^2
+    float transmitOut = 0.f;  ///< 1 - Fd(wo.z)
+    float smithWo = 0.f;      ///< sqrt(a2 + (1 - a2) wo.z^2)
+    float specPdfScale = 0.f; ///< pSpec / (2 (wo.z + smithWo)): the specular pdf is D times this
+    bool valid = false;       ///< wo.z > 0
+};
+
+LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo) {
+    BrdfVertex v;
+    v.frame = makeFrame(n);
+    v.wo = v.frame.toLocal(wo);
+    v.valid = v.wo.z > 0.f;
+    if (!v.valid) return v;
+    v.baseColor = in.baseColor;
+    v.f0 = brdfF0(in);
+    v.metallic = in.metallic;
+    v.alpha = alphaFromRoughness(in.roughness);
+    v.a2 = v.alpha * v.alpha;
+    v.pSpec = specularLobeProbability(in, v.wo.z);
+    v.transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(v.wo.z));
+    v.smithWo = std::sqrt(v.a2 + (1.f - v.a2) * v.wo.z * v.wo.z);
+    v.invA2 = 1.f / v.a2;
+    v.invPiA2 = 1.f / (kPi * v.a2);
+    v.specPdfScale = v.pSpec / (2.f * (v.wo.z + v.smithWo));
+    return v;
+}
+
+/// f and the mixture pdf for a local wi (evalBrdfAndPdfLocal()'s values).
+LOOM_HD inline BrdfEval evalBrdfVertexLocal(const BrdfVertex& v, glm::vec3 wi) {
+    BrdfEval e;
+    if (!v.valid) return e;
+    const glm::vec3 wo = v.wo;
+    const glm::vec3 hSum = wo + wi;
+    const float lenSq = glm::dot(hSum, hSum);
+    // With s = wo + wi unnormalised (h = s / |s|), ggxD(h) = invPiA2 |s|^4 / ts^2, ts = (s.x^2 + s.y^2) / a2 + s.z^2:
+    // no square root on the way to D (latency), the per-vertex divisions hoisted, and D and V share one division.
+    float ts2 = 0.f;  // 0: D = 0 (h below the surface or undefined)
+    if (lenSq > 1e-12f && hSum.z > 0.f) {
+        const float ts = (hSum.x * hSum.x + hSum.y * hSum.y) * v.invA2 + hSum.z * hSum.z;
+        ts2 = ts * ts;
+    }
+    const float lenSq2 = lenSq * lenSq;
+    if (wi.z <= 0.f) {
+        e.pdf = ts2 > 0.f ? v.specPdfScale * (v.invPiA2 * lenSq2 / ts2) : 0.f;
+        return e;
+    }
+    // Height-correlated Smith visibility (ggxVisibility()) V = 0.5 / g, with the wo-side root precomputed.
+    const float g = wi.z * v.smithWo + wo.z * std::sqrt(wi.z * wi.z * (1.f - v.a2) + v.a2);
+    float D = 0.f, DV = 0.f;
+    if (ts2 > 0.f) {
+        const float r = v.invPiA2 * lenSq2 / (ts2 * g);
+        D = r * g;
+        DV = 0.5f * r;
+    }
+    // |wo.h| = |wo.s| / |s| (Schlick's weight; off D's critical path).
+    const float VdotH = lenSq > 1e-12f ? std::fabs(glm::dot(wo, hSum)) / std::sqrt(lenSq) : 0.f;
+    e.pdf = v.specPdfScale * D + (1.f - v.pSpec) * (wi.z * kInvPi);
+    const float w = schlickWeight(VdotH);
+    const glm::vec3 fSpec = v.f0 + (glm::vec3(1.f) - v.f0) * w;
+    const float transmitIn = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wi.z));
+    e.f = fSpec * DV + ((1.f - v.metallic) * transmitIn * v.transmitOut * kInvPi) * v.baseColor;
+    return e;
+}
+
+/// f and pdf for a world direction wi (evalBrdfAndPdf()'s values).
+LOOM_HD inline BrdfEval evalBrdfVertex(const BrdfVertex& v, glm::vec3 wi) {
+    return evalBrdfVertexLocal(v, v.frame.toLocal(wi));
+}
+
+/// sampleBrdf() with the per-vertex terms precomputed.
+LOOM_HD inline BrdfSample sampleBrdfVertex(const BrdfVertex& v, glm::vec2 u, float uLobe) {
+    BrdfSample s;
+    if (!v.valid) return s;
+    glm::vec3 local;
+    if (uLobe < v.pSpec) {
+        const glm::vec3 h = sampleGgxVndf(v.wo, v.alpha, u);
+        local = glm::normalize(2.f * glm::dot(v.wo, h) * h - v.wo);
+    } else {
+        local = sampleCosineHemisphere(u);
+    }
+    const glm::vec3 wi = v.frame.toWorld(local);
+    const glm::vec3 wiL = v.frame.toLocal(wi);  // as evalBrdfVertex() will see wi (see sampleBrdf())
+    if (wiL.z <= 0.f) return s;
+    const BrdfEval e = evalBrdfVertexLocal(v, wiL);
+    if (!(e.pdf > 0.f) || !std::isfinite(e.pdf)) return s;
+    s.wi = wi;
+    s.pdf = e.pdf;
+    s.weight = e.f * (wiL.z / e.pdf);
+    s.valid = true;
+    return s;
+}
+
 }  // namespace loom::pt

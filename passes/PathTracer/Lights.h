@@ -23,6 +23,8 @@ struct EmissiveTri {
     uint32_t doubleSided = 0;
     uint32_t textured = 0;  ///< emission varies over the triangle (emissive texture): evaluate the material
     glm::vec3 radiance{0.f};  ///< emitted radiance when not textured
+    float pdfArea = 0.f;      ///< pTris * power / triPowerSum / area: area density of a light sample on it, selection
+                              ///< included (filled by the pass with the LightsView)
 };
 
 enum PunctualType : uint32_t { kPoint = 0, kSpot = 1, kDirectional = 2 };
@@ -120,7 +122,7 @@ struct LightSample {
 /// Area pdf of a triangle light point converted to solid angle, with selection.
 LOOM_HD inline float triLightPdf(const LightsView& L, const EmissiveTri& t, float dist2, float cosLight) {
     if (cosLight <= 0.f || L.triPowerSum <= 0.f) return 0.f;
-    return L.pTris * (t.power / L.triPowerSum) / t.area * dist2 / cosLight;
+    return t.pdfArea * dist2 / cosLight;
 }
 
 /// Samples a light for shading point p. u: four uniform numbers.
@@ -139,7 +141,7 @@ LOOM_HD inline LightSample sampleLight(const LightsView& L, glm::vec3 p, float u
         const float dist2 = glm::dot(d, d);
         if (dist2 <= 1e-12f) return s;
         const float dist = std::sqrt(dist2);
-        d /= dist;
+        d *= 1.f / dist;
         float cosLight = -glm::dot(t.normal, d);
         if (t.doubleSided) cosLight = std::fabs(cosLight);
         s.pdf = triLightPdf(L, t, dist2, cosLight);

@@ -195,6 +195,8 @@ void PathTracer::buildLights(const Scene& scene) {
     L.pTris = total > 0.0 ? 1.f / kinds : 0.f;
     L.pPunctual = !mPunctual.empty() ? 1.f / kinds : 0.f;
     L.pEnv = L.hasEnv ? 1.f / kinds : 0.f;
+    for (pt::EmissiveTri& t : mTris)
+        t.pdfArea = t.area > 0.f ? L.pTris * (t.power / L.triPowerSum) / t.area : 0.f;
 }
 
 void PathTracer::execute(PassContext& ctx) {
@@ -210,7 +212,8 @@ void PathTracer::execute(PassContext& ctx) {
     camera.aspect = float(w) / float(h);
     const CameraData cam = makeCameraData(camera, w, h);
     const SceneView& view = scene->view();
-    const EmbreeTracer tracer{scene->rayScene()};
+    const RayScene& rayScene = scene->rayScene();
+    const EmbreeTracer tracer{rayScene};
     pt::PathTracerSettings set;
     set.maxBounces = uint32_t(mMaxBounces);
     set.rrStartBounce = uint32_t(mRrStartBounce);
@@ -239,14 +242,49 @@ void PathTracer::execute(PassContext& ctx) {
     parallelFor2D(w, h, [&](const Tile& tile) {
         const size_t tileIndex = size_t(tile.y0 / kDefaultTileSize) * tilesX + tile.x0 / kDefaultTileSize;
         uint64_t rays = 0, dropped = 0;
-        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
-            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
-                // The same (unnormalised) primary ray as GBufferRT, so hits from its vbuffer and from
-                // camera rays are bit-identical.
-                const glm::vec3 rawDir = pixelRayDir(cam, x, y);
-                const glm::vec3 dir = glm::normalize(rawDir);
-                RayHit primary;
-                if (vbuffer.data) {
+        // Shades pixel (x, y) given its primary hit.
+        auto shade = [&](uint32_t x, uint32_t y, const glm::vec3& dir, const RayHit& primary) {
+            // Double sums: many finite samples near FLT_MAX must not overflow to Inf.
+            glm::dvec3 sum(0.0), sumDirect(0.0), sumIndirect(0.0);
+            uint32_t kept = 0;
+            for (uint32_t s = 0; s < spp; ++s) {
+                pt::PathRng rng(y * w + x, frame, s);
+                const pt::PathResult r = pt::tracePath(tracer, view, lights, set, cam.origin, dir, primary, rng);
+                rays += r.rays;
+                if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) {
+                    ++dropped;  // never written: a NaN would spread through every filter downstream
+                    continue;
+                }
+                sum += glm::dvec3(r.color);
+                sumDirect += glm::dvec3(r.direct);
+                sumIndirect += glm::dvec3(r.indirect);
+                ++kept;
+            }
+            const double inv = kept ? 1.0 / double(kept) : 0.0;
+            color.at(x, y) = glm::vec4(glm::vec3(sum * inv), 1.f);
+            if (split) {
+                if (direct.data) direct.at(x, y) = glm::vec4(glm::vec3(sumDirect * inv), 1.f);
+                if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(sumIndirect * inv), 1.f);
+            }
+            if (wantsPrimary) {
+                glm::vec4 a(0.f), sa(0.f), e(0.f);
+                if (primary.hit()) {
+                    const SurfaceHit hs =
+                        evalSurface(view, primary.instance, primary.primitive, primary.u, primary.v, dir);
+                    a = glm::vec4(diffuseAlbedo(hs), 1.f);
+                    const float NdotV = glm::clamp(glm::dot(hs.normalW, -dir), 0.f, 1.f);
+                    sa = glm::vec4(specularAlbedo(specularF0(hs), NdotV, hs.roughness), 1.f);
+                    e = glm::vec4(pt::emittedRadiance(view, hs, dir), 1.f);
+                }
+                if (albedo.data) albedo.at(x, y) = a;
+                if (specAlbedo.data) specAlbedo.at(x, y) = sa;
+                if (emission.data) emission.at(x, y) = e;
+            }
+        };
+        if (vbuffer.data) {
+            for (uint32_t y = tile.y0; y < tile.y1; ++y) {
+                for (uint32_t x = tile.x0; x < tile.x1; ++x) {
+                    RayHit primary;
                     const glm::uvec4 vb = vbuffer.at(x, y);
                     if (vb.x != kInvalidId) {
                         primary.instance = vb.x;
@@ -254,45 +292,27 @@ void PathTracer::execute(PassContext& ctx) {
                         primary.u = bitsToFloat(vb.z);
                         primary.v = bitsToFloat(vb.w);
                     }
-                } else {
-                    primary = tracer.intersect(cam.origin, rawDir);
-                    ++rays;
+                    shade(x, y, glm::normalize(pixelRayDir(cam, x, y)), primary);
                 }
-                // Double sums: many finite samples near FLT_MAX must not overflow to Inf.
-                glm::dvec3 sum(0.0), sumDirect(0.0), sumIndirect(0.0);
-                uint32_t kept = 0;
-                for (uint32_t s = 0; s < spp; ++s) {
-                    pt::PathRng rng(y * w + x, frame, s);
-                    const pt::PathResult r = pt::tracePath(tracer, view, lights, set, cam.origin, dir, primary, rng);
-                    rays += r.rays;
-                    if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) {
-                        ++dropped;  // never written: a NaN would spread through every filter downstream
-                        continue;
+            }
+        } else {
+            // Camera rays in coherent 4x4 packets. The same (unnormalised) primary ray as GBufferRT, so hits
+            // from its vbuffer and from camera rays are bit-identical.
+            for (uint32_t by = tile.y0; by < tile.y1; by += 4) {
+                for (uint32_t bx = tile.x0; bx < tile.x1; bx += 4) {
+                    glm::vec3 origins[16], dirs[16];
+                    bool valid[16];
+                    RayHit hits[16];
+                    for (uint32_t i = 0; i < 16; ++i) {
+                        const uint32_t x = bx + (i & 3u), y = by + (i >> 2);
+                        valid[i] = x < tile.x1 && y < tile.y1;
+                        origins[i] = cam.origin;
+                        dirs[i] = valid[i] ? pixelRayDir(cam, x, y) : glm::vec3(0.f, 0.f, 1.f);
+                        rays += valid[i];
                     }
-                    sum += glm::dvec3(r.color);
-                    sumDirect += glm::dvec3(r.direct);
-                    sumIndirect += glm::dvec3(r.indirect);
-                    ++kept;
-                }
-                const double inv = kept ? 1.0 / double(kept) : 0.0;
-                color.at(x, y) = glm::vec4(glm::vec3(sum * inv), 1.f);
-                if (split) {
-                    if (direct.data) direct.at(x, y) = glm::vec4(glm::vec3(sumDirect * inv), 1.f);
-                    if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(sumIndirect * inv), 1.f);
-                }
-                if (wantsPrimary) {
-                    glm::vec4 a(0.f), sa(0.f), e(0.f);
-                    if (primary.hit()) {
-                        const SurfaceHit hs = evalSurface(view, primary.instance, primary.primitive, primary.u,
-                                                          primary.v, dir);
-                        a = glm::vec4(diffuseAlbedo(hs), 1.f);
-                        const float NdotV = glm::clamp(glm::dot(hs.normalW, -dir), 0.f, 1.f);
-                        sa = glm::vec4(specularAlbedo(specularF0(hs), NdotV, hs.roughness), 1.f);
-                        e = glm::vec4(pt::emittedRadiance(view, hs, dir), 1.f);
-                    }
-                    if (albedo.data) albedo.at(x, y) = a;
-                    if (specAlbedo.data) specAlbedo.at(x, y) = sa;
-                    if (emission.data) emission.at(x, y) = e;
+                    rayScene.intersect16(origins, dirs, valid, 1e30f, hits);
+                    for (uint32_t i = 0; i < 16; ++i)
+                        if (valid[i]) shade(bx + (i & 3u), by + (i >> 2), glm::normalize(dirs[i]), hits[i]);
                 }
             }
         }

@@ -79,7 +79,7 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
             (directSlot ? r.direct : r.indirect) += c;
             break;
         }
-        const SurfaceHit s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir);
+        const SurfaceHit s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir, SurfaceEval::Shading);
         const glm::vec3 Le = emittedRadiance(scene, s, rayDir);
         if (Le != glm::vec3(0.f)) {
             float w = 1.f;
@@ -111,7 +111,10 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
         }
         if (glm::dot(n, wo) <= 0.f) n = fn;  // shading normal beyond the silhouette: fall back to geometry
         const glm::vec3 p = offsetOrigin(s.posW, fn);
-        const BrdfInputs brdf = brdfInputs(s);
+        // Everything the BRDF needs from this vertex alone, computed once for NEE and the BRDF sample.
+        // Made when first needed (a light sample that reaches the surface, or the BRDF sample).
+        BrdfVertex bv;
+        bool bvReady = false;
         const bool nearSurface = bounce == 0;
         // At the last scattering vertex no BRDF-sampled ray follows, so light sampling alone estimates direct
         // light there (weight 1): unbiased, and it saves a closest-hit ray per path. BRDF-only mode still traces it.
@@ -125,7 +128,8 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
             if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
                 glm::vec3 Li = ls.Li;
                 if (ls.isTriangle) {
-                    const SurfaceHit e = evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi);
+                    const SurfaceHit e = evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi,
+                                                       SurfaceEval::Shading);
                     Li = emittedRadiance(scene, e, ls.wi);
                 }
                 if (Li != glm::vec3(0.f)) {
@@ -135,7 +139,9 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
                         f = lambertEval(s, n, ls.wi);
                         bsdfPdf = cosI * kInvPi;
                     } else {
-                        const BrdfEval e = evalBrdfAndPdf(brdf, n, wo, ls.wi);
+                        bv = makeBrdfVertex(brdfInputs(s), n, wo);
+                        bvReady = true;
+                        const BrdfEval e = evalBrdfVertex(bv, ls.wi);
                         f = e.f;
                         bsdfPdf = e.pdf;
                     }
@@ -168,7 +174,8 @@ LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const
             throughput *= s.baseColor;  // f cos / pdf = (a/pi) cos / (cos/pi)
             prevBsdfPdf = cosI * kInvPi;
         } else {
-            const BrdfSample bs = sampleBrdf(brdf, n, wo, glm::vec2(b0, b1), b2);
+            if (!bvReady) bv = makeBrdfVertex(brdfInputs(s), n, wo);
+            const BrdfSample bs = sampleBrdfVertex(bv, glm::vec2(b0, b1), b2);
             if (!bs.valid || glm::dot(fn, bs.wi) <= 0.f) break;
             wi = bs.wi;
             throughput *= bs.weight;

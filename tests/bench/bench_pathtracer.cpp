@@ -3,8 +3,8 @@
 // tutorial path tracer (the anchor, tools/anchor_embree_pathtracer.sh): light
 // transport over paths of up to L + 1 segments, i.e. direct light at up to L
 // surface hits. In Loom that is maxBounces = L. Russian roulette is off, as
-// in the tutorial. Loom also traces the BRDF-sampled ray after the last NEE
-// (for MIS), so it traces one more closest-hit ray per path than the anchor.
+// in the tutorial. At the last vertex Loom samples lights only (no
+// BRDF-sampled ray after it), as the anchor does.
 #include <benchmark/benchmark.h>
 
 #include <string>

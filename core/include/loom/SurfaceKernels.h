@@ -81,10 +81,14 @@ struct SurfaceHit {
     bool frontFacing = true;
 };
 
+/// What evalSurface computes. Shading leaves out prevPosW (motion, which only
+/// G-buffers need) and, for materials without textures, uv (left 0).
+enum class SurfaceEval : uint32_t { Full, Shading };
+
 /// Evaluates the surface at barycentrics (u, v) of triangle `prim` of an
 /// instance, seen along direction `rayDir` (from the viewer toward the hit).
 LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v,
-                                      glm::vec3 rayDir) {
+                                      glm::vec3 rayDir, SurfaceEval what = SurfaceEval::Full) {
     const InstanceView& inst = scene.instances[instance];
     const MeshView& mesh = scene.meshes[inst.mesh];
     const MaterialData& mat = scene.materials[mesh.material];
@@ -95,11 +99,14 @@ LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance,
     const glm::vec3 p0 = mesh.positions[i0], p1 = mesh.positions[i1], p2 = mesh.positions[i2];
     const glm::vec3 pObj = w * p0 + u * p1 + v * p2;
     s.posW = glm::vec3(inst.world * glm::vec4(pObj, 1.f));
-    s.prevPosW = glm::vec3(inst.prevWorld * glm::vec4(pObj, 1.f));
+    const bool full = what == SurfaceEval::Full;
+    if (full) s.prevPosW = glm::vec3(inst.prevWorld * glm::vec4(pObj, 1.f));
     glm::vec3 fn = glm::normalize(inst.normalMatrix * glm::cross(p1 - p0, p2 - p0));
     glm::vec3 n = glm::normalize(inst.normalMatrix *
                                  (w * mesh.normals[i0] + u * mesh.normals[i1] + v * mesh.normals[i2]));
-    s.uv = w * mesh.uvs[i0] + u * mesh.uvs[i1] + v * mesh.uvs[i2];
+    if (full || mat.normalTexture >= 0 || mat.baseColorTexture >= 0 || mat.metallicRoughnessTexture >= 0 ||
+        mat.emissiveTexture >= 0)
+        s.uv = w * mesh.uvs[i0] + u * mesh.uvs[i1] + v * mesh.uvs[i2];
     s.frontFacing = glm::dot(fn, rayDir) < 0.f;
     if (!s.frontFacing && mat.doubleSided) {
         fn = -fn;
