@@ -1,6 +1,7 @@
 #include "PathTracer.h"
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
 
 #include <spdlog/spdlog.h>
@@ -200,6 +201,7 @@ void PathTracer::buildLights(const Scene& scene) {
 }
 
 void PathTracer::execute(PassContext& ctx) {
+    const auto start = std::chrono::steady_clock::now();
     const Scene* scene = ctx.scene();
     if (!scene || !ctx.camera())
         throwBadInput(ctx.passName(), "the path tracer needs a scene", "a scene given with --scene",
@@ -327,6 +329,9 @@ void PathTracer::execute(PassContext& ctx) {
     ctx.stats().set("rays", double(rays));
     ctx.stats().set("paths", double(uint64_t(w) * h * spp));
     ctx.stats().set("nonFiniteSamplesDropped", double(dropped));
+    // Throughput of this frame (timing only; it never changes the image).
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (seconds > 0.0) ctx.stats().set("pathsPerSecond", double(uint64_t(w) * h * spp) / seconds);
 }
 
 }  // namespace loom
