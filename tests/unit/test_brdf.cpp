@@ -360,7 +360,9 @@ TEST(Brdf, RoughWhiteDielectricIsNearlyLambertian) {
     double previous = 2.0;
     for (float view = 0.f; view <= 80.f; view += 10.f) {
         const double albedo = albedoByQuadrature(in, frame, direction(frame, view, 0.f)).x;
-        if (view == 0.f) EXPECT_GT(albedo, 0.85);
+        if (view == 0.f) {
+            EXPECT_GT(albedo, 0.85);
+        }
         EXPECT_GT(albedo, 0.5) << view;
         EXPECT_LE(albedo, 1.0) << view;
         EXPECT_LE(albedo, previous + 1e-3) << "albedo should not grow toward grazing views: " << view;
