@@ -71,32 +71,42 @@ void GBufferRT::execute(PassContext& ctx) {
     const bool cullBack = mCullMode == CullMode::Back;
     const bool alphaTest = mAlphaTest;
 
+    // The first hit of each camera ray comes from a coherent 4x4 packet (rtcIntersect16); a ray whose first hit
+    // must be passed (culled back face, alpha-masked texel) continues with single rays. Packet and single-ray hits
+    // are bit-identical, which PathTracer relies on when it reads this vbuffer.
+    auto resolve = [&](uint32_t x, uint32_t y, glm::vec3 dir, RayHit hit) {
+        for (int layer = 0; layer < 16 && hit.hit(); ++layer) {
+            const InstanceView& inst = view.instances[hit.instance];
+            const MaterialData& mat = view.materials[view.meshes[inst.mesh].material];
+            bool skip = false;
+            if (cullBack && !mat.doubleSided) skip = !facesRay(view, hit.instance, hit.primitive, dir);
+            if (!skip && alphaTest && mat.alphaMask) {
+                const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
+                skip = s.alpha < mat.alphaCutoff;
+            }
+            if (!skip) return hitSample(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v);
+            hit = rays.intersect(cam.origin, dir, std::nextafter(hit.t, 1e30f));
+        }
+        return missSample(cam, dir);
+    };
     parallelFor2D(w, h, [&](const Tile& t) {
-        for (uint32_t y = t.y0; y < t.y1; ++y) {
-            for (uint32_t x = t.x0; x < t.x1; ++x) {
-                const glm::vec3 dir = pixelRayDir(cam, x, y);
-                float tMin = 0.f;
-                GBufferSample g = missSample(cam, dir);
-                // Continue past culled back faces and alpha-masked texels, a bounded number of times.
-                for (int layer = 0; layer < 16; ++layer) {
-                    RayHit hit = rays.intersect(cam.origin, dir, tMin);
-                    if (!hit.hit()) break;
-                    const InstanceView& inst = view.instances[hit.instance];
-                    const MaterialData& mat = view.materials[view.meshes[inst.mesh].material];
-                    bool skip = false;
-                    if (cullBack && !mat.doubleSided)
-                        skip = !facesRay(view, hit.instance, hit.primitive, dir);
-                    if (!skip && alphaTest && mat.alphaMask) {
-                        const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
-                        skip = s.alpha < mat.alphaCutoff;
-                    }
-                    if (!skip) {
-                        g = hitSample(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v);
-                        break;
-                    }
-                    tMin = std::nextafter(hit.t, 1e30f);
+        for (uint32_t by = t.y0; by < t.y1; by += 4) {
+            for (uint32_t bx = t.x0; bx < t.x1; bx += 4) {
+                glm::vec3 origins[16], dirs[16];
+                bool valid[16];
+                RayHit hits[16];
+                for (uint32_t i = 0; i < 16; ++i) {
+                    const uint32_t x = bx + (i & 3u), y = by + (i >> 2);
+                    valid[i] = x < t.x1 && y < t.y1;
+                    origins[i] = cam.origin;
+                    dirs[i] = valid[i] ? pixelRayDir(cam, x, y) : glm::vec3(0.f, 0.f, 1.f);
                 }
-                store(o, x, y, g);
+                rays.intersect16(origins, dirs, valid, 1e30f, hits);
+                for (uint32_t i = 0; i < 16; ++i) {
+                    if (!valid[i]) continue;
+                    const uint32_t x = bx + (i & 3u), y = by + (i >> 2);
+                    store(o, x, y, resolve(x, y, dirs[i], hits[i]));
+                }
             }
         }
     });
