@@ -2,6 +2,7 @@
 
 #include "GBufferCommon.h"
 #include "GBufferKernels.h"
+#include "loom/CameraRays.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
 #include "loom/RayScene.h"
@@ -90,25 +91,9 @@ void GBufferRT::execute(PassContext& ctx) {
         return missSample(cam, dir);
     };
     parallelFor2D(w, h, [&](const Tile& t) {
-        for (uint32_t by = t.y0; by < t.y1; by += 4) {
-            for (uint32_t bx = t.x0; bx < t.x1; bx += 4) {
-                glm::vec3 origins[16], dirs[16];
-                bool valid[16];
-                RayHit hits[16];
-                for (uint32_t i = 0; i < 16; ++i) {
-                    const uint32_t x = bx + (i & 3u), y = by + (i >> 2);
-                    valid[i] = x < t.x1 && y < t.y1;
-                    origins[i] = cam.origin;
-                    dirs[i] = valid[i] ? pixelRayDir(cam, x, y) : glm::vec3(0.f, 0.f, 1.f);
-                }
-                rays.intersect16(origins, dirs, valid, 1e30f, hits);
-                for (uint32_t i = 0; i < 16; ++i) {
-                    if (!valid[i]) continue;
-                    const uint32_t x = bx + (i & 3u), y = by + (i >> 2);
-                    store(o, x, y, resolve(x, y, dirs[i], hits[i]));
-                }
-            }
-        }
+        traceCameraRays(rays, cam, t, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
+            store(o, x, y, resolve(x, y, dir, hit));
+        });
     });
 }
 

@@ -8,6 +8,7 @@
 
 #include "PathTracerKernels.h"
 #include "loom/CameraKernels.h"
+#include "loom/CameraRays.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
 #include "loom/RayScene.h"
@@ -300,23 +301,10 @@ void PathTracer::execute(PassContext& ctx) {
         } else {
             // Camera rays in coherent 4x4 packets. The same (unnormalised) primary ray as GBufferRT, so hits
             // from its vbuffer and from camera rays are bit-identical.
-            for (uint32_t by = tile.y0; by < tile.y1; by += 4) {
-                for (uint32_t bx = tile.x0; bx < tile.x1; bx += 4) {
-                    glm::vec3 origins[16], dirs[16];
-                    bool valid[16];
-                    RayHit hits[16];
-                    for (uint32_t i = 0; i < 16; ++i) {
-                        const uint32_t x = bx + (i & 3u), y = by + (i >> 2);
-                        valid[i] = x < tile.x1 && y < tile.y1;
-                        origins[i] = cam.origin;
-                        dirs[i] = valid[i] ? pixelRayDir(cam, x, y) : glm::vec3(0.f, 0.f, 1.f);
-                        rays += valid[i];
-                    }
-                    rayScene.intersect16(origins, dirs, valid, 1e30f, hits);
-                    for (uint32_t i = 0; i < 16; ++i)
-                        if (valid[i]) shade(bx + (i & 3u), by + (i >> 2), glm::normalize(dirs[i]), hits[i]);
-                }
-            }
+            traceCameraRays(rayScene, cam, tile, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
+                ++rays;
+                shade(x, y, glm::normalize(dir), hit);
+            });
         }
         tileRays[tileIndex] = rays;
         tileDropped[tileIndex] = dropped;
