@@ -86,6 +86,8 @@ void RayScene::updateInstances(const Scene& scene) {
     rtcCommitScene(m.top);
 }
 
+void* RayScene::embreeScene() const { return mImpl->top; }
+
 RayHit RayScene::intersect(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);

@@ -43,6 +43,10 @@ public:
     void intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax,
                      RayHit* hits) const;
 
+    /// The top-level Embree scene (an RTCScene), for passes that call Embree
+    /// directly in their innermost loop; valid while this RayScene lives.
+    void* embreeScene() const;
+
 private:
     struct Impl;
     std::unique_ptr<Impl> mImpl;
