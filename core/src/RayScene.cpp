@@ -1,5 +1,7 @@
 #include "loom/RayScene.h"
 
+#include "loom/EmbreeRays.h"
+
 #include <embree3/rtcore.h>
 
 #include <vector>
@@ -89,53 +91,11 @@ void RayScene::updateInstances(const Scene& scene) {
 void* RayScene::embreeScene() const { return mImpl->top; }
 
 RayHit RayScene::intersect(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRayHit rh;
-    rh.ray.org_x = o.x;
-    rh.ray.org_y = o.y;
-    rh.ray.org_z = o.z;
-    rh.ray.dir_x = d.x;
-    rh.ray.dir_y = d.y;
-    rh.ray.dir_z = d.z;
-    rh.ray.tnear = tMin;
-    rh.ray.tfar = tMax;
-    rh.ray.time = 0.f;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(mImpl->top, &ctx, &rh);
-    RayHit h;
-    if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-        h.instance = rh.hit.instID[0];
-        h.primitive = rh.hit.primID;
-        h.u = rh.hit.u;
-        h.v = rh.hit.v;
-        h.t = rh.ray.tfar;
-    }
-    return h;
+    return embreeIntersect(mImpl->top, o, d, tMin, tMax);
 }
 
 bool RayScene::occluded(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRay r;
-    r.org_x = o.x;
-    r.org_y = o.y;
-    r.org_z = o.z;
-    r.dir_x = d.x;
-    r.dir_y = d.y;
-    r.dir_z = d.z;
-    r.tnear = tMin;
-    r.tfar = tMax;
-    r.time = 0.f;
-    r.mask = 0xFFFFFFFFu;
-    r.id = 0;
-    r.flags = 0;
-    rtcOccluded1(mImpl->top, &ctx, &r);
-    return r.tfar < 0.f;  // Embree sets tfar to -inf on a hit
+    return embreeOccluded(mImpl->top, o, d, tMin, tMax);
 }
 
 void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax,

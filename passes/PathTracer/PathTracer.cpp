@@ -4,12 +4,12 @@
 #include <chrono>
 #include <cmath>
 
-#include <embree3/rtcore.h>
 #include <spdlog/spdlog.h>
 
 #include "PathTracerKernels.h"
 #include "loom/CameraKernels.h"
 #include "loom/CameraRays.h"
+#include "loom/EmbreeRays.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
 #include "loom/RayScene.h"
@@ -27,60 +27,14 @@ const char kDirect[] = "direct";
 const char kIndirect[] = "indirect";
 
 /// Adapts RayScene to the integrator's tracer interface.
-/// Adapts Embree to the integrator's tracer interface. Calls rtcIntersect1 and
-/// rtcOccluded1 here, inlined into the path loop, rather than through
-/// RayScene's out-of-line wrappers (same rays, same results).
+/// Adapts Embree to the integrator's tracer interface, with the inline ray
+/// functions (same rays and results as RayScene, without a library call per ray).
 struct EmbreeTracer {
     const RayScene& rays;
     RTCScene scene = static_cast<RTCScene>(rays.embreeScene());
-
-    RayHit intersect(glm::vec3 o, glm::vec3 d) const {
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        RTCRayHit rh;
-        rh.ray.org_x = o.x;
-        rh.ray.org_y = o.y;
-        rh.ray.org_z = o.z;
-        rh.ray.tnear = 0.f;
-        rh.ray.dir_x = d.x;
-        rh.ray.dir_y = d.y;
-        rh.ray.dir_z = d.z;
-        rh.ray.time = 0.f;
-        rh.ray.tfar = 1e30f;
-        rh.ray.mask = 0xFFFFFFFFu;
-        rh.ray.id = 0;
-        rh.ray.flags = 0;
-        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-        rtcIntersect1(scene, &ctx, &rh);
-        RayHit h;
-        if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-            h.instance = rh.hit.instID[0];
-            h.primitive = rh.hit.primID;
-            h.u = rh.hit.u;
-            h.v = rh.hit.v;
-            h.t = rh.ray.tfar;
-        }
-        return h;
-    }
+    RayHit intersect(glm::vec3 o, glm::vec3 d) const { return embreeIntersect(scene, o, d, 0.f, 1e30f); }
     bool occluded(glm::vec3 o, glm::vec3 d, float tMin, float tMax) const {
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        RTCRay r;
-        r.org_x = o.x;
-        r.org_y = o.y;
-        r.org_z = o.z;
-        r.tnear = tMin;
-        r.dir_x = d.x;
-        r.dir_y = d.y;
-        r.dir_z = d.z;
-        r.time = 0.f;
-        r.tfar = tMax;
-        r.mask = 0xFFFFFFFFu;
-        r.id = 0;
-        r.flags = 0;
-        rtcOccluded1(scene, &ctx, &r);
-        return r.tfar < 0.f;
+        return embreeOccluded(scene, o, d, tMin, tMax);
     }
 };
 

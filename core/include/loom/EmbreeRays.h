@@ -1,0 +1,66 @@
+#pragma once
+// Single rays against an Embree scene, inline so that hot loops (the path
+// tracer's) avoid a call into libloom_core per ray. RayScene uses the same
+// functions, so both give identical hits. Including this header needs
+// Embree 3's headers (link the `embree` target).
+#include <embree3/rtcore.h>
+
+#include <glm/glm.hpp>
+
+#include "loom/RayScene.h"
+
+namespace loom {
+
+/// Closest hit of o + t d, t in (tMin, tMax).
+inline RayHit embreeIntersect(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    rh.ray.org_x = o.x;
+    rh.ray.org_y = o.y;
+    rh.ray.org_z = o.z;
+    rh.ray.tnear = tMin;
+    rh.ray.dir_x = d.x;
+    rh.ray.dir_y = d.y;
+    rh.ray.dir_z = d.z;
+    rh.ray.time = 0.f;
+    rh.ray.tfar = tMax;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene, &ctx, &rh);
+    RayHit h;
+    if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
+        h.instance = rh.hit.instID[0];
+        h.primitive = rh.hit.primID;
+        h.u = rh.hit.u;
+        h.v = rh.hit.v;
+        h.t = rh.ray.tfar;
+    }
+    return h;
+}
+
+/// Any hit of o + t d, t in (tMin, tMax).
+inline bool embreeOccluded(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRay r;
+    r.org_x = o.x;
+    r.org_y = o.y;
+    r.org_z = o.z;
+    r.tnear = tMin;
+    r.dir_x = d.x;
+    r.dir_y = d.y;
+    r.dir_z = d.z;
+    r.time = 0.f;
+    r.tfar = tMax;
+    r.mask = 0xFFFFFFFFu;
+    r.id = 0;
+    r.flags = 0;
+    rtcOccluded1(scene, &ctx, &r);
+    return r.tfar < 0.f;  // Embree sets tfar to -inf on a hit
+}
+
+}  // namespace loom
