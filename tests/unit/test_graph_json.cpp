@@ -76,25 +76,7 @@ std::string withEdge(const json& edge) {
     return g.dump();
 }
 
-/// A fresh folder per test, removed afterwards.
-class GraphFiles : public ::testing::Test {
-protected:
-    void SetUp() override {
-        const auto* test = ::testing::UnitTest::GetInstance()->current_test_info();
-        mDir = fs::temp_directory_path() / ("loom_test_graph_" + std::to_string(::getpid()) + "_" + test->name());
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-    void write(const fs::path& p, const std::string& text) {
-        std::ofstream out(p, std::ios::binary);
-        out << text;
-    }
-    fs::path mDir;
-};
+class GraphFiles : public test::TempDirTest {};
 
 /// Graphs of different shapes for the round-trip tests.
 std::vector<GraphDesc> sampleGraphs() {
