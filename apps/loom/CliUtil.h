@@ -24,6 +24,7 @@ void addRenderCommand(CLI::App& app);
 void addCheckCommand(CLI::App& app);
 void addPassesCommand(CLI::App& app);
 void addSceneCommand(CLI::App& app);
+void addImageCommand(CLI::App& app);
 
 /// "orbit", "orbit:0.5", "dolly:1:0.25", "static" -> a camera path. Throws loom::Error naming the option.
 CameraPath parseCameraPath(const std::string& text, const std::string& option);

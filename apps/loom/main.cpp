@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
     loom::cli::addCheckCommand(app);
     loom::cli::addPassesCommand(app);
     loom::cli::addSceneCommand(app);
+    loom::cli::addImageCommand(app);
 
     try {
         if (argc > 1 && argv[1][0] != '-') {

@@ -1,5 +1,6 @@
 #include "loom/Graph.h"
 
+#include <algorithm>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -109,7 +110,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
         const json& p = passes[i];
         if (!p.is_object())
             throwBadInput(where, "a pass must be an object", "{\"name\": ..., \"type\": ...}", {}, file);
-        checkKeys(p, {"name", "type", "params"}, where, file);
+        checkKeys(p, {"name", "type", "params", "unconnected"}, where, file);
         PassDesc d;
         d.name = require(p, "name", json::value_t::string, "a string", where, file).get<std::string>();
         d.type = require(p, "type", json::value_t::string, "a string", where, file).get<std::string>();
@@ -123,6 +124,14 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
             if (!p["params"].is_object())
                 throwBadInput(where + "/params", "'params' must be an object", "{\"name\": value, ...}", {}, file);
             d.params = p["params"];
+        }
+        if (p.contains("unconnected")) {
+            const json& u = p["unconnected"];
+            const bool ok = u.is_array() && std::all_of(u.begin(), u.end(), [](const json& v) { return v.is_string(); });
+            if (!ok)
+                throwBadInput(where + "/unconnected", "'unconnected' must be an array of input names",
+                              "[\"direct\", \"indirect\"]", {}, file);
+            for (const json& v : u) d.unconnected.push_back(v.get<std::string>());
         }
         g.passes.push_back(std::move(d));
     }
@@ -181,6 +190,7 @@ json graphToJson(const GraphDesc& g) {
     for (const auto& p : g.passes) {
         json jp = {{"name", p.name}, {"type", p.type}};
         if (!p.params.empty()) jp["params"] = p.params;
+        if (!p.unconnected.empty()) jp["unconnected"] = p.unconnected;
         passes.push_back(std::move(jp));
     }
     root["passes"] = std::move(passes);

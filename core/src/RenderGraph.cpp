@@ -297,13 +297,34 @@ void RenderGraph::compile(const CompileOptions& options) {
         wires.push_back(Wire{e.src, e.dst, false});
     }
 
+    // 2b. Optional inputs a pass asks to leave unconnected: wiring by name skips them.
+    std::set<std::string> unconnected;
+    for (size_t i = 0; i < m.desc.passes.size(); ++i) {
+        const PassDesc& pd = m.desc.passes[i];
+        PassNode* n = m.node(pd.name);
+        for (size_t k = 0; k < pd.unconnected.size(); ++k) {
+            const std::string where = fmt::format("/passes/{}/unconnected/{}", i, k);
+            const std::string key = fieldKey(pd.name, pd.unconnected[k]);
+            const FieldDesc& f = resolveField(*n, ChannelRef{pd.name, pd.unconnected[k], false}, FieldKind::Input,
+                                              where);
+            if (!f.optional)
+                fail(where, "input '" + key + "' is required and cannot be left unconnected",
+                     "an optional input of " + pd.type, "remove it from \"unconnected\"");
+            if (wiredInputs.count(key))
+                fail(where, "input '" + key + "' is listed as unconnected but an edge connects it",
+                     "the edge or the entry, not both", "remove one of them");
+            unconnected.insert(key);
+        }
+    }
+
     // 3. Wiring by name for inputs without an edge. Problems are reported
     //    only for passes that end up live.
     std::map<std::string, std::string> wiringProblems;  // pass -> message (first one)
     std::map<std::string, std::pair<std::string, std::string>> wiringDetail;
     for (auto& n : m.nodes) {
         for (const auto& f : n->refl.fields()) {
-            if (f.kind != FieldKind::Input || wiredInputs.count(fieldKey(n->desc.name, f.name))) continue;
+            const std::string key = fieldKey(n->desc.name, f.name);
+            if (f.kind != FieldKind::Input || wiredInputs.count(key) || unconnected.count(key)) continue;
             std::vector<std::string> producers;
             for (auto& other : m.nodes) {
                 if (other.get() == n.get()) continue;

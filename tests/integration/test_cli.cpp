@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include <glm/vec4.hpp>
 #include <nlohmann/json.hpp>
 
 #include "loom/ImageIO.h"
@@ -313,3 +314,40 @@ TEST_F(Cli, PassesWritesMarkdown) {
 }
 
 }  // namespace
+
+using loom::Format;
+using loom::Texture;
+using loom::readImage;
+using loom::writeImage;
+
+TEST_F(Cli, ImageMontagePlacesImagesSideBySide) {
+    Texture a(3, 2, Format::RGBA8Unorm), b(5, 2, Format::RGBA32F);
+    for (uint32_t y = 0; y < 2; ++y) {
+        for (uint32_t x = 0; x < 3; ++x) reinterpret_cast<uint8_t*>(a.row(y))[x * 4] = 10;
+        // Linear 0.5 is sRGB 0.7353569 -> 188; 2.0 clamps to 255.
+        for (uint32_t x = 0; x < 5; ++x) b.view<glm::vec4>().at(x, y) = glm::vec4(0.5f, 2.f, 0.f, 1.f);
+    }
+    writeImage(mDir / "a.png", a);
+    writeImage(mDir / "b.exr", b);
+    RunResult r = loom("image montage a.png b.exr --gap 1 -o side.png");
+    ASSERT_EQ(r.code, 0) << r.output;
+    Texture side = readImage(mDir / "side.png");
+    ASSERT_EQ(side.width(), 3u + 1u + 5u);
+    ASSERT_EQ(side.height(), 2u);
+    EXPECT_EQ(side.texel(0, 1, 0) * 255.f, 10.f);
+    EXPECT_EQ(side.texel(3, 0, 0), 1.f);  // the white gap
+    EXPECT_EQ(std::lround(side.texel(4, 0, 0) * 255.f), 188);
+    EXPECT_EQ(side.texel(8, 1, 1), 1.f);
+    EXPECT_EQ(side.texel(8, 1, 2), 0.f);
+}
+
+TEST_F(Cli, ImageMontageOfUnequalHeightsIsBadInput) {
+    writeImage(mDir / "a.png", Texture(4, 4, Format::RGBA8Unorm));
+    writeImage(mDir / "b.png", Texture(4, 3, Format::RGBA8Unorm));
+    RunResult r = loom("image montage a.png b.png -o side.png");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "b.png");
+    EXPECT_CONTAINS(r.output, "equal height");
+    EXPECT_FALSE(fs::exists(mDir / "side.png"));
+    EXPECT_EQ(loom("image montage a.png missing.png -o side.png").code, 2);
+}

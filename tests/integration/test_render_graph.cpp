@@ -263,6 +263,44 @@ TEST(RenderGraphWiring, SeveralProducersIsAnErrorListingThem) {
     EXPECT_CONTAINS(e.what(), "S2.src");
 }
 
+TEST(RenderGraphWiring, OptionalInputListedAsUnconnectedIsNotWiredByName) {
+    RenderGraph g(makeGraph(R"([{"name": "S", "type": "SrcSource", "params": {"color": [0.5, 0.5, 0.5, 1]}},
+                                {"name": "B", "type": "BiasSource", "params": {"color": [1, 2, 3, 0]}},
+                                {"name": "O", "type": "OptionalInput", "unconnected": ["bias"]}])",
+                            "[]", R"(["O.dst"])"),
+                  registry());
+    g.compile(sized());
+    EXPECT_EQ(findWire(g.plan(), "O.bias"), nullptr);
+    EXPECT_NE(findWire(g.plan(), "O.src"), nullptr);
+    EXPECT_TRUE(isCulled(g.plan(), "B"));
+    g.execute(frameAt(0));
+    EXPECT_EQ(g.lastStats()["O"]["biasConnected"], 0.0);
+    EXPECT_EQ(texel(g, "O.dst"), 0.5f);
+    // The key survives a save and load.
+    EXPECT_TRUE(parseGraph(graphToJson(g.desc()).dump()).sameAs(g.desc()));
+}
+
+TEST(RenderGraphWiring, UnconnectedMustNameAnOptionalInputWithoutAnEdge) {
+    Error required = compileError(makeGraph(R"([{"name": "S", "type": "SrcSource"},
+                                                {"name": "O", "type": "OptionalInput", "unconnected": ["src"]}])",
+                                            "[]", R"(["O.dst"])"));
+    EXPECT_EQ(required.info().where, "/passes/1/unconnected/0");
+    EXPECT_CONTAINS(required.what(), "required");
+    Error unknown = compileError(makeGraph(R"([{"name": "S", "type": "SrcSource"},
+                                               {"name": "O", "type": "OptionalInput", "unconnected": ["bais"]}])",
+                                           "[]", R"(["O.dst"])"));
+    EXPECT_CONTAINS(unknown.what(), "did you mean 'bias'");
+    Error both = compileError(makeGraph(R"([{"name": "S", "type": "SrcSource"}, {"name": "B", "type": "BiasSource"},
+                                            {"name": "O", "type": "OptionalInput", "unconnected": ["bias"]}])",
+                                        R"([["B.bias", "O.bias"]])", R"(["O.dst"])"));
+    EXPECT_CONTAINS(both.what(), "an edge connects it");
+    Error notList = expectBadInput([] {
+        parseGraph(R"({"loom_graph": 1, "passes": [{"name": "O", "type": "X", "unconnected": "bias"}],
+                       "outputs": ["O.dst"]})");
+    });
+    EXPECT_EQ(notList.info().where, "/passes/0/unconnected");
+}
+
 TEST(RenderGraphWiring, UnconnectedInputOfACulledPassIsOnlyAWarning) {
     RenderGraph g(makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "O", "type": "OptionalInput"}])", "[]",
                             R"(["C.dst"])"),

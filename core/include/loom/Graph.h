@@ -14,6 +14,9 @@ struct PassDesc {
     std::string name;
     std::string type;
     nlohmann::json params = nlohmann::json::object();
+    /// Optional inputs left unconnected: wiring by name skips them (e.g. SVGF's direct/indirect when the
+    /// combined colour is to be filtered although the path tracer could split it).
+    std::vector<std::string> unconnected;
     bool operator==(const PassDesc&) const = default;
 };
 

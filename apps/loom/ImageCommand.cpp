@@ -1,0 +1,82 @@
+// loom image: small image utilities for looking at results.
+//   loom image montage A B C -o side.png   side-by-side of images of equal height
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "CliUtil.h"
+#include "loom/Error.h"
+#include "loom/ImageIO.h"
+
+namespace loom::cli {
+
+namespace {
+
+/// The exact sRGB encoding of a linear value, to 8 bits (round to nearest).
+uint8_t encodeSrgb8(float linear) {
+    if (!std::isfinite(linear)) linear = linear > 0.f ? 1.f : 0.f;
+    const float v = std::clamp(linear, 0.f, 1.f);
+    const float e = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.f / 2.4f) - 0.055f;
+    return uint8_t(std::lround(std::clamp(e, 0.f, 1.f) * 255.f));
+}
+
+/// 8-bit pixel (x, y) of an image read from disk: PNG bytes as they are, float images (EXR) clamped to [0, 1]
+/// and sRGB-encoded, so a linear HDR image shows as it would after a linear tone map.
+void pixel8(const Texture& t, uint32_t x, uint32_t y, uint8_t out[4]) {
+    const FormatInfo& info = formatInfo(t.format());
+    if (info.component == ComponentType::Unorm8) {
+        std::memcpy(out, t.row(y) + size_t(x) * 4, 4);
+        return;
+    }
+    for (uint32_t c = 0; c < 3; ++c) out[c] = encodeSrgb8(c < info.channels ? t.texel(x, y, c) : 0.f);
+    out[3] = 255;
+}
+
+void runMontage(const std::vector<std::string>& inputs, const std::string& output, uint32_t gap) {
+    if (inputs.size() < 2) throwBadInput("loom image montage", "fewer than two input images", "two or more images");
+    std::vector<Texture> images;
+    for (const std::string& path : inputs) images.push_back(readImage(path));
+    const uint32_t height = images.front().height();
+    uint32_t width = 0;
+    for (size_t i = 0; i < images.size(); ++i) {
+        if (images[i].height() != height)
+            throwBadInput(inputs[i],
+                          fmt::format("image is {} pixels high, the first is {}", images[i].height(), height),
+                          "images of equal height", "render them at the same --size");
+        width += images[i].width() + (i ? gap : 0);
+    }
+    Texture out(width, height, Format::RGBA8Srgb);
+    uint32_t x0 = 0;
+    for (const Texture& image : images) {
+        for (uint32_t y = 0; y < height; ++y)
+            for (uint32_t x = 0; x < image.width(); ++x)
+                pixel8(image, x, y, reinterpret_cast<uint8_t*>(out.row(y)) + size_t(x0 + x) * 4);
+        x0 += image.width();
+        for (uint32_t g = 0; g < gap && x0 < width; ++g, ++x0)
+            for (uint32_t y = 0; y < height; ++y) std::memset(out.row(y) + size_t(x0) * 4, 0xFF, 4);
+    }
+    writeImage(output, out);
+}
+
+}  // namespace
+
+void addImageCommand(CLI::App& app) {
+    CLI::App* cmd = app.add_subcommand("image", "Image utilities (montage)");
+    cmd->require_subcommand(1);
+    CLI::App* montage = cmd->add_subcommand("montage", "Place images of equal height side by side into one PNG");
+    static std::vector<std::string> inputs;
+    static std::string output;
+    static uint32_t gap = 4;
+    montage->add_option("images", inputs, "PNG or EXR images, left to right (EXR: clamped, sRGB-encoded)")
+        ->required()
+        ->check(CLI::ExistingFile);
+    montage->add_option("-o,--out", output, "output PNG")->required();
+    montage->add_option("--gap", gap, "white pixels between images")->capture_default_str();
+    montage->callback([] { runMontage(inputs, output, gap); });
+}
+
+}  // namespace loom::cli
