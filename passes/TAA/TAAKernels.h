@@ -1,0 +1,266 @@
+#pragma once
+// Per-pixel temporal anti-aliasing for TAAPass: plain functions over plain
+// structs, so the same code compiles for CUDA (see loom/Kernel.h). This is the
+// reference; TAAPass.cpp runs a tiled CPU version of the same steps and a test
+// checks that the two agree.
+//
+// One pixel:
+//   1. Neighbourhood: the 3x3 current colours (edge pixels repeated at the
+//      frame border) in YCoCg + alpha; mean mu and standard deviation s of the
+//      finite ones, and their min / max. The box is
+//        lo = clamp(mu - sigma s, min, max), hi = clamp(mu + sigma s, min, max)
+//      (variance clipping, M. Salvi, "An Excursion in Temporal Supersampling",
+//      GDC 2016, intersected with the min / max box of B. Karis, "High Quality
+//      Temporal Supersampling", SIGGRAPH 2014 Advances course).
+//   2. Motion dilation: the longest finite motion vector of the 3x3 (first in
+//      row-major order on ties), so edges of moving objects reproject with the
+//      object rather than with the background (Karis 2014).
+//   3. History: Catmull-Rom (bicubic, B = 0, C = 1/2) sampling of last frame's
+//      output at uvPrev = uvCur + mvec, 4x4 texels, edge texels repeated. The
+//      current colour is used instead when history is invalid or uvPrev lies
+//      outside [0, 1]^2.
+//   4. Clipping: the history in YCoCg + alpha is moved towards the box centre
+//      along the line to it until it lies in the box (Salvi 2016; clipping
+//      rather than per-channel clamping keeps the hue). History inside the box
+//      is kept untouched.
+//   5. Blend with anti-flicker (Karis 2014, after T. Lottes): weights
+//        wc = alpha / (1 + Yc),  wh = (1 - alpha) / (1 + Yh),
+//      Yc and Yh the (non-negative) YCoCg luma of current and clipped history;
+//      out = c + wh / (wc + wh) (h - c). Luminance weighting stops a bright
+//      sample (a firefly, a jittered specular) from dominating the average,
+//      which is what makes plain alpha blending of HDR colour flicker.
+//      Written as c + k (h - c) so that h == c gives exactly c.
+// Non-finite current pixels are replaced by the mean of the finite
+// neighbours (0 when there are none) and are left out of the statistics; a
+// non-finite result (overflow of huge inputs) falls back to the current
+// colour, so history stays finite.
+#include <cstdint>
+#include <glm/glm.hpp>
+
+#include "loom/Kernel.h"
+
+namespace loom::taa {
+
+struct TaaParams {
+    float alpha = 0.1f;  ///< weight of the current frame
+    float sigma = 1.f;   ///< box half-size in standard deviations
+    bool antiFlicker = true;
+};
+
+/// A read-only image of T with row pitch in bytes; reads clamp to the edges.
+template <class T>
+struct ClampedImage {
+    const T* data = nullptr;
+    uint32_t width = 0, height = 0;
+    size_t rowPitch = 0;
+
+    LOOM_HD const T& at(int x, int y) const {
+        x = x < 0 ? 0 : (x >= int(width) ? int(width) - 1 : x);
+        y = y < 0 ? 0 : (y >= int(height) ? int(height) - 1 : y);
+        return reinterpret_cast<const T*>(reinterpret_cast<const unsigned char*>(data) + rowPitch * size_t(y))[x];
+    }
+};
+
+struct TaaInputs {
+    ClampedImage<glm::vec4> color;    ///< this frame
+    ClampedImage<glm::vec2> mvec;     ///< uvPrev - uvCur
+    ClampedImage<glm::vec4> history;  ///< last frame's output
+    bool historyValid = false;
+};
+
+LOOM_HD inline bool isFinite(float v) {
+    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
+}
+LOOM_HD inline bool isFinite(const glm::vec2& v) {
+    return isFinite(v.x) && isFinite(v.y);
+}
+LOOM_HD inline bool isFinite(const glm::vec4& v) {
+    return isFinite(v.x) && isFinite(v.y) && isFinite(v.z) && isFinite(v.w);
+}
+
+/// RGB + alpha to YCoCg + alpha (Malvar & Sullivan 2003): Y = R/4 + G/2 + B/4,
+/// Co = (R - B)/2, Cg = -R/4 + G/2 - B/4.
+LOOM_HD inline glm::vec4 toYCoCg(const glm::vec4& c) {
+    return glm::vec4(0.25f * (c.x + c.z) + 0.5f * c.y, 0.5f * (c.x - c.z), 0.5f * c.y - 0.25f * (c.x + c.z), c.w);
+}
+LOOM_HD inline glm::vec4 fromYCoCg(const glm::vec4& v) {
+    return glm::vec4(v.x + v.y - v.z, v.x + v.z, v.x - v.y - v.z, v.w);
+}
+
+/// Start value of a running minimum (and, negated, maximum).
+inline constexpr float kHuge = 3.0e38f;
+
+/// The clipping box of a neighbourhood in YCoCg + alpha.
+struct ClipBox {
+    glm::vec4 lo{0.f}, hi{0.f};
+    glm::vec4 mean{0.f};
+    uint32_t finiteCount = 0;
+};
+
+/// Box from the running sums of n finite samples (mean and variance as the
+/// moments, the variance clamped at 0 against rounding).
+LOOM_HD inline ClipBox makeClipBox(const glm::vec4& sum, const glm::vec4& sumSq, const glm::vec4& mn,
+                                   const glm::vec4& mx, uint32_t n, float sigma) {
+    ClipBox b;
+    b.finiteCount = n;
+    if (n == 0) return b;
+    const float inv = 1.f / float(n);
+    b.mean = sum * inv;
+    const glm::vec4 var = glm::max(sumSq * inv - b.mean * b.mean, glm::vec4(0.f));
+    const glm::vec4 dev = sigma * glm::sqrt(var);
+    b.lo = glm::clamp(b.mean - dev, mn, mx);
+    b.hi = glm::clamp(b.mean + dev, mn, mx);
+    return b;
+}
+
+/// The 3x3 statistics of the current colour around (x, y). Each row's sums
+/// are formed first, then the rows are added, each sum starting from 0: the
+/// order the tiled CPU path uses too, so both give the same bits.
+LOOM_HD inline ClipBox neighbourhoodBox(const ClampedImage<glm::vec4>& color, int x, int y, float sigma) {
+    glm::vec4 sum(0.f), sumSq(0.f), mn(kHuge), mx(-kHuge);
+    uint32_t n = 0;
+    for (int dy = -1; dy <= 1; ++dy) {
+        glm::vec4 rowSum(0.f), rowSumSq(0.f), rowMin(kHuge), rowMax(-kHuge);
+        for (int dx = -1; dx <= 1; ++dx) {
+            const glm::vec4 c = color.at(x + dx, y + dy);
+            if (!isFinite(c)) continue;
+            const glm::vec4 v = toYCoCg(c);
+            rowSum += v;
+            rowSumSq += v * v;
+            rowMin = glm::min(rowMin, v);
+            rowMax = glm::max(rowMax, v);
+            ++n;
+        }
+        sum += rowSum;
+        sumSq += rowSumSq;
+        mn = glm::min(mn, rowMin);
+        mx = glm::max(mx, rowMax);
+    }
+    return makeClipBox(sum, sumSq, mn, mx, n, sigma);
+}
+
+/// Longest finite motion vector of the 3x3 around (x, y); false when none is finite.
+LOOM_HD inline bool dilatedMotion(const ClampedImage<glm::vec2>& mvec, int x, int y, glm::vec2& out) {
+    float best = -1.f;
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            const glm::vec2 m = mvec.at(x + dx, y + dy);
+            if (!isFinite(m)) continue;
+            const float l = m.x * m.x + m.y * m.y;
+            if (l > best) {
+                best = l;
+                out = m;
+            }
+        }
+    return best >= 0.f;
+}
+
+/// Catmull-Rom weights of the four taps at -1, 0, 1, 2 for a fraction t in [0, 1).
+LOOM_HD inline glm::vec4 catmullRomWeights(float t) {
+    const float t2 = t * t, t3 = t2 * t;
+    return glm::vec4(0.5f * (-t3 + 2.f * t2 - t), 0.5f * (3.f * t3 - 5.f * t2) + 1.f, 0.5f * (-3.f * t3 + 4.f * t2 + t),
+                     0.5f * (t3 - t2));
+}
+
+/// Where a pixel's centre was last frame, in pixels (texel centres at integers),
+/// from its motion vector; false when that lies outside the frame.
+LOOM_HD inline bool previousPosition(uint32_t x, uint32_t y, uint32_t width, uint32_t height, const glm::vec2& mv,
+                                     glm::vec2& pos) {
+    // uvPrev = (x + 0.5) / W + mv.x; in texel-centre coordinates that is x + mv.x W.
+    pos = glm::vec2(float(x) + mv.x * float(width), float(y) + mv.y * float(height));
+    return pos.x >= -0.5f && pos.x <= float(width) - 0.5f && pos.y >= -0.5f && pos.y <= float(height) - 0.5f;
+}
+
+/// Bicubic (Catmull-Rom) history at a texel-centre position. Integer
+/// positions read one texel.
+LOOM_HD inline glm::vec4 sampleHistory(const ClampedImage<glm::vec4>& history, const glm::vec2& pos) {
+    const float fx0 = glm::floor(pos.x), fy0 = glm::floor(pos.y);
+    const int ix = int(fx0), iy = int(fy0);
+    const float fx = pos.x - fx0, fy = pos.y - fy0;
+    if (fx == 0.f && fy == 0.f) return history.at(ix, iy);
+    const glm::vec4 wx = catmullRomWeights(fx), wy = catmullRomWeights(fy);
+    glm::vec4 result(0.f);
+    for (int j = 0; j < 4; ++j) {
+        glm::vec4 row(0.f);
+        for (int i = 0; i < 4; ++i) row += wx[i] * history.at(ix - 1 + i, iy - 1 + j);
+        result += wy[j] * row;
+    }
+    return result;
+}
+
+/// The history point moved along the line to the box centre into the box
+/// (unchanged when already inside).
+LOOM_HD inline bool clipToBox(const ClipBox& b, glm::vec4& v) {
+    const glm::vec4 center = 0.5f * (b.lo + b.hi), extent = 0.5f * (b.hi - b.lo);
+    const glm::vec4 d = v - center;
+    float unit = 0.f;
+    for (int c = 0; c < 4; ++c) {
+        const float a = glm::abs(d[c]);
+        // Only channels outside the box count (then a > 0). A flat channel (extent 0) gives an infinite unit,
+        // which pulls the point exactly onto the centre (d / inf = 0).
+        if (a > extent[c]) unit = glm::max(unit, a / extent[c]);
+    }
+    if (unit <= 0.f) return false;
+    v = center + d / unit;
+    return true;
+}
+
+/// The final blend (step 5 above).
+LOOM_HD inline glm::vec4 blend(const TaaParams& p, const glm::vec4& current, float currentLuma,
+                               const glm::vec4& history, float historyLuma) {
+    float wc = p.alpha, wh = 1.f - p.alpha;
+    if (p.antiFlicker) {
+        wc /= 1.f + glm::max(currentLuma, 0.f);
+        wh /= 1.f + glm::max(historyLuma, 0.f);
+    }
+    const float sum = wc + wh;
+    const float k = sum > 0.f ? wh / sum : 0.f;
+    return current + k * (history - current);
+}
+
+/// What one pixel reports besides its colour.
+enum PixelFlags : uint32_t {
+    kNonFiniteInput = 1u,  ///< the current colour was not finite and was replaced
+    kNoHistory = 2u,       ///< history unusable (invalid, off-frame or no finite motion): output = current
+    kClipped = 4u,         ///< the history was outside the box and was clipped
+};
+
+/// The current colour with a non-finite pixel replaced by the neighbourhood mean.
+LOOM_HD inline glm::vec4 saneCurrent(const glm::vec4& c, const ClipBox& box, uint32_t& flags) {
+    if (isFinite(c)) return c;
+    flags |= kNonFiniteInput;
+    const glm::vec4 mean = box.finiteCount > 0 ? fromYCoCg(box.mean) : glm::vec4(0.f);
+    return isFinite(mean) ? mean : glm::vec4(0.f);  // the mean of huge neighbours can overflow
+}
+
+/// Steps 3 to 5 for a pixel whose box and dilated motion are known.
+LOOM_HD inline glm::vec4 resolveWithBox(const TaaInputs& in, const TaaParams& p, uint32_t x, uint32_t y,
+                                        const glm::vec4& current, const ClipBox& box, bool motionFinite,
+                                        const glm::vec2& motion, uint32_t& flags) {
+    glm::vec2 pos;
+    if (!in.historyValid || !motionFinite || !previousPosition(x, y, in.color.width, in.color.height, motion, pos)) {
+        flags |= kNoHistory;
+        return current;
+    }
+    glm::vec4 history = sampleHistory(in.history, pos);
+    glm::vec4 historyYCoCg = toYCoCg(history);
+    if (clipToBox(box, historyYCoCg)) {
+        history = fromYCoCg(historyYCoCg);
+        flags |= kClipped;
+    }
+    const glm::vec4 out = blend(p, current, toYCoCg(current).x, history, historyYCoCg.x);
+    return isFinite(out) ? out : current;
+}
+
+/// The whole reference kernel for pixel (x, y).
+LOOM_HD inline glm::vec4 resolvePixel(const TaaInputs& in, const TaaParams& p, uint32_t x, uint32_t y,
+                                      uint32_t& flags) {
+    flags = 0;
+    const ClipBox box = neighbourhoodBox(in.color, int(x), int(y), p.sigma);
+    const glm::vec4 current = saneCurrent(in.color.at(int(x), int(y)), box, flags);
+    glm::vec2 motion(0.f);
+    const bool motionFinite = dilatedMotion(in.mvec, int(x), int(y), motion);
+    return resolveWithBox(in, p, x, y, current, box, motionFinite, motion, flags);
+}
+
+}  // namespace loom::taa

@@ -1,0 +1,37 @@
+#pragma once
+// TAAPass: temporal anti-aliasing for jittered input (the G-buffer passes'
+// Halton or stratified camera jitter): the current frame's 3x3 neighbourhood
+// in YCoCg bounds the reprojected history (variance clipping), motion vectors
+// are dilated to the longest of the 3x3, history is sampled with Catmull-Rom,
+// and the blend is luminance-weighted against flicker. TAAKernels.h holds the
+// per-pixel reference and the formulas with their sources.
+//
+// Fields (declared whatever the parameters):
+//   colorIn       input   RGBA32F  this frame's (jittered) colour
+//   mvec          input   RG32F    uvPrev - uvCur, jitter removed (wired by name from the G-buffer)
+//   colorOut      output  RGBA32F  the anti-aliased colour
+//   colorHistory  history RGBA32F  last frame's colorOut (graph history: dumpable, no state in the pass)
+//
+// History invalid (first frame, reset, resize, camera cut) or a reprojected
+// position outside the frame: the output is the current colour. Non-finite
+// input pixels never reach the output or the history.
+#include "TAAKernels.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+class TAAPass final : public RenderPass {
+public:
+    void reflect(Reflection& r, const CompileInfo& info) const override;
+    void declareParams(ParamList& p) override;
+    void execute(PassContext& ctx) override;
+
+    /// Runs the per-pixel reference kernel instead of the tiled CPU path (for tests comparing the two).
+    void useReferenceKernel(bool on) { mReference = on; }
+
+private:
+    taa::TaaParams mParams;
+    bool mReference = false;
+};
+
+}  // namespace loom

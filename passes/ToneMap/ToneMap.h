@@ -1,0 +1,48 @@
+#pragma once
+// ToneMap: HDR colour to display colour. Exposure compensation in EV, optional
+// auto exposure (Reinhard 2002 log-average luminance, adapted over time), one
+// of five operators (see ToneMapKernels.h), and an exact 8-bit sRGB encoding.
+//
+// Fields (declared whatever the parameters):
+//   src               input   RGBA32F  scene-referred colour
+//   dst               output  RGBA8Srgb  tone-mapped, sRGB-encoded (exact OETF, round to nearest)
+//   dstFloat          output  RGBA32F  optional: tone-mapped, still linear, in [0, 1]; computed
+//                                      only when consumed
+//   adaptedLuminance  history RGBA32F 1x1: x the adapted luminance the exposure follows (0 while
+//                                      auto exposure is off), y this frame's measured log-average
+//                                      luminance, z + w the frame time in seconds (a float pair
+//                                      whose sum is the double time), so the time step needs no
+//                                      state in the pass.
+#include <memory>
+
+#include "ToneMapKernels.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+class ToneMapPass final : public RenderPass {
+public:
+    using Operator = tonemap::Operator;
+
+    ToneMapPass();
+    void reflect(Reflection& r, const CompileInfo& info) const override;
+    void declareParams(ParamList& p) override;
+    void execute(PassContext& ctx) override;
+
+private:
+    /// Log-average luminance of src over its finite pixels (deterministic: per-tile sums added in tile order);
+    /// returns false when no pixel is finite.
+    bool measureLogAverage(const Texture& src, double& logAverage, uint64_t& finitePixels) const;
+
+    // Parameters.
+    Operator mOperator = Operator::Aces;
+    float mExposureEv = 0.f;
+    bool mAutoExposure = false;
+    float mKey = 0.18f;
+    float mAdaptationTime = 1.f;
+    float mWhitePoint = 4.f;
+
+    std::unique_ptr<tonemap::SrgbEncodeTable> mSrgbTable;
+};
+
+}  // namespace loom

@@ -1,0 +1,499 @@
+// TAAPass: exact pass-through of a constant image, convergence to the supersampled image of a jittered G-buffer,
+// reprojection that follows motion (integer and fractional), clipping that bounds ghosting, history invalid and
+// off-frame cases, non-finite input, the tiled path against the reference kernel, determinism across thread
+// counts, and parameter-independent reflection.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <glm/glm.hpp>
+#include <limits>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "../../passes/TAA/TAAKernels.h"
+#include "TestUtil.h"
+#include "loom/Graph.h"
+#include "loom/Parallel.h"
+#include "loom/Plugin.h"
+#include "loom/RenderGraph.h"
+#include "loom/Scene.h"
+#include "loom/Texture.h"
+
+using namespace loom;
+
+namespace {
+
+using ColorFn = std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)>;
+using MotionFn = std::function<glm::vec2(uint64_t frame, uint32_t x, uint32_t y)>;
+
+/// Emits "color" and "mvec" from functions of (frame, x, y).
+class MotionSource final : public RenderPass {
+public:
+    void reflect(Reflection& r, const CompileInfo&) const override {
+        r.output("color", Format::RGBA32F);
+        r.output("mvec", Format::RG32F);
+    }
+    void execute(PassContext& ctx) override {
+        auto c = ctx.output("color")->view<glm::vec4>();
+        auto m = ctx.output("mvec")->view<glm::vec2>();
+        for (uint32_t y = 0; y < c.height; ++y)
+            for (uint32_t x = 0; x < c.width; ++x) {
+                c.at(x, y) = color ? color(ctx.frameIndex(), x, y) : glm::vec4(0.f);
+                m.at(x, y) = motion ? motion(ctx.frameIndex(), x, y) : glm::vec2(0.f);
+            }
+    }
+    ColorFn color;
+    MotionFn motion;
+};
+
+PluginRegistry& registry() {
+    static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
+    static const bool registered = [] {
+        reg.registerPass("MotionSource", "test input", [] { return std::make_unique<MotionSource>(); });
+        return true;
+    }();
+    (void)registered;
+    return reg;
+}
+
+/// MotionSource -> TAA (mvec wired by name), one frame at a time.
+struct Harness {
+    explicit Harness(const nlohmann::json& params = nlohmann::json::object(), uint32_t width = 64, uint32_t height = 64)
+        : graph(describe(params), registry()) {
+        CompileOptions o;
+        o.width = width;
+        o.height = height;
+        graph.compile(o);
+        source = dynamic_cast<MotionSource*>(graph.pass("Source"));
+    }
+    static GraphDesc describe(const nlohmann::json& params) {
+        nlohmann::json g = {{"loom_graph", 1},
+                            {"name", "taa"},
+                            {"passes",
+                             {{{"name", "Source"}, {"type", "MotionSource"}},
+                              {{"name", "TAA"}, {"type", "TAAPass"}, {"params", params}}}},
+                            {"edges", nlohmann::json::array({nlohmann::json::array({"Source.color", "TAA.colorIn"})})},
+                            {"outputs", {"TAA.colorOut"}}};
+        return parseGraph(g.dump());
+    }
+    void run() {
+        FrameInfo f;
+        f.frameIndex = frame++;
+        f.time = double(f.frameIndex) / 60.0;
+        graph.execute(f);
+    }
+    void run(int n) {
+        for (int i = 0; i < n; ++i) run();
+    }
+    const Texture& field(const std::string& name) const {
+        const Texture* t = graph.fieldTexture("TAA." + name);
+        if (!t) throw std::runtime_error("no texture for TAA." + name);
+        return *t;
+    }
+    glm::vec4 out(uint32_t x, uint32_t y) const { return field("colorOut").view<glm::vec4>().at(x, y); }
+    double stat(const std::string& name) const { return graph.lastStats().at("TAA").at(name); }
+
+    RenderGraph graph;
+    MotionSource* source = nullptr;
+    uint64_t frame = 0;
+};
+
+/// A deterministic value in [0, 1) from three integers.
+float hash01(uint64_t a, int64_t b, int64_t c) {
+    uint64_t h = a * 0x9E3779B97F4A7C15ull ^ uint64_t(b) * 0xC2B2AE3D27D4EB4Full ^ uint64_t(c) * 0x165667B19E3779F9ull;
+    h ^= h >> 29;
+    h *= 0xBF58476D1CE4E5B9ull;
+    h ^= h >> 32;
+    return float(h >> 40) / float(1u << 24);
+}
+
+std::unique_ptr<Texture> copyOf(const Texture& t) {
+    auto c = std::make_unique<Texture>(t.width(), t.height(), t.format());
+    c->copyFrom(t);
+    return c;
+}
+
+bool allFinite(const Texture& t) {
+    for (uint32_t y = 0; y < t.height(); ++y)
+        for (uint32_t x = 0; x < t.width(); ++x)
+            for (uint32_t c = 0; c < 4; ++c)
+                if (!std::isfinite(t.texel(x, y, c))) return false;
+    return true;
+}
+
+/// A textured image of pattern coordinates (u, v) with per-frame noise: what a jittered renderer produces.
+// noipa: one compiled body (no inlined or constant-propagated copies that could contract differently), so the
+// tests can recompute exactly what the source wrote.
+[[gnu::noipa]] glm::vec4 noisyPattern(uint64_t frame, int64_t u, int64_t v) {
+    const float base = 0.5f + 0.4f * std::sin(0.37f * float(u)) * std::cos(0.23f * float(v));
+    const float n = 0.1f * (hash01(frame, u, v) - 0.5f);
+    return glm::vec4(base + n, 0.5f * base + n, 1.f - base, 1.f);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------------------------
+// Static input
+
+TEST(TAAPass, ConstantImageWithZeroMotionPassesThroughExactly) {
+    for (const glm::vec4 c : {glm::vec4(0.3f, 0.6f, 0.9f, 1.f), glm::vec4(7.25f, 0.01f, 123.f, 0.5f)}) {
+        Harness h;
+        h.source->color = [&](uint64_t, uint32_t, uint32_t) { return c; };
+        for (int f = 0; f < 6; ++f) {
+            h.run();
+            for (uint32_t y = 0; y < 64; ++y)
+                for (uint32_t x = 0; x < 64; ++x) ASSERT_EQ(h.out(x, y), c) << x << "," << y << " frame " << f;
+        }
+        EXPECT_EQ(h.stat("clipped"), 0);
+        EXPECT_EQ(h.stat("noHistory"), 0);
+    }
+}
+
+TEST(TAAPass, InvalidHistoryOrOffFrameReprojectionGivesTheCurrentColour) {
+    Harness h;
+    h.source->color = [](uint64_t f, uint32_t x, uint32_t y) { return noisyPattern(f, x, y); };
+    h.run();  // first frame: no history
+    EXPECT_EQ(h.stat("noHistory"), 64 * 64);
+    for (uint32_t y = 0; y < 64; y += 7)
+        for (uint32_t x = 0; x < 64; x += 5) ASSERT_EQ(h.out(x, y), noisyPattern(0, x, y)) << x << "," << y;
+    h.run(3);
+    EXPECT_EQ(h.stat("noHistory"), 0);
+    h.graph.resetHistory();
+    h.run();
+    EXPECT_EQ(h.stat("noHistory"), 64 * 64);
+    EXPECT_EQ(h.out(10, 10), noisyPattern(4, 10, 10));
+
+    // Everything moves 3 pixels left: the 3 rightmost columns come from outside the frame.
+    h.source->motion = [](uint64_t, uint32_t, uint32_t) { return glm::vec2(3.f / 64.f, 0.f); };
+    h.run();
+    EXPECT_EQ(h.stat("noHistory"), 3 * 64);
+    for (uint32_t y = 0; y < 64; ++y) {
+        EXPECT_EQ(h.out(63, y), noisyPattern(5, 63, y));
+        EXPECT_EQ(h.out(61, y), noisyPattern(5, 61, y));
+        EXPECT_NE(h.out(60, y), noisyPattern(5, 60, y));
+    }
+}
+
+// A static scene rendered with Halton jitter: TAA converges to the supersampled image (the mean of the jittered
+// frames, from AccumulatePass) far more closely than any single frame is to it.
+TEST(TAAPass, ConvergesToTheSupersampledImageOfAJitteredGBuffer) {
+    auto scene = Scene::load(test::dataScene("cornell_box.gltf"));
+    scene->camera.jitterPattern = JitterPattern::Halton;
+    const uint32_t W = 96, H = 96;
+    nlohmann::json g = {{"loom_graph", 1},
+                        {"name", "taa_gbuffer"},
+                        {"passes",
+                         {{{"name", "GBuffer"}, {"type", "GBufferRT"}},
+                          {{"name", "TAA"}, {"type", "TAAPass"}},
+                          {{"name", "Accumulate"}, {"type", "AccumulatePass"}}}},
+                        {"edges", nlohmann::json::array({nlohmann::json::array({"GBuffer.albedo", "TAA.colorIn"}),
+                                                         nlohmann::json::array({"GBuffer.albedo", "Accumulate.src"})})},
+                        {"outputs", {"TAA.colorOut", "Accumulate.dst", "GBuffer.albedo"}}};
+    RenderGraph graph(parseGraph(g.dump()), test::pluginRegistry());
+    graph.setScene(scene);
+    CompileOptions o;
+    o.width = W;
+    o.height = H;
+    graph.compile(o);
+
+    const int frames = 64;  // 4 periods of the 16-sample Halton pattern
+    std::vector<std::unique_ptr<Texture>> singles;
+    for (int f = 0; f < frames; ++f) {
+        const double time = 0.0;  // static
+        scene->update(time);
+        scene->camera.aspect = float(W) / float(H);
+        scene->camera.beginFrame(uint64_t(f));
+        graph.execute(FrameInfo{uint64_t(f), time, scene.get(), &scene->camera});
+        if (f >= frames - 16) singles.push_back(copyOf(*graph.fieldTexture("GBuffer.albedo")));
+    }
+    const auto reference = graph.fieldTexture("Accumulate.dst")->view<glm::vec4>();
+    const auto taa = graph.fieldTexture("TAA.colorOut")->view<glm::vec4>();
+    auto error = [&](const auto& img) {
+        double e = 0.0;
+        for (uint32_t y = 0; y < H; ++y)
+            for (uint32_t x = 0; x < W; ++x) {
+                const glm::vec4 d = img.at(x, y) - reference.at(x, y);
+                e += std::fabs(d.x) + std::fabs(d.y) + std::fabs(d.z);
+            }
+        return e / double(W * H);
+    };
+    double singleError = 0.0;
+    for (const auto& s : singles) singleError += error(s->view<glm::vec4>()) / double(singles.size());
+    const double taaError = error(taa);
+    std::printf("mean abs error vs the 64-frame mean: single jittered frame %.5f, TAA %.5f (ratio %.3f)\n", singleError,
+                taaError, taaError / singleError);
+    EXPECT_GT(singleError, 1e-3) << "the jitter should change the image";
+    EXPECT_LT(taaError, 0.4 * singleError);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Motion
+
+// Content moves by (2, 1) pixels per frame with exact motion vectors: the output at a moving pixel equals the
+// output of the same content held still, bit for bit, wherever the pixel's history stayed inside the frame.
+TEST(TAAPass, HistoryFollowsIntegerMotionExactly) {
+    const int dx = 2, dy = 1;
+    Harness moving, still;
+    moving.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+        return noisyPattern(f, int64_t(x) - dx * int64_t(f), int64_t(y) - dy * int64_t(f));
+    };
+    // uvPrev - uvCur: the content at x was at x - dx last frame.
+    moving.source->motion = [&](uint64_t, uint32_t, uint32_t) { return glm::vec2(-dx / 64.f, -dy / 64.f); };
+    still.source->color = [&](uint64_t f, uint32_t x, uint32_t y) { return noisyPattern(f, x, y); };
+    const int frames = 12;
+    int compared = 0;
+    for (int f = 0; f < frames; ++f) {
+        moving.run();
+        still.run();
+        // Pixel (u, v) of the still image is at (u + dx f, v + dy f) in the moving one; both see the same 3x3
+        // neighbourhood away from the borders, over the whole history chain.
+        for (int v = 1; v + 1 < 64; ++v)
+            for (int u = 1; u + 1 < 64; ++u) {
+                const int x = u + dx * f, y = v + dy * f;
+                if (x + 1 >= 64 || y + 1 >= 64) continue;
+                ASSERT_EQ(moving.out(uint32_t(x), uint32_t(y)), still.out(uint32_t(u), uint32_t(v)))
+                    << "frame " << f << " still pixel " << u << "," << v;
+                ++compared;
+            }
+    }
+    EXPECT_GT(compared, 10000);
+    EXPECT_GT(still.stat("clipped"), 0) << "the noise should make clipping matter";
+}
+
+// A linear ramp moving half a pixel per frame: Catmull-Rom reproduces linear functions, so the reprojected
+// history lands on the current value and the output is the current ramp. Zero motion vectors leave a lag.
+TEST(TAAPass, FractionalMotionIsReprojectedWithTheBicubicFilter) {
+    auto ramp = [](uint64_t f, uint32_t x, uint32_t y) {
+        const float u = float(x) - 0.5f * float(f);
+        return glm::vec4(0.01f * u + 0.2f, 0.005f * float(y) + 0.3f, 0.5f - 0.004f * u, 1.f);
+    };
+    for (bool withMotion : {true, false}) {
+        SCOPED_TRACE(withMotion ? "exact mvec" : "zero mvec");
+        Harness h(nlohmann::json{{"sigma", 10.f}});  // a wide box: the test is about reprojection, not clipping
+        h.source->color = ramp;
+        if (withMotion) h.source->motion = [](uint64_t, uint32_t, uint32_t) { return glm::vec2(-0.5f / 64.f, 0.f); };
+        h.run(12);
+        // Content enters at the left edge with clamped (wrong) history, which then travels right with it at half a
+        // pixel per frame and spreads by the filter's support: after 12 frames x >= 24 is clear of it.
+        double maxError = 0.0;
+        for (uint32_t y = 2; y < 62; ++y)
+            for (uint32_t x = 24; x < 56; ++x)
+                maxError = std::max(maxError, double(std::fabs(h.out(x, y).x - ramp(11, x, y).x)));
+        if (withMotion)
+            EXPECT_LT(maxError, 2e-5);
+        else
+            EXPECT_GT(maxError, 1e-3) << "without motion vectors the history lags";
+    }
+}
+
+TEST(TAAPass, MotionIsDilatedToTheLongestVectorOfTheNeighbourhood) {
+    taa::ClampedImage<glm::vec2> img;
+    glm::vec2 data[9] = {glm::vec2(0.f),        glm::vec2(0.1f, 0.f), glm::vec2(0.f),
+                         glm::vec2(0.f, -0.2f), glm::vec2(0.f),       glm::vec2(0.f),
+                         glm::vec2(0.f),        glm::vec2(0.2f, 0.f), glm::vec2(0.f)};
+    img.data = data;
+    img.width = img.height = 3;
+    img.rowPitch = 3 * sizeof(glm::vec2);
+    glm::vec2 m;
+    ASSERT_TRUE(taa::dilatedMotion(img, 1, 1, m));
+    EXPECT_EQ(m, glm::vec2(0.f, -0.2f)) << "the first of the two longest, in row-major order";
+    data[3] = glm::vec2(std::numeric_limits<float>::quiet_NaN());
+    ASSERT_TRUE(taa::dilatedMotion(img, 1, 1, m));
+    EXPECT_EQ(m, glm::vec2(0.2f, 0.f)) << "non-finite vectors are ignored";
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Clipping and bad input
+
+TEST(TAAPass, ClippingBoundsGhostingAfterASuddenChange) {
+    // A constant change: the box collapses to the new value and the old one is gone in one frame.
+    {
+        Harness h;
+        h.source->color = [](uint64_t, uint32_t, uint32_t) { return glm::vec4(0.1f, 0.1f, 0.1f, 1.f); };
+        h.run(20);
+        const glm::vec4 after(0.8f, 0.7f, 0.6f, 1.f);
+        h.source->color = [&](uint64_t, uint32_t, uint32_t) { return after; };
+        // Plain blending would give 0.9 * 0.1 + 0.1 * 0.8 = 0.17 now and still 0.43 after 5 frames.
+        for (int f = 0; f < 3; ++f) {
+            h.run();
+            for (uint32_t y = 0; y < 64; ++y)
+                for (uint32_t x = 0; x < 64; ++x)
+                    for (int c = 0; c < 4; ++c) ASSERT_NEAR(h.out(x, y)[c], after[c], 1e-6) << x << "," << y;
+        }
+    }
+    // A change to a texture: the output at once lies in the new 3x3 neighbourhood's YCoCg min / max box (the
+    // clipped history and the current colour are both in it, and the blend is convex).
+    {
+        Harness h;
+        h.source->color = [](uint64_t, uint32_t, uint32_t) { return glm::vec4(0.1f, 0.1f, 0.1f, 1.f); };
+        h.run(20);
+        auto after = [](uint64_t f, uint32_t x, uint32_t y) {
+            return glm::vec4(0.6f + 0.3f * hash01(f, x, y), 0.7f, 0.8f - 0.2f * hash01(f + 7, x, y), 1.f);
+        };
+        h.source->color = after;
+        h.run();
+        const uint64_t f = h.frame - 1;
+        for (int y = 0; y < 64; ++y)
+            for (int x = 0; x < 64; ++x) {
+                glm::vec4 lo(1e30f), hi(-1e30f);
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const glm::vec4 v = taa::toYCoCg(
+                            after(f, uint32_t(std::clamp(x + dx, 0, 63)), uint32_t(std::clamp(y + dy, 0, 63))));
+                        lo = glm::min(lo, v);
+                        hi = glm::max(hi, v);
+                    }
+                const glm::vec4 o = taa::toYCoCg(h.out(uint32_t(x), uint32_t(y)));
+                for (int c = 0; c < 4; ++c) {
+                    ASSERT_GE(o[c], lo[c] - 1e-6f) << x << "," << y << " channel " << c;
+                    ASSERT_LE(o[c], hi[c] + 1e-6f) << x << "," << y << " channel " << c;
+                }
+            }
+    }
+}
+
+TEST(TAAPass, NonFiniteInputNeverReachesOutputOrHistory) {
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    for (bool reference : {false, true}) {
+        SCOPED_TRACE(reference ? "reference" : "tiled");
+        Harness h(nlohmann::json{{"reference", reference}});
+        h.source->color = [](uint64_t f, uint32_t x, uint32_t y) { return noisyPattern(f, x, y); };
+        h.source->motion = [](uint64_t, uint32_t, uint32_t) { return glm::vec2(0.3f / 64.f, -0.2f / 64.f); };
+        h.run(5);
+        h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+            if (x == 20 && y == 20) return glm::vec4(nan);
+            if (x == 21 && y == 20) return glm::vec4(inf, 0.f, 0.f, 1.f);
+            if (x == 40 && y == 33) return glm::vec4(0.f, -inf, 0.f, 1.f);
+            if (x >= 48 && y >= 48) return glm::vec4(nan);  // a whole region with no finite neighbour
+            return noisyPattern(f, x, y);
+        };
+        h.source->motion = [&](uint64_t, uint32_t x, uint32_t y) {
+            return x == 5 && y == 5 ? glm::vec2(nan) : glm::vec2(0.3f / 64.f, -0.2f / 64.f);
+        };
+        h.run();
+        EXPECT_EQ(h.stat("nonFinite"), 3 + 16 * 16);
+        EXPECT_TRUE(allFinite(h.field("colorOut")));
+        EXPECT_TRUE(allFinite(h.field("colorHistory")));
+        EXPECT_EQ(h.out(60, 60), glm::vec4(0.f)) << "no finite neighbour: 0";
+        // The replaced pixel is within the range of its neighbours.
+        EXPECT_GT(h.out(20, 20).x, 0.f);
+        EXPECT_LT(h.out(20, 20).x, 1.f);
+        // Clean input again: the next frames are finite and the NaN spot is indistinguishable from its surroundings.
+        h.source->color = [](uint64_t f, uint32_t x, uint32_t y) { return noisyPattern(f, x, y); };
+        h.source->motion = [](uint64_t, uint32_t, uint32_t) { return glm::vec2(0.f); };
+        h.run();
+        EXPECT_EQ(h.stat("nonFinite"), 0);
+        EXPECT_TRUE(allFinite(h.field("colorOut")));
+        EXPECT_TRUE(allFinite(h.field("colorHistory")));
+        EXPECT_NEAR(h.out(20, 20).x, noisyPattern(h.frame - 1, 20, 20).x, 0.3);
+    }
+}
+
+TEST(TAAPass, HugeInputsStayFinite) {
+    const float huge = std::numeric_limits<float>::max();
+    Harness h;
+    h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+        return (x + y + f) % 3 == 0 ? glm::vec4(huge, -huge, huge, 1.f) : glm::vec4(1.f);
+    };
+    h.source->motion = [](uint64_t, uint32_t, uint32_t) { return glm::vec2(0.25f / 64.f, 0.f); };
+    for (int f = 0; f < 4; ++f) {
+        h.run();
+        ASSERT_TRUE(allFinite(h.field("colorOut"))) << f;
+        ASSERT_TRUE(allFinite(h.field("colorHistory"))) << f;
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Implementation checks
+
+TEST(TAAPass, TiledPathEqualsTheReferenceKernel) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    std::unique_ptr<Texture> results[2];
+    for (int run = 0; run < 2; ++run) {
+        Harness h(nlohmann::json{{"reference", run == 1}, {"sigma", 1.25f}}, 100, 70);  // partial tiles
+        h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+            if (f == 3 && x == 50 && y == 9) return glm::vec4(nan);
+            return noisyPattern(f, x, y) * 3.f;
+        };
+        h.source->motion = [](uint64_t f, uint32_t x, uint32_t y) {
+            // Varying, fractional motion: an edge where the dilation matters.
+            return x > 40 && x < 60 ? glm::vec2(-1.37f / 100.f, 0.61f / 70.f)
+                                    : glm::vec2(0.11f / 100.f, float(f % 2) / 70.f);
+        };
+        h.run(8);
+        results[run] = copyOf(h.field("colorOut"));
+    }
+    EXPECT_TRUE(results[0]->samePixels(*results[1]));
+}
+
+TEST(TAAPass, IdenticalResultsForAnyThreadCount) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    std::unique_ptr<Texture> results[2][2];
+    double clipped[2];
+    for (int run = 0; run < 2; ++run) {
+        ThreadLimit limit(run == 0 ? 1 : 2);
+        Harness h(nlohmann::json::object(), 128, 96);
+        h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+            if (hash01(f, x + 1000, y) < 0.002f) return glm::vec4(nan);
+            return noisyPattern(f, int64_t(x) - int64_t(f), y);
+        };
+        h.source->motion = [](uint64_t, uint32_t x, uint32_t) {
+            return glm::vec2(x < 64 ? -1.f / 128.f : -0.4f / 128.f, 0.f);
+        };
+        h.run(10);
+        clipped[run] = h.stat("clipped");
+        results[run][0] = copyOf(h.field("colorOut"));
+        results[run][1] = copyOf(h.field("colorHistory"));
+    }
+    EXPECT_EQ(clipped[0], clipped[1]);
+    EXPECT_TRUE(results[0][0]->samePixels(*results[1][0]));
+    EXPECT_TRUE(results[0][1]->samePixels(*results[1][1]));
+}
+
+TEST(TAAPass, HistoryIsAGraphFieldThatCanBeObserved) {
+    Harness h;
+    h.source->color = [](uint64_t f, uint32_t x, uint32_t y) { return noisyPattern(f, x, y); };
+    h.run(3);
+    // This frame's history side is this frame's output.
+    EXPECT_TRUE(h.field("colorHistory").samePixels(h.field("colorOut")));
+}
+
+TEST(TAAPass, ReflectionDoesNotDependOnParameters) {
+    auto fieldsWith = [](const nlohmann::json& params) {
+        std::unique_ptr<RenderPass> pass = registry().create("TAAPass");
+        pass->params().setAll(params, "test");
+        Reflection r;
+        CompileInfo info;
+        info.frameWidth = info.frameHeight = 32;
+        pass->reflect(r, info);
+        return r.fields();
+    };
+    const auto reference = fieldsWith(nlohmann::json::object());
+    EXPECT_EQ(fieldsWith({{"alpha", 0.5f}, {"sigma", 3.f}, {"antiFlicker", false}, {"reference", true}}), reference);
+}
+
+TEST(TAAKernels, AntiFlickerWeightsByInverseLuminance) {
+    taa::TaaParams p;
+    const glm::vec4 c(10.f), h(0.f);
+    // wc = 0.1 / 11, wh = 0.9 / 1: the bright current sample gets far less than its nominal 10 %.
+    const glm::vec4 out = taa::blend(p, c, 10.f, h, 0.f);
+    const double wc = 0.1 / 11.0, wh = 0.9;
+    EXPECT_NEAR(out.x, 10.0 * wc / (wc + wh), 1e-5);
+    p.antiFlicker = false;
+    EXPECT_NEAR(taa::blend(p, c, 10.f, h, 0.f).x, 1.0, 1e-6);
+    // YCoCg round trip.
+    const glm::vec4 rgb(0.2f, 0.5f, 0.9f, 0.3f);
+    const glm::vec4 back = taa::fromYCoCg(taa::toYCoCg(rgb));
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(back[i], rgb[i], 1e-6);
+    // Catmull-Rom weights sum to one and interpolate.
+    for (float t : {0.f, 0.25f, 0.5f, 0.9f}) {
+        const glm::vec4 w = taa::catmullRomWeights(t);
+        EXPECT_NEAR(w.x + w.y + w.z + w.w, 1.f, 1e-6);
+        EXPECT_NEAR(-w.x + w.z + 2.f * w.w, t, 1e-6) << "reproduces linear functions";
+    }
+}
