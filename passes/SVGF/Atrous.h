@@ -1,0 +1,40 @@
+#pragma once
+// The à-trous stage of SVGF on the CPU: every level of one frame, with the guides (depth, depth derivative,
+// normal) packed once per frame and reused by each level. The result agrees with the scalar reference kernel
+// (AtrousKernels.h) within a stated tolerance; `reference = true` runs the reference kernel itself.
+#include <cstdint>
+#include <vector>
+
+#include "AtrousKernels.h"
+#include "loom/Texture.h"
+
+namespace loom::svgf {
+
+/// Per-level timings of the last run (milliseconds), for the pass's stats.
+struct AtrousTimings {
+    double prepareMs = 0.0;
+    double levelMs[16] = {};
+};
+
+class AtrousFilter {
+public:
+    /// Packs this frame's guides. Memory is reallocated only when the size changes.
+    void setGuide(ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal);
+
+    /// Runs `iterations` levels with steps 1, 2, 4, ... on src (rgb illumination, a variance) into dst.
+    /// When `feedback` is non-null it receives the output of level `feedbackTap` (0-based; clamped to the last
+    /// level; a negative tap copies src, the unfiltered signal). iterations == 0 copies src to dst.
+    /// src, dst and feedback have the guide's size; dst and feedback may not alias src.
+    void run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations, const AtrousParams& params,
+             int feedbackTap = -1, ImageView<glm::vec4> feedback = {}, bool reference = false,
+             AtrousTimings* timings = nullptr);
+
+private:
+    ImageView<const glm::vec2> mLinearZ;
+    ImageView<const glm::vec4> mNormal;
+    uint32_t mWidth = 0, mHeight = 0;
+    // Ping-pong storage between levels.
+    Texture mPing, mPong;
+};
+
+}  // namespace loom::svgf

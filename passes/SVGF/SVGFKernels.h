@@ -1,0 +1,355 @@
+#pragma once
+// Per-pixel stages of SVGFPass (Schied et al. 2017, "Spatiotemporal Variance-Guided Filtering", HPG 2017) other
+// than the à-trous levels (AtrousKernels.h): plain functions over plain structs and views, so the same code
+// compiles for CUDA (loom/Kernel.h).
+//
+// A frame runs these stages, each one pass over the pixels:
+//   1. temporalPixel: sanitize, take emission out and demodulate by albedo, reproject last frame's history through
+//      mvec with per-tap disocclusion tests, accumulate colour and luminance moments (paper section 4.1, 4.2),
+//      and copy this frame's guides into history for the next frame's tests.
+//   2. varianceEstimatePixel: the temporal variance max(0, m2 - m1^2), or for history shorter than
+//      kSpatialVarianceFrames a 7x7 edge-aware spatial estimate (paper section 4.2; Falcor's filter-moments pass).
+//   3. à-trous levels (AtrousFilter), level `feedbackTap` becoming next frame's colour history.
+//   4. modulatePixel: remodulate by albedo, add emission back, pass miss pixels through.
+// Up to two signals are filtered side by side: signal 0 is `color` (or `direct` when the split is connected),
+// signal 1 is `indirect` (split only). Each has its own history and moments; the history length and the
+// disocclusion tests are shared (they depend on geometry only).
+#include <cmath>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <type_traits>
+
+#include "AtrousKernels.h"
+#include "loom/Kernel.h"
+#include "loom/Texture.h"
+
+namespace loom::svgf {
+
+/// Albedo below this (per channel) is clamped for demodulation, and the same clamp is used to remodulate, so a
+/// pixel the filter leaves alone comes back exactly (SVGF paper section 4; Falcor divides by max(albedo, 1e-3)).
+inline constexpr float kMinAlbedo = 1e-3f;
+/// Demodulated illumination is clamped to [0, kMaxIllumination], so the second moment l^2 stays finite.
+inline constexpr float kMaxIllumination = 1e16f;
+/// History shorter than this uses the spatial variance estimate (paper section 4.2).
+inline constexpr float kSpatialVarianceFrames = 4.f;
+/// Disocclusion tests (Falcor's isReprjValid, depth relative to the depth derivative): a previous tap is rejected
+/// when |z - zPrev| / (dz + kDepthEpsilon * z) > kDepthThreshold, dot(n, nPrev) < kNormalThreshold, or its mesh id
+/// differs. The depth epsilon is relative to z so the test does not depend on the scene's units.
+inline constexpr float kDepthThreshold = 10.f;
+inline constexpr float kDepthEpsilon = 1e-3f;
+inline constexpr float kNormalThreshold = 0.9f;
+/// Bilinear footprints whose valid weights sum below this fall back to the 3x3 search (Falcor).
+inline constexpr float kMinBilinearWeight = 0.01f;
+
+/// Pixel (x, y) of a view. ImageView::at is host-only; this is the same address computation for both sides.
+template <class T>
+LOOM_HD inline T& texel(const ImageView<T>& v, uint32_t x, uint32_t y) {
+    using Byte = std::conditional_t<std::is_const_v<T>, const unsigned char, unsigned char>;
+    return reinterpret_cast<T*>(reinterpret_cast<Byte*>(v.data) + v.rowPitch * y)[x];
+}
+
+/// True unless the float is a NaN or an infinity (a bit test: holds under any math flags and on devices).
+LOOM_HD inline bool isFiniteBits(float v) {
+    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
+}
+LOOM_HD inline bool isFinite3(const glm::vec3& v) {
+    return isFiniteBits(v.x) && isFiniteBits(v.y) && isFiniteBits(v.z);
+}
+LOOM_HD inline bool isFinite4(const glm::vec4& v) {
+    return isFinite3(glm::vec3(v)) && isFiniteBits(v.w);
+}
+
+/// Non-finite channels become 0.
+LOOM_HD inline glm::vec3 finiteOrZero(const glm::vec3& v) {
+    return glm::vec3(isFiniteBits(v.x) ? v.x : 0.f, isFiniteBits(v.y) ? v.y : 0.f, isFiniteBits(v.z) ? v.z : 0.f);
+}
+
+/// The albedo demodulation divides by (and remodulation multiplies with).
+LOOM_HD inline glm::vec3 guardedAlbedo(const glm::vec4& albedo) {
+    const glm::vec3 a = finiteOrZero(glm::vec3(albedo));
+    return glm::vec3(fmaxf(a.x, kMinAlbedo), fmaxf(a.y, kMinAlbedo), fmaxf(a.z, kMinAlbedo));
+}
+
+LOOM_HD inline glm::vec3 clampIllumination(const glm::vec3& v) {
+    return glm::vec3(fminf(fmaxf(v.x, 0.f), kMaxIllumination), fminf(fmaxf(v.y, 0.f), kMaxIllumination),
+                     fminf(fmaxf(v.z, 0.f), kMaxIllumination));
+}
+
+/// Parameters of the temporal stage.
+struct TemporalParams {
+    float alpha = 0.05f;        ///< colour blend factor (paper eq. 1)
+    float momentsAlpha = 0.2f;  ///< moments blend factor
+    float maxHistory = 32.f;    ///< history length cap
+    bool temporal = true;       ///< false: no reprojection, every frame starts from history length 1
+    bool split = false;         ///< two signals (direct, indirect) instead of one (color)
+};
+
+/// Everything the temporal stage reads and writes. Optional views have data == nullptr.
+struct TemporalViews {
+    // This frame's inputs.
+    ImageView<const glm::vec4> color, direct, indirect, albedo, emission, normW;
+    ImageView<const glm::vec2> linearZ, mvec;
+    ImageView<const uint32_t> meshId;  // optional: without it the mesh test is skipped
+    // Last frame's history.
+    ImageView<const glm::vec4> prevIllum0, prevIllum1, prevMoments, prevNormW;
+    ImageView<const glm::vec2> prevLinearZ;
+    ImageView<const float> prevLength;
+    ImageView<const uint32_t> prevMeshId;
+    // This frame's history (moments, length, guides) and the integrated signals (rgb, a = temporal variance).
+    ImageView<glm::vec4> integrated0, integrated1, curMoments, curNormW;
+    ImageView<glm::vec2> curLinearZ;
+    ImageView<float> curLength;
+    ImageView<uint32_t> curMeshId;
+};
+
+/// The disocclusion test of one previous-frame tap (Falcor's isReprjValid).
+LOOM_HD inline bool reprojectionTapValid(const TemporalViews& v, int px, int py, float z, float dz, const glm::vec3& n,
+                                         uint32_t mesh) {
+    if (px < 0 || py < 0 || px >= int(v.color.width) || py >= int(v.color.height)) return false;
+    const uint32_t qx = uint32_t(px), qy = uint32_t(py);
+    // History length 0: no history there (first frame, reset, or SVGF was disabled).
+    if (!(texel(v.prevLength, qx, qy) > 0.f)) return false;
+    const float zPrev = texel(v.prevLinearZ, qx, qy).x;
+    if (zPrev < 0.f) return false;
+    if (v.meshId.data && texel(v.prevMeshId, qx, qy) != mesh) return false;
+    if (fabsf(z - zPrev) > kDepthThreshold * (dz + kDepthEpsilon * z)) return false;
+    if (glm::dot(n, glm::vec3(texel(v.prevNormW, qx, qy))) < kNormalThreshold) return false;
+    return true;
+}
+
+/// The reprojected history of one pixel.
+struct Reprojected {
+    glm::vec4 illum0{0.f}, illum1{0.f}, moments{0.f};
+    float length = 0.f;
+    bool valid = false;
+};
+
+LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, uint32_t y, float w) {
+    r.illum0 += w * texel(v.prevIllum0, x, y);
+    if (v.prevIllum1.data) r.illum1 += w * texel(v.prevIllum1, x, y);
+    r.moments += w * texel(v.prevMoments, x, y);
+    r.length += w * texel(v.prevLength, x, y);
+}
+
+/// Last frame's history at pixel (x, y) through the motion vector: bilinear over the valid taps of the 2x2
+/// footprint (weights renormalised), else the mean of the valid taps of the 3x3 around the nearest pixel.
+LOOM_HD inline Reprojected reproject(const TemporalViews& v, uint32_t x, uint32_t y, float z, float dz,
+                                     const glm::vec3& n, uint32_t mesh) {
+    Reprojected r;
+    const glm::vec2 mv = texel(v.mvec, x, y);
+    if (!isFiniteBits(mv.x) || !isFiniteBits(mv.y)) return r;
+    // uvPrev = uv + mvec with uv = (x + 0.5) / width: the previous pixel centre coordinate is (uv + mvec) size - 0.5.
+    const float w = float(v.color.width), h = float(v.color.height);
+    const float px = float(x) + mv.x * w, py = float(y) + mv.y * h;
+    // Far outside (also guards the float to int conversion).
+    if (!(px > -2.f && py > -2.f && px < w + 1.f && py < h + 1.f)) return r;
+    const float fx0 = floorf(px), fy0 = floorf(py);
+    const int x0 = int(fx0), y0 = int(fy0);
+    const float fx = px - fx0, fy = py - fy0;
+    const float bw[4] = {(1.f - fx) * (1.f - fy), fx * (1.f - fy), (1.f - fx) * fy, fx * fy};
+    float sumW = 0.f;
+    bool tapValid[4];
+    for (int k = 0; k < 4; ++k) {
+        tapValid[k] = bw[k] > 0.f && reprojectionTapValid(v, x0 + (k & 1), y0 + (k >> 1), z, dz, n, mesh);
+        if (tapValid[k]) sumW += bw[k];
+    }
+    if (sumW >= kMinBilinearWeight) {
+        for (int k = 0; k < 4; ++k)
+            if (tapValid[k]) addTap(v, r, uint32_t(x0 + (k & 1)), uint32_t(y0 + (k >> 1)), bw[k]);
+    } else {
+        // 3x3 fallback around the nearest previous pixel, equal weights.
+        const int cx = int(floorf(px + 0.5f)), cy = int(floorf(py + 0.5f));
+        sumW = 0.f;
+        for (int j = -1; j <= 1; ++j)
+            for (int i = -1; i <= 1; ++i)
+                if (reprojectionTapValid(v, cx + i, cy + j, z, dz, n, mesh)) {
+                    addTap(v, r, uint32_t(cx + i), uint32_t(cy + j), 1.f);
+                    sumW += 1.f;
+                }
+        if (sumW == 0.f) return r;
+    }
+    const float inv = 1.f / sumW;
+    r.illum0 *= inv;
+    r.illum1 *= inv;
+    r.moments *= inv;
+    r.length *= inv;
+    // History that is not finite (it never should be) counts as disoccluded, so it cannot persist.
+    r.valid = isFinite4(r.illum0) && isFinite4(r.illum1) && isFinite4(r.moments) && isFiniteBits(r.length);
+    if (!r.valid) r = Reprojected{};
+    return r;
+}
+
+/// Stage 1 for pixel (x, y). Returns true when this pixel's colour sample was not finite (and was rejected).
+LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y, const TemporalParams& p) {
+    const glm::vec2 z = texel(v.linearZ, x, y);
+    const glm::vec4 normal = texel(v.normW, x, y);
+    const uint32_t mesh = v.meshId.data ? texel(v.meshId, x, y) : 0u;
+    // Guides for next frame's tests.
+    texel(v.curLinearZ, x, y) = z;
+    texel(v.curNormW, x, y) = normal;
+    texel(v.curMeshId, x, y) = mesh;
+
+    const glm::vec4 c0 = p.split ? texel(v.direct, x, y) : texel(v.color, x, y);
+    const glm::vec4 c1 = p.split ? texel(v.indirect, x, y) : glm::vec4(0.f);
+    const bool sampleFinite = isFinite3(glm::vec3(c0)) && isFinite3(glm::vec3(c1));
+    if (!(z.x >= 0.f)) {
+        // Miss: passed through by the modulation stage; no history.
+        texel(v.integrated0, x, y) = glm::vec4(0.f);
+        if (p.split) texel(v.integrated1, x, y) = glm::vec4(0.f);
+        texel(v.curMoments, x, y) = glm::vec4(0.f);
+        texel(v.curLength, x, y) = 0.f;
+        return !sampleFinite;
+    }
+
+    // Emission seen by the camera is taken out first (it is part of `direct` in the split) and added back after
+    // remodulation; only the reflected light is demodulated and filtered.
+    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(texel(v.emission, x, y))) : glm::vec3(0.f);
+    const glm::vec3 albedo = guardedAlbedo(texel(v.albedo, x, y));
+    const glm::vec3 l0 = clampIllumination((glm::vec3(c0) - emission) / albedo);
+    const glm::vec3 l1 = clampIllumination(glm::vec3(c1) / albedo);
+    const float lum0 = luminance(l0), lum1 = luminance(l1);
+    const glm::vec4 moments(lum0, lum0 * lum0, lum1, lum1 * lum1);
+
+    Reprojected r;
+    if (p.temporal) r = reproject(v, x, y, z.x, z.y, glm::vec3(normal), mesh);
+
+    glm::vec4 i0, i1, m;
+    float length;
+    if (!sampleFinite) {
+        // Rejected sample: keep the reprojected history as it is (or nothing where there is none).
+        i0 = r.illum0;
+        i1 = r.illum1;
+        m = r.moments;
+        length = r.valid ? r.length : 0.f;
+    } else if (r.valid) {
+        length = fminf(r.length + 1.f, p.maxHistory);
+        // Paper eq. 1 with Falcor's max(alpha, 1 / n): a plain mean until the history is 1 / alpha long.
+        const float a = fmaxf(p.alpha, 1.f / length), am = fmaxf(p.momentsAlpha, 1.f / length);
+        i0 = glm::vec4(glm::mix(glm::vec3(r.illum0), l0, a), 0.f);
+        i1 = glm::vec4(glm::mix(glm::vec3(r.illum1), l1, a), 0.f);
+        m = glm::mix(r.moments, moments, am);
+    } else {
+        length = 1.f;
+        i0 = glm::vec4(l0, 0.f);
+        i1 = glm::vec4(l1, 0.f);
+        m = moments;
+    }
+    i0.a = fmaxf(0.f, m.y - m.x * m.x);
+    i1.a = fmaxf(0.f, m.w - m.z * m.z);
+    texel(v.integrated0, x, y) = i0;
+    if (p.split) texel(v.integrated1, x, y) = i1;
+    texel(v.curMoments, x, y) = m;
+    texel(v.curLength, x, y) = length;
+    return !sampleFinite;
+}
+
+/// Edge-stopping weight of the spatial variance estimate (Falcor's computeWeight: exp of the depth and luminance
+/// terms times the normal power, paper eq. 3-5 without the variance in the luminance term).
+LOOM_HD inline float varianceWeight(float zCentre, float zTap, float phiDepth, const glm::vec3& nCentre,
+                                    const glm::vec3& nTap, float phiNormal, float lCentre, float lTap, float phiL) {
+    const float wn = powf(fmaxf(0.f, glm::dot(nCentre, nTap)), phiNormal);
+    const float wz = phiDepth > 0.f ? fabsf(zCentre - zTap) / phiDepth : 0.f;
+    const float wl = fabsf(lCentre - lTap) / phiL;
+    return expf(-wl - wz) * wn;
+}
+
+/// Views of the variance stage: integrated signals and moments in, à-trous input out.
+struct VarianceViews {
+    ImageView<const glm::vec4> integrated0, integrated1, moments, normW;
+    ImageView<const glm::vec2> linearZ;
+    ImageView<const float> length;
+    ImageView<glm::vec4> estimate0, estimate1;
+    ImageView<float> variance;  // optional debug output: the estimate's variance (both signals summed)
+};
+
+/// Stage 2 for pixel (x, y): the temporal variance where history is long enough; else a 7x7 edge-aware filter of
+/// the integrated colour and the moments whose variance is boosted by 4 / n for the first frames (Falcor).
+LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, uint32_t y, const AtrousParams& p,
+                                          bool split) {
+    const glm::vec4 i0 = texel(v.integrated0, x, y);
+    const glm::vec4 i1 = split ? texel(v.integrated1, x, y) : glm::vec4(0.f);
+    const float length = texel(v.length, x, y);
+    const glm::vec2 z = texel(v.linearZ, x, y);
+    if (!(z.x >= 0.f) || length >= kSpatialVarianceFrames) {
+        texel(v.estimate0, x, y) = i0;
+        if (split) texel(v.estimate1, x, y) = i1;
+        if (v.variance.data) texel(v.variance, x, y) = i0.a + i1.a;
+        return;
+    }
+    const glm::vec3 n = glm::vec3(texel(v.normW, x, y));
+    const float l0 = luminance(glm::vec3(i0)), l1 = luminance(glm::vec3(i1));
+    const float phiDepth = fmaxf(z.y, 1e-8f) * 3.f;
+    glm::vec3 sum0(0.f), sum1(0.f);
+    glm::vec4 sumMoments(0.f);
+    float sumW0 = 0.f, sumW1 = 0.f;
+    const int w = int(v.integrated0.width), h = int(v.integrated0.height);
+    for (int j = -3; j <= 3; ++j) {
+        const int qy = int(y) + j;
+        if (qy < 0 || qy >= h) continue;
+        for (int i = -3; i <= 3; ++i) {
+            const int qx = int(x) + i;
+            if (qx < 0 || qx >= w) continue;
+            const glm::vec2 zq = texel(v.linearZ, uint32_t(qx), uint32_t(qy));
+            if (zq.x < 0.f) continue;
+            const glm::vec3 nq = glm::vec3(texel(v.normW, uint32_t(qx), uint32_t(qy)));
+            const glm::vec4 q0 = texel(v.integrated0, uint32_t(qx), uint32_t(qy));
+            const glm::vec4 mq = texel(v.moments, uint32_t(qx), uint32_t(qy));
+            const float distance = sqrtf(float(i * i + j * j));
+            const float w0 = varianceWeight(z.x, zq.x, phiDepth * distance, n, nq, p.phiNormal, l0,
+                                            luminance(glm::vec3(q0)), p.phiColor);
+            sum0 += w0 * glm::vec3(q0);
+            sumMoments.x += w0 * mq.x;
+            sumMoments.y += w0 * mq.y;
+            sumW0 += w0;
+            if (split) {
+                const glm::vec4 q1 = texel(v.integrated1, uint32_t(qx), uint32_t(qy));
+                const float w1 = varianceWeight(z.x, zq.x, phiDepth * distance, n, nq, p.phiNormal, l1,
+                                                luminance(glm::vec3(q1)), p.phiColor);
+                sum1 += w1 * glm::vec3(q1);
+                sumMoments.z += w1 * mq.z;
+                sumMoments.w += w1 * mq.w;
+                sumW1 += w1;
+            }
+        }
+    }
+    // The centre tap has weight 1 unless its normal is degenerate; then keep the temporal values.
+    const float boost = kSpatialVarianceFrames / fmaxf(length, 1.f);
+    glm::vec4 e0 = i0, e1 = i1;
+    if (sumW0 > 0.f) {
+        sum0 /= sumW0;
+        const float m1 = sumMoments.x / sumW0, m2 = sumMoments.y / sumW0;
+        e0 = glm::vec4(sum0, fmaxf(0.f, m2 - m1 * m1) * boost);
+    }
+    if (split && sumW1 > 0.f) {
+        sum1 /= sumW1;
+        const float m1 = sumMoments.z / sumW1, m2 = sumMoments.w / sumW1;
+        e1 = glm::vec4(sum1, fmaxf(0.f, m2 - m1 * m1) * boost);
+    }
+    texel(v.estimate0, x, y) = e0;
+    if (split) texel(v.estimate1, x, y) = e1;
+    if (v.variance.data) texel(v.variance, x, y) = e0.a + (split ? e1.a : 0.f);
+}
+
+/// Views of the modulation stage.
+struct ModulateViews {
+    ImageView<const glm::vec4> filtered0, filtered1, color, albedo, emission;
+    ImageView<const glm::vec2> linearZ;
+    ImageView<glm::vec4> dst;
+};
+
+/// Stage 4 for pixel (x, y): albedo * (sum of the filtered signals) + emission; miss pixels copy the input colour
+/// (non-finite channels as 0). The alpha channel is the input colour's.
+LOOM_HD inline void modulatePixel(const ModulateViews& v, uint32_t x, uint32_t y, bool split) {
+    const glm::vec4 c = texel(v.color, x, y);
+    const float alpha = isFiniteBits(c.a) ? c.a : 1.f;
+    if (!(texel(v.linearZ, x, y).x >= 0.f)) {
+        texel(v.dst, x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), alpha);
+        return;
+    }
+    glm::vec3 illum = glm::vec3(texel(v.filtered0, x, y));
+    if (split) illum += glm::vec3(texel(v.filtered1, x, y));
+    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(texel(v.emission, x, y))) : glm::vec3(0.f);
+    texel(v.dst, x, y) = glm::vec4(illum * guardedAlbedo(texel(v.albedo, x, y)) + emission, alpha);
+}
+
+}  // namespace loom::svgf

@@ -1,0 +1,280 @@
+#include "SVGFPass.h"
+
+#include <atomic>
+#include <chrono>
+#include <string>
+
+#include "loom/Parallel.h"
+#include "loom/Plugin.h"
+
+namespace loom {
+
+using namespace svgf;
+
+namespace {
+
+// Inputs (standard channel names, so they wire by name from the G-buffer and the path tracer).
+const char kColor[] = "color";
+const char kDirect[] = "direct";
+const char kIndirect[] = "indirect";
+const char kAlbedo[] = "albedo";
+const char kEmission[] = "emission";
+const char kLinearZ[] = "linearZ";
+const char kNormW[] = "normW";
+const char kMvec[] = "mvec";
+const char kMeshId[] = "meshId";
+// Outputs.
+const char kFiltered[] = "filtered";
+const char kVariance[] = "variance";
+const char kHistoryLength[] = "historyLength";
+// History.
+const char kIllumHistory[] = "illumination";
+const char kIndirectHistory[] = "illuminationIndirect";
+const char kMomentsHistory[] = "moments";
+const char kLengthHistory[] = "length";
+const char kPrevLinearZ[] = "prevLinearZ";
+const char kPrevNormW[] = "prevNormW";
+const char kPrevMeshId[] = "prevMeshId";
+// Scratch.
+const char kIntegrated[] = "integrated";
+const char kIntegratedIndirect[] = "integratedIndirect";
+const char kEstimate[] = "estimate";
+const char kEstimateIndirect[] = "estimateIndirect";
+
+// Frame stats.
+const char kStatNonFinite[] = "nonFinite";
+const char kStatSplit[] = "split";
+const char kStatReproject[] = "ms.reproject";
+const char kStatVariance[] = "ms.variance";
+const char kStatAtrousPrepare[] = "ms.atrous.prepare";
+const char kStatAtrous[] = "ms.atrous";
+const char kStatModulate[] = "ms.modulate";
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+template <class T>
+ImageView<const T> inputView(const PassContext& ctx, const char* name) {
+    const Texture* t = ctx.input(name);
+    return t ? t->view<T>() : ImageView<const T>{};
+}
+
+template <class T>
+ImageView<T> outputView(const PassContext& ctx, const char* name) {
+    Texture* t = ctx.output(name);
+    return t ? t->view<T>() : ImageView<T>{};
+}
+
+template <class T>
+ImageView<const T> asConst(ImageView<T> v) {
+    return {v.data, v.width, v.height, v.rowPitch};
+}
+
+}  // namespace
+
+void SVGFPass::reflect(Reflection& r, const CompileInfo&) const {
+    r.input(kColor, Format::RGBA32F).doc("path-traced radiance to filter (also what miss pixels pass through)");
+    r.input(kDirect, Format::RGBA32F)
+        .optional()
+        .doc("direct part of color, emission seen by the camera included; with indirect: filtered separately");
+    r.input(kIndirect, Format::RGBA32F).optional().doc("indirect part of color (direct + indirect = color)");
+    r.input(kAlbedo, Format::RGBA32F).doc("diffuse reflectance at the primary hit, for demodulation");
+    r.input(kEmission, Format::RGBA32F).optional().doc("emitted radiance at the primary hit (not filtered)");
+    r.input(kLinearZ, Format::RG32F).doc("view depth (-1 on a miss) and its screen-space derivative");
+    r.input(kNormW, Format::RGBA32F).doc("shading normal, world space");
+    r.input(kMvec, Format::RG32F).doc("uvPrev - uvCur, for reprojection");
+    r.input(kMeshId, Format::R32U).optional().doc("mesh/instance id for the disocclusion test (skipped if absent)");
+
+    r.output(kFiltered, Format::RGBA32F).doc("filtered radiance");
+    r.output(kVariance, Format::R32F)
+        .optional()
+        .doc("debug: luminance variance of the demodulated signal fed to the first a-trous level (split: summed)");
+    r.output(kHistoryLength, Format::R32F).optional().doc("debug: history length in frames (0: none)");
+
+    r.history(kIllumHistory, Format::RGBA32F)
+        .doc("colour (split: direct) history, demodulated rgb and variance: the output of level feedbackTap");
+    r.history(kIndirectHistory, Format::RGBA32F).doc("indirect history (split only), as illumination");
+    r.history(kMomentsHistory, Format::RGBA32F)
+        .doc("luminance moments m1, m2 of colour (split: direct) in xy, of indirect in zw");
+    r.history(kLengthHistory, Format::R32F).doc("history length in frames, capped at maxHistory; 0: no history");
+    r.history(kPrevLinearZ, Format::RG32F).doc("linearZ of the frame, for next frame's disocclusion test");
+    r.history(kPrevNormW, Format::RGBA32F).doc("normW of the frame, for next frame's disocclusion test");
+    r.history(kPrevMeshId, Format::R32U).doc("meshId of the frame, for next frame's disocclusion test");
+
+    r.internal(kIntegrated, Format::RGBA32F)
+        .doc("colour (split: direct) after temporal accumulation, a = temporal variance; then the filtered result");
+    r.internal(kIntegratedIndirect, Format::RGBA32F).doc("indirect, as integrated (split only)");
+    r.internal(kEstimate, Format::RGBA32F)
+        .doc("input of the a-trous levels: integrated colour with its variance estimate (spatial while short)");
+    r.internal(kEstimateIndirect, Format::RGBA32F).doc("indirect, as estimate (split only)");
+}
+
+void SVGFPass::declareParams(ParamList& p) {
+    p.add("enabled", &mEnabled, true).doc("false: filtered is a copy of color and the history restarts");
+    p.add("temporal", &mTemporal, true)
+        .doc(
+            "false: no reprojection, variance estimated spatially every frame: a pure edge-avoiding a-trous filter "
+            "(Dammertz et al. 2010) as a baseline");
+    p.add("iterations", &mIterations, 4).range(0, 16).doc("a-trous levels (tap spacing 1, 2, 4, ...)");
+    p.add("feedbackTap", &mFeedbackTap, 1)
+        .range(-1, 15)
+        .doc("the output of this level (0-based) is next frame's colour history; -1: the unfiltered signal");
+    p.add("alpha", &mAlpha, 0.05f).range(0.0, 1.0).doc("temporal blend factor of colour (at least 1 / history)");
+    p.add("momentsAlpha", &mMomentsAlpha, 0.2f)
+        .range(0.0, 1.0)
+        .doc("temporal blend factor of the luminance moments (at least 1 / history)");
+    p.add("phiColor", &mPhiColor, 10.f).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
+    p.add("phiNormal", &mPhiNormal, 128.f).min(0.0).doc("normal edge-stopping exponent (eq. 4)");
+    p.add("phiDepth", &mPhiDepth, 1.f).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
+    p.add("maxHistory", &mMaxHistory, 32).range(1, 1024).doc("cap of the history length in frames");
+    p.add("referenceAtrous", &mReferenceAtrous, false)
+        .doc("run the scalar reference a-trous kernel instead of the fast path (validation)");
+}
+
+void SVGFPass::passThrough(PassContext& ctx) const {
+    const auto color = ctx.input(kColor)->view<glm::vec4>();
+    const auto dst = ctx.output(kFiltered)->view<glm::vec4>();
+    parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) {
+        const glm::vec4 c = color.at(x, y);
+        dst.at(x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), isFiniteBits(c.a) ? c.a : 1.f);
+    });
+    if (Texture* t = ctx.output(kVariance)) t->clear();
+    if (Texture* t = ctx.output(kHistoryLength)) t->clear();
+    // Length 0 everywhere: no history when enabled again.
+    ctx.historyCur(kLengthHistory).clear();
+}
+
+void SVGFPass::execute(PassContext& ctx) {
+    Stats& stats = ctx.stats();
+    if (!mEnabled) {
+        passThrough(ctx);
+        stats.set(kStatNonFinite, 0);
+        return;
+    }
+    const bool split = ctx.input(kDirect) && ctx.input(kIndirect);
+    const uint32_t w = ctx.output(kFiltered)->width(), h = ctx.output(kFiltered)->height();
+
+    // Stage 1: demodulation, reprojection, moments (one pass).
+    auto t0 = Clock::now();
+    TemporalViews tv;
+    tv.color = inputView<glm::vec4>(ctx, kColor);
+    if (split) {
+        tv.direct = inputView<glm::vec4>(ctx, kDirect);
+        tv.indirect = inputView<glm::vec4>(ctx, kIndirect);
+    }
+    tv.albedo = inputView<glm::vec4>(ctx, kAlbedo);
+    tv.emission = inputView<glm::vec4>(ctx, kEmission);
+    tv.normW = inputView<glm::vec4>(ctx, kNormW);
+    tv.linearZ = inputView<glm::vec2>(ctx, kLinearZ);
+    tv.mvec = inputView<glm::vec2>(ctx, kMvec);
+    tv.meshId = inputView<uint32_t>(ctx, kMeshId);
+    tv.prevIllum0 = ctx.historyPrev(kIllumHistory).view<glm::vec4>();
+    if (split) tv.prevIllum1 = ctx.historyPrev(kIndirectHistory).view<glm::vec4>();
+    tv.prevMoments = ctx.historyPrev(kMomentsHistory).view<glm::vec4>();
+    tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
+    tv.prevLinearZ = ctx.historyPrev(kPrevLinearZ).view<glm::vec2>();
+    tv.prevNormW = ctx.historyPrev(kPrevNormW).view<glm::vec4>();
+    tv.prevMeshId = ctx.historyPrev(kPrevMeshId).view<uint32_t>();
+    tv.integrated0 = ctx.internal(kIntegrated)->view<glm::vec4>();
+    tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
+    tv.curMoments = ctx.historyCur(kMomentsHistory).view<glm::vec4>();
+    tv.curLength = ctx.historyCur(kLengthHistory).view<float>();
+    tv.curLinearZ = ctx.historyCur(kPrevLinearZ).view<glm::vec2>();
+    tv.curNormW = ctx.historyCur(kPrevNormW).view<glm::vec4>();
+    tv.curMeshId = ctx.historyCur(kPrevMeshId).view<uint32_t>();
+
+    TemporalParams tp;
+    tp.alpha = mAlpha;
+    tp.momentsAlpha = mMomentsAlpha;
+    tp.maxHistory = float(mMaxHistory);
+    // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
+    tp.temporal = mTemporal && ctx.historyValid();
+    tp.split = split;
+    std::atomic<uint64_t> nonFinite{0};
+    parallelFor2D(w, h, [&](const Tile& t) {
+        uint64_t count = 0;
+        for (uint32_t y = t.y0; y < t.y1; ++y)
+            for (uint32_t x = t.x0; x < t.x1; ++x) count += temporalPixel(tv, x, y, tp) ? 1 : 0;
+        nonFinite += count;
+    });
+    stats.set(kStatReproject, msSince(t0));
+
+    // Stage 2: variance estimate (spatial where history is short).
+    t0 = Clock::now();
+    AtrousParams ap;
+    ap.phiColor = mPhiColor;
+    ap.phiNormal = mPhiNormal;
+    ap.phiDepth = mPhiDepth;
+    VarianceViews vv;
+    vv.integrated0 = asConst(tv.integrated0);
+    vv.integrated1 = asConst(tv.integrated1);
+    vv.moments = asConst(tv.curMoments);
+    vv.normW = tv.normW;
+    vv.linearZ = tv.linearZ;
+    vv.length = asConst(tv.curLength);
+    vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
+    vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
+    vv.variance = outputView<float>(ctx, kVariance);
+    parallelForPixels(w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, ap, split); });
+    stats.set(kStatVariance, msSince(t0));
+
+    // Stage 3: à-trous levels; the integrated fields are free now and take the filtered signals.
+    t0 = Clock::now();
+    mAtrous.setGuide(tv.linearZ, tv.normW);
+    stats.set(kStatAtrousPrepare, msSince(t0));
+    const int levels = mIterations;
+    double levelMs[16] = {};
+    double prepareMs = 0.0;
+    auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback) {
+        AtrousTimings timings;
+        mAtrous.run(asConst(src), dst, levels, ap, mFeedbackTap, feedback, mReferenceAtrous, &timings);
+        prepareMs += timings.prepareMs;
+        for (int level = 0; level < levels && level < 16; ++level) levelMs[level] += timings.levelMs[level];
+    };
+    filter(vv.estimate0, tv.integrated0, ctx.historyCur(kIllumHistory).view<glm::vec4>());
+    if (split) filter(vv.estimate1, tv.integrated1, ctx.historyCur(kIndirectHistory).view<glm::vec4>());
+    stats.set(kStatAtrousPrepare, stats.values().at(kStatAtrousPrepare) + prepareMs);
+    double atrousMs = 0.0;
+    for (int level = 0; level < levels && level < 16; ++level) {
+        stats.set(std::string(kStatAtrous) + std::to_string(level), levelMs[level]);
+        atrousMs += levelMs[level];
+    }
+    stats.set(kStatAtrous, atrousMs);
+
+    // Stage 4: remodulation (and the debug history length).
+    t0 = Clock::now();
+    ModulateViews mv;
+    mv.filtered0 = asConst(tv.integrated0);
+    mv.filtered1 = asConst(tv.integrated1);
+    mv.color = tv.color;
+    mv.albedo = tv.albedo;
+    mv.emission = tv.emission;
+    mv.linearZ = tv.linearZ;
+    mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
+    const auto lengthOut = outputView<float>(ctx, kHistoryLength);
+    parallelFor2D(w, h, [&](const Tile& t) {
+        for (uint32_t y = t.y0; y < t.y1; ++y)
+            for (uint32_t x = t.x0; x < t.x1; ++x) {
+                modulatePixel(mv, x, y, split);
+                if (lengthOut.data) lengthOut.at(x, y) = tv.curLength.at(x, y);
+            }
+    });
+    stats.set(kStatModulate, msSince(t0));
+    stats.set(kStatNonFinite, double(nonFinite.load()));
+    stats.set(kStatSplit, split ? 1 : 0);
+}
+
+}  // namespace loom
+
+LOOM_DEFINE_PLUGIN(registrar) {
+    registrar.registerPass<loom::SVGFPass>(
+        "SVGFPass",
+        "Spatiotemporal variance-guided filtering (Schied et al. 2017) with Falcor's defaults: demodulation, "
+        "reprojection with disocclusion tests, moments, spatial variance while history is short, a-trous levels "
+        "with feedback, remodulation; direct and indirect filtered separately when both are connected. History in "
+        "graph fields. Stats: nonFinite (colour samples rejected), split, ms.reproject, ms.variance, "
+        "ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate.");
+}

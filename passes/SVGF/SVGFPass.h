@@ -1,0 +1,48 @@
+#pragma once
+// SVGFPass: spatiotemporal variance-guided filtering (Schied et al. 2017, HPG) of a path-traced signal, with
+// Falcor's defaults. Per frame: demodulation by albedo (emission taken out first), reprojection with
+// disocclusion tests, temporal accumulation of colour and luminance moments, a spatial variance estimate while
+// history is short, à-trous wavelet levels guided by the variance (AtrousFilter; level `feedbackTap` is next
+// frame's colour history), and remodulation. With `direct` and `indirect` connected, the two are filtered
+// separately and recombined.
+//
+// All state lives in graph history fields, so it can be dumped and survives recompiles:
+//   illumination          RGBA32F  colour (or direct) history: demodulated rgb, a = variance (feedback tap)
+//   illuminationIndirect  RGBA32F  indirect history (split only), same layout
+//   moments               RGBA32F  luminance moments: (m1, m2) of colour/direct, (m1, m2) of indirect
+//   length                R32F     history length in frames (capped at maxHistory); 0: no history there
+//   prevLinearZ, prevNormW, prevMeshId   this frame's guides, for next frame's disocclusion tests
+// The pass object holds only parameters and the à-trous scratch.
+#include "Atrous.h"
+#include "SVGFKernels.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+class SVGFPass final : public RenderPass {
+public:
+    void reflect(Reflection& r, const CompileInfo& info) const override;
+    void declareParams(ParamList& p) override;
+    void execute(PassContext& ctx) override;
+
+private:
+    void passThrough(PassContext& ctx) const;
+
+    // Parameters.
+    bool mEnabled = true;
+    bool mTemporal = true;
+    int mIterations = 4;
+    int mFeedbackTap = 1;
+    float mAlpha = 0.05f;
+    float mMomentsAlpha = 0.2f;
+    float mPhiColor = 10.f;
+    float mPhiNormal = 128.f;
+    float mPhiDepth = 1.f;
+    int mMaxHistory = 32;
+    bool mReferenceAtrous = false;
+
+    // Scratch of the à-trous levels (no state across frames).
+    svgf::AtrousFilter mAtrous;
+};
+
+}  // namespace loom
