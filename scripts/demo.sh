@@ -4,13 +4,16 @@
 #   pattern/    the graph machinery on test passes (PNG), with a dump of every Blur field
 #   gbuffer/    every G-buffer channel of the animated Cornell box, 8 frames (EXR)
 #   pathtraced/ the Cornell box path traced and accumulated, 8 frames x 16 spp (EXR, linear HDR)
+#   denoised/   the default graph (PathTracerSVGF: G-buffer, 1 spp path tracing, SVGF, TAA, tone mapping) on the
+#               animated Cornell box, 30 frames (PNG), and side_by_side.png of the last frame:
+#               1 spp input | SVGF + TAA | reference (256 spp), all through the same tone map
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/build.sh release
 loom=build/release/bin/loom
 out=out/demo
 rm -rf "$out"
-mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced"
+mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced" "$out/denoised"
 
 "$loom" check graphs/TestPattern.json --size 512x512 --dot "$out/pattern/graph.dot" > "$out/pattern/plan.txt"
 "$loom" render --graph graphs/TestPattern.json --size 512x512 --frames 8 --out "$out/pattern" \
@@ -22,8 +25,27 @@ mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced"
 "$loom" render --graph graphs/Reference.json --scene data/scenes/cornell_box.gltf --size 320x320 \
   --frames 8 --set PathTracer.samplesPerPixel=16 --out "$out/pathtraced"
 
+# The default graph on the dynamic scene. Its last frame is rendered again as the noisy input and as a reference,
+# with the same frame index (same random numbers, same animation time) and the same tone map.
+scene=data/scenes/cornell_dynamic.gltf
+size=320x240
+frames=30
+last=$((frames - 1))
+common=(--scene "$scene" --size "$size" --fps 30 --jitter halton --quiet)
+"$loom" check graphs/PathTracerSVGF.json --size "$size" --dot "$out/denoised/graph.dot" > "$out/denoised/plan.txt"
+"$loom" render --graph graphs/PathTracerSVGF.json "${common[@]}" --frames "$frames" --out "$out/denoised" \
+  --stats "$out/denoised/stats.json"
+"$loom" render --graph graphs/PathTracerRaw.json "${common[@]}" --start-frame "$last" --frames 1 \
+  --out "$out/denoised/noisy"
+"$loom" render --graph graphs/PathTracerAccumulate.json "${common[@]}" --start-frame "$last" --frames 1 \
+  --set PathTracer.samplesPerPixel=256 --out "$out/denoised/reference"
+frame=$(printf '%04d' "$last")
+"$loom" image montage "$out/denoised/noisy/ToneMap.dst.$frame.png" "$out/denoised/ToneMap.dst.$frame.png" \
+  "$out/denoised/reference/ToneMap.dst.$frame.png" -o "$out/denoised/side_by_side.png"
+
 echo
 echo "Images written to $out/:"
-for d in pattern gbuffer pathtraced; do
+for d in pattern gbuffer pathtraced denoised; do
   echo "  $d/: $(ls "$out/$d" | wc -l) files, e.g. $(ls "$out/$d" | grep -E '\.(png|exr)$' | tail -1)"
 done
+echo "  side by side (1 spp | SVGF + TAA | 256 spp reference): $out/denoised/side_by_side.png"
