@@ -1,5 +1,6 @@
 #include "Atrous.h"
 
+#include <algorithm>
 #include <chrono>
 
 #include "loom/Parallel.h"
@@ -7,6 +8,10 @@
 namespace loom::svgf {
 
 namespace {
+
+// Steps the planes are first laid out for (5 levels); more levels widen the margins once.
+constexpr int kDefaultMaxStep = 16;
+constexpr int kGuidePlanes = 5, kSignalPlanes = 5;
 
 double msSince(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -19,26 +24,54 @@ void copyImage(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst) {
     });
 }
 
-ImageView<const glm::vec4> asConst(ImageView<glm::vec4> v) { return {v.data, v.width, v.height, v.rowPitch}; }
+ImageView<const glm::vec4> asConst(ImageView<glm::vec4> v) {
+    return {v.data, v.width, v.height, v.rowPitch};
+}
 
 }  // namespace
+
+bool AtrousFilter::ensureLayout(int maxStep) {
+    const simd::PlaneLayout want = simd::makeLayout(mWidth, mHeight, maxStep);
+    if (!mPlaneStorage.empty() && mLayout.width == mWidth && mLayout.height == mHeight && mLayout.margin >= want.margin)
+        return false;
+    mLayout = want;
+    const size_t plane = mLayout.planeSize();
+    const size_t alignFloats = kRowAlignment / sizeof(float);
+    mPlaneStorage.assign(plane * (kGuidePlanes + 2 * kSignalPlanes) + alignFloats, 0.f);
+    float* base = mPlaneStorage.data();
+    base += (alignFloats - (reinterpret_cast<uintptr_t>(base) / sizeof(float)) % alignFloats) % alignFloats;
+    float* planes[kGuidePlanes + 2 * kSignalPlanes];
+    for (int i = 0; i < kGuidePlanes + 2 * kSignalPlanes; ++i) planes[i] = base + plane * size_t(i);
+    mGuide = {planes[0], planes[1], planes[2], planes[3], planes[4]};
+    for (int s = 0; s < 2; ++s) {
+        float** p = planes + kGuidePlanes + s * kSignalPlanes;
+        mSignal[s] = {p[0], p[1], p[2], p[3], p[4]};
+    }
+    // Margins read as misses; the interior is overwritten by every packGuide.
+    std::fill(mGuide.z, mGuide.z + plane, -1.f);
+    return true;
+}
+
+void AtrousFilter::packGuide() {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (mWidth > 0 && mHeight > 0) simd::packGuide(mLayout, mLinearZ, mNormal, mGuide);
+    mGuideMs = msSince(t0);
+}
 
 void AtrousFilter::setGuide(ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal) {
     mLinearZ = linearZ;
     mNormal = normal;
-    if (mWidth != linearZ.width || mHeight != linearZ.height) {
-        mWidth = linearZ.width;
-        mHeight = linearZ.height;
-        mPing = Texture(mWidth, mHeight, Format::RGBA32F);
-        mPong = Texture(mWidth, mHeight, Format::RGBA32F);
-    }
+    mWidth = linearZ.width;
+    mHeight = linearZ.height;
+    ensureLayout(std::max(kDefaultMaxStep, mLayout.margin > 0 ? int(mLayout.margin / 2) : 0));
+    packGuide();
 }
 
 void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations,
                        const AtrousParams& params, int feedbackTap, ImageView<glm::vec4> feedback, bool reference,
                        AtrousTimings* timings) {
-    (void)reference;  // only the reference kernel exists so far
     const bool wantsFeedback = feedback.data != nullptr;
+    if (timings) *timings = AtrousTimings{};
     if (iterations <= 0) {
         copyImage(src, dst);
         if (wantsFeedback) copyImage(src, feedback);
@@ -47,20 +80,49 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
     if (wantsFeedback && feedbackTap < 0) copyImage(src, feedback);
     const int tap = feedbackTap >= iterations ? iterations - 1 : feedbackTap;
 
-    ImageView<const glm::vec4> in = src;
+    if (reference) {
+        if (mPing.width() != mWidth || mPing.height() != mHeight) {
+            mPing = Texture(mWidth, mHeight, Format::RGBA32F);
+            mPong = Texture(mWidth, mHeight, Format::RGBA32F);
+        }
+        ImageView<const glm::vec4> in = src;
+        for (int level = 0; level < iterations; ++level) {
+            const auto t0 = std::chrono::steady_clock::now();
+            const bool last = level == iterations - 1;
+            ImageView<glm::vec4> out = last ? dst : (level % 2 == 0 ? mPing : mPong).view<glm::vec4>();
+            const int step = 1 << level;
+            parallelFor2D(mWidth, mHeight, [&](const Tile& t) {
+                for (uint32_t y = t.y0; y < t.y1; ++y)
+                    for (uint32_t x = t.x0; x < t.x1; ++x)
+                        out.at(x, y) = atrousPixel(in, mLinearZ, mNormal, int(x), int(y), step, params);
+            });
+            if (wantsFeedback && level == tap) copyImage(asConst(out), feedback);
+            in = asConst(out);
+            if (timings && level < 16) timings->levelMs[level] = msSince(t0);
+        }
+        return;
+    }
+
+    const auto t0 = std::chrono::steady_clock::now();
+    // Steps beyond 2^30 reach no further than 2^30 in any frame a float image can hold.
+    const int maxStep = 1 << std::min(iterations - 1, 30);
+    double guideMs = mGuideMs;
+    if (ensureLayout(maxStep)) {
+        packGuide();
+        guideMs += mGuideMs;
+    }
+    simd::packSignal(mLayout, src, mSignal[0]);
+    if (timings) timings->prepareMs = guideMs + msSince(t0);
+
     for (int level = 0; level < iterations; ++level) {
-        const auto t0 = std::chrono::steady_clock::now();
+        const auto t1 = std::chrono::steady_clock::now();
         const bool last = level == iterations - 1;
-        ImageView<glm::vec4> out = last ? dst : (level % 2 == 0 ? mPing : mPong).view<glm::vec4>();
-        const int step = 1 << level;
-        parallelFor2D(mWidth, mHeight, [&](const Tile& t) {
-            for (uint32_t y = t.y0; y < t.y1; ++y)
-                for (uint32_t x = t.x0; x < t.x1; ++x)
-                    out.at(x, y) = atrousPixel(in, mLinearZ, mNormal, int(x), int(y), step, params);
-        });
-        if (wantsFeedback && level == tap) copyImage(asConst(out), feedback);
-        in = asConst(out);
-        if (timings && level < 16) timings->levelMs[level] = msSince(t0);
+        simd::LevelOutputs out;
+        if (!last) out.planes = mSignal[(level + 1) % 2];
+        if (last) out.image[0] = dst;
+        if (wantsFeedback && level == tap) out.image[1] = feedback;
+        simd::filterLevel(mLayout, mGuide, mSignal[level % 2], out, 1 << std::min(level, 30), params);
+        if (timings && level < 16) timings->levelMs[level] = msSince(t1);
     }
 }
 

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "AtrousKernels.h"
+#include "AtrousSimd.h"
 #include "loom/Texture.h"
 
 namespace loom::svgf {
@@ -30,11 +31,21 @@ public:
              AtrousTimings* timings = nullptr);
 
 private:
+    /// (Re)allocates the planes for steps up to maxStep; true when the layout changed (guides need packing).
+    bool ensureLayout(int maxStep);
+    void packGuide();
+
     ImageView<const glm::vec2> mLinearZ;
     ImageView<const glm::vec4> mNormal;
     uint32_t mWidth = 0, mHeight = 0;
-    // Ping-pong storage between levels.
+    // Ping-pong storage between levels of the reference path (allocated when it is first used).
     Texture mPing, mPong;
+    // The fast path's planes: the guide and two signals, in one allocation.
+    simd::PlaneLayout mLayout;
+    std::vector<float> mPlaneStorage;
+    simd::GuidePlanes mGuide;
+    simd::SignalPlanes mSignal[2];
+    double mGuideMs = 0.0;
 };
 
 }  // namespace loom::svgf

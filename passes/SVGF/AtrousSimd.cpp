@@ -1,0 +1,345 @@
+// Compiled once per Highway target (foreach_target) and dispatched at run time to the best one the CPU has:
+// AVX2 on the x86-64-v3 baseline, AVX-512 where present.
+#include "AtrousSimd.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "loom/Parallel.h"
+
+#ifndef LOOM_ATROUS_SIMD_SHARED
+#define LOOM_ATROUS_SIMD_SHARED
+namespace loom::svgf::simd::detail {
+
+// Tiles of 64 x 64 pixels: with the taps' rows and columns around them, a level's ten planes stay in L2 for steps
+// up to 8.
+constexpr uint32_t kTileSize = 64;
+constexpr float kLog2e = 1.44269504088896341f;
+// Weights below 2^-kMaxExponent are treated as 2^-kMaxExponent; the product p(f) * 2^-t stays a normal float.
+constexpr float kMaxExponent = 100.f;
+// Degree-4 minimax fit of 2^f on [-0.5, 0.5] (relative error 2.6e-6), lowest degree first.
+constexpr float kExp2Poly[5] = {0.9999992614457146f, 0.6931218147367706f, 0.2402474482794381f, 0.05591786031930501f,
+                                0.009570101908089415f};
+constexpr float kB3[3] = {6.f / 16.f, 4.f / 16.f, 1.f / 16.f};
+// Screen distances of the taps |(i, j)| for |i|, |j| in 0..2, as indices into the five distinct non-zero ones.
+constexpr float kTapDistance[5] = {1.f, 1.41421356237f, 2.f, 2.2360679775f, 2.82842712475f};
+constexpr int kDistanceIndex[3][3] = {{-1, 0, 2}, {0, 1, 3}, {2, 3, 4}};
+constexpr float kMagnitudeLimit = 1e30f;
+
+inline float sanitiseScalar(float v) {
+    return std::isfinite(v) ? std::clamp(v, -kMagnitudeLimit, kMagnitudeLimit) : 0.f;
+}
+
+/// Constants of one level shared by all its pixels.
+struct LevelConstants {
+    int step;
+    float phiColor, phiDepthStep;
+    float phiNormal;
+    float series[4];      // phi * log2(e) / k, k = 1..4: the normal weight's exponent in powers of two
+    float poly[3][3][5];  // kExp2Poly * h(i, j) by |j|, |i|
+};
+
+inline LevelConstants makeConstants(int step, const AtrousParams& p) {
+    LevelConstants c{};
+    c.step = step;
+    c.phiColor = std::max(0.f, p.phiColor);
+    c.phiDepthStep = std::max(0.f, p.phiDepth) * float(step);
+    c.phiNormal = std::max(0.f, p.phiNormal);
+    for (int k = 0; k < 4; ++k) c.series[k] = c.phiNormal * kLog2e / float(k + 1);
+    for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i)
+            for (int k = 0; k < 5; ++k) c.poly[j][i][k] = kExp2Poly[k] * kB3[i] * kB3[j];
+    return c;
+}
+
+}  // namespace loom::svgf::simd::detail
+#endif  // LOOM_ATROUS_SIMD_SHARED
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "AtrousSimd.cpp"
+#include <hwy/contrib/math/math-inl.h>
+#include <hwy/foreach_target.h>  // must come before highway.h
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
+namespace loom::svgf::simd::HWY_NAMESPACE {
+
+namespace hn = hwy::HWY_NAMESPACE;
+using namespace detail;
+
+using D = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<D>;
+using V = hn::Vec<D>;
+
+/// h * 2^-t for t >= 0 (up to rounding), `poly` being kExp2Poly scaled by h.
+HWY_INLINE V exp2NegScaled(D d, V t, const float* poly) {
+    const DI di;
+    const V magic = hn::Set(d, 12582912.f);  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
+    t = hn::Min(t, hn::Set(d, kMaxExponent));
+    const V r = hn::Add(t, magic);
+    const V n = hn::Sub(r, magic);
+    const V f = hn::Sub(n, t);  // in [-0.5, 0.5]
+    V p = hn::MulAdd(hn::Set(d, poly[4]), f, hn::Set(d, poly[3]));
+    p = hn::MulAdd(p, f, hn::Set(d, poly[2]));
+    p = hn::MulAdd(p, f, hn::Set(d, poly[1]));
+    p = hn::MulAdd(p, f, hn::Set(d, poly[0]));
+    // The low bits of r hold round(t); shifting by 23 drops everything else and lands it on the exponent field.
+    const auto e = hn::ShiftLeft<23>(hn::BitCast(di, r));
+    return hn::BitCast(d, hn::Sub(hn::BitCast(di, p), e));
+}
+
+HWY_INLINE V sanitise(D d, V v) {
+    const V limit = hn::Set(d, kMagnitudeLimit);
+    return hn::IfThenElseZero(hn::IsFinite(v), hn::Min(hn::Max(v, hn::Neg(limit)), limit));
+}
+
+HWY_INLINE V luminanceOf(D d, V r, V g, V b) {
+    return hn::MulAdd(hn::Set(d, 0.0722f), b, hn::MulAdd(hn::Set(d, 0.7152f), g, hn::Mul(hn::Set(d, 0.2126f), r)));
+}
+
+/// e plus the normal weight's exponent (in powers of two, >= 0) for the centre and tap normals.
+template <bool kSeries>
+HWY_INLINE V addNormalExponent(D d, V e, V ncx, V ncy, V ncz, V nqx, V nqy, V nqz, const LevelConstants& c) {
+    // The dot product rounded as the reference rounds it (glm::dot, no contraction): at phi = 128 a rounding of
+    // 2^-24 in the dot is already 1e-5 in the weight, so both sides must see the same value.
+    const V dot = hn::Add(hn::Add(hn::Mul(ncx, nqx), hn::Mul(ncy, nqy)), hn::Mul(ncz, nqz));
+    if constexpr (kSeries) {
+        // d = 1 - dot is exact for dot in [0.5, 2]. A dot just above 1 (rounding) gives the reference's weight
+        // above 1 too; beyond 1.01 (non-unit normals) it is capped, so weights stay finite.
+        const V dd = hn::Max(hn::Sub(hn::Set(d, 1.f), dot), hn::Set(d, -0.01f));
+        V u = hn::MulAdd(dd, hn::Set(d, c.series[3]), hn::Set(d, c.series[2]));
+        u = hn::MulAdd(dd, u, hn::Set(d, c.series[1]));
+        u = hn::MulAdd(dd, u, hn::Set(d, c.series[0]));
+        return hn::MulAdd(dd, u, e);
+    } else {
+        const V lg = hn::Log2(d, hn::Max(dot, hn::Set(d, 1e-30f)));
+        return hn::NegMulAdd(hn::Set(d, c.phiNormal), lg, e);
+    }
+}
+
+template <bool kSeries>
+void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out,
+                const LevelConstants& c, const Tile& t) {
+    const D d;
+    const size_t N = hn::Lanes(d);
+    const int W = int(L.width), H = int(L.height);
+    const ptrdiff_t stride = ptrdiff_t(L.stride);
+    const V zero = hn::Zero(d);
+    const float blurKernel[2][2] = {{1.f / 4.f, 1.f / 8.f}, {1.f / 8.f, 1.f / 16.f}};
+
+    for (uint32_t y = t.y0; y < t.y1; ++y) {
+        for (uint32_t x0 = t.x0; x0 < t.x1; x0 += uint32_t(N)) {
+            const size_t o = L.offset(x0, y);
+            const V zc = hn::LoadU(d, G.z + o);
+            const V dzc = hn::LoadU(d, G.dz + o);
+            const V ncx = hn::LoadU(d, G.nx + o), ncy = hn::LoadU(d, G.ny + o), ncz = hn::LoadU(d, G.nz + o);
+            const V rc = hn::LoadU(d, in.r + o), gc = hn::LoadU(d, in.g + o), bc = hn::LoadU(d, in.b + o);
+            const V vc = hn::LoadU(d, in.v + o), lc = hn::LoadU(d, in.l + o);
+
+            // 3x3 Gaussian of the variance over in-frame, non-miss pixels (off-frame columns are misses).
+            V num = zero, den = zero;
+            for (int j = -1; j <= 1; ++j) {
+                const int qy = int(y) + j;
+                if (qy < 0 || qy >= H) continue;
+                for (int i = -1; i <= 1; ++i) {
+                    const ptrdiff_t q = ptrdiff_t(o) + j * stride + i;
+                    const auto m = hn::Ge(hn::LoadU(d, G.z + q), zero);
+                    const V k = hn::Set(d, blurKernel[i < 0 ? -i : i][j < 0 ? -j : j]);
+                    num = hn::MulAdd(k, hn::IfThenElseZero(m, hn::LoadU(d, in.v + q)), num);
+                    den = hn::Add(den, hn::IfThenElseZero(m, k));
+                }
+            }
+            const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
+            const V sigma = hn::Sqrt(hn::Max(blurred, zero));
+            const V log2e = hn::Set(d, kLog2e);
+            const V eps = hn::Set(d, kAtrousEpsilon);
+            // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
+            const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, c.phiColor), sigma, eps));
+            const V phiZ = hn::Mul(hn::Set(d, c.phiDepthStep), dzc);
+            V invPhiZ[5];
+            for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Div(log2e, hn::MulAdd(phiZ, hn::Set(d, kTapDistance[k]), eps));
+
+            // Centre tap: no depth or luminance difference, only its normal with itself.
+            V w = exp2NegScaled(d, addNormalExponent<kSeries>(d, zero, ncx, ncy, ncz, ncx, ncy, ncz, c), c.poly[0][0]);
+            V sumR = hn::Mul(w, rc), sumG = hn::Mul(w, gc), sumB = hn::Mul(w, bc);
+            V sumW = w, sumV = hn::Mul(hn::Mul(w, w), vc);
+
+            for (int j = -2; j <= 2; ++j) {
+                const int qy = int(y) + j * c.step;
+                if (qy < 0 || qy >= H) continue;
+                const int aj = j < 0 ? -j : j;
+                for (int i = -2; i <= 2; ++i) {
+                    if (i == 0 && j == 0) continue;
+                    const int ox = i * c.step;
+                    if (ox >= W || -ox >= W) continue;  // off-frame for every pixel of the row
+                    const int ai = i < 0 ? -i : i;
+                    const ptrdiff_t q = ptrdiff_t(o) + ptrdiff_t(j) * c.step * stride + ox;
+                    const V zq = hn::LoadU(d, G.z + q);
+                    const V lq = hn::LoadU(d, in.l + q);
+                    V e = hn::Mul(hn::Abs(hn::Sub(zc, zq)), invPhiZ[kDistanceIndex[aj][ai]]);
+                    e = hn::MulAdd(hn::Abs(hn::Sub(lc, lq)), invPhiL, e);
+                    e = addNormalExponent<kSeries>(d, e, ncx, ncy, ncz, hn::LoadU(d, G.nx + q), hn::LoadU(d, G.ny + q),
+                                                   hn::LoadU(d, G.nz + q), c);
+                    const V wq = hn::IfThenElseZero(hn::Ge(zq, zero), exp2NegScaled(d, e, c.poly[aj][ai]));
+                    sumR = hn::MulAdd(wq, hn::LoadU(d, in.r + q), sumR);
+                    sumG = hn::MulAdd(wq, hn::LoadU(d, in.g + q), sumG);
+                    sumB = hn::MulAdd(wq, hn::LoadU(d, in.b + q), sumB);
+                    sumV = hn::MulAdd(hn::Mul(wq, wq), hn::LoadU(d, in.v + q), sumV);
+                    sumW = hn::Add(sumW, wq);
+                }
+            }
+
+            // Miss centres, and pixels whose every weight vanished (degenerate normal), keep their input.
+            const auto keep = hn::Or(hn::Lt(zc, zero), hn::Not(hn::Gt(sumW, hn::Set(d, 1e-30f))));
+            const V inv = hn::Div(hn::Set(d, 1.f), hn::Max(sumW, hn::Set(d, 1e-30f)));
+            const V r = hn::IfThenElse(keep, rc, hn::Mul(sumR, inv));
+            const V g = hn::IfThenElse(keep, gc, hn::Mul(sumG, inv));
+            const V b = hn::IfThenElse(keep, bc, hn::Mul(sumB, inv));
+            const V v = hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sumV, inv), inv));
+
+            if (out.planes.r) {
+                // Lanes past the frame's right edge have miss centres: they store the margin's zeros back.
+                hn::StoreU(r, d, out.planes.r + o);
+                hn::StoreU(g, d, out.planes.g + o);
+                hn::StoreU(b, d, out.planes.b + o);
+                hn::StoreU(v, d, out.planes.v + o);
+                hn::StoreU(luminanceOf(d, r, g, b), d, out.planes.l + o);
+            }
+            const uint32_t count = std::min<uint32_t>(uint32_t(N), t.x1 - x0);
+            for (const ImageView<glm::vec4>& image : out.image) {
+                if (!image.data) continue;
+                float* px = &image.at(x0, y).x;
+                if (count == N) {
+                    hn::StoreInterleaved4(r, g, b, v, d, px);
+                } else {
+                    HWY_ALIGN float lanes[4][kMaxLanes];
+                    hn::Store(r, d, lanes[0]);
+                    hn::Store(g, d, lanes[1]);
+                    hn::Store(b, d, lanes[2]);
+                    hn::Store(v, d, lanes[3]);
+                    for (uint32_t k = 0; k < count; ++k)
+                        for (int ch = 0; ch < 4; ++ch) px[4 * k + ch] = lanes[ch][k];
+                }
+            }
+        }
+    }
+}
+
+void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {
+    parallelFor2D(
+        L.width, L.height,
+        [&](const Tile& t) {
+            const D d;
+            const uint32_t N = uint32_t(hn::Lanes(d));
+            for (uint32_t y = t.y0; y < t.y1; ++y) {
+                const glm::vec4* row = src.row(y);
+                uint32_t x = t.x0;
+                for (; x + N <= t.x1; x += N) {
+                    V r, g, b, v;
+                    hn::LoadInterleaved4(d, &row[x].x, r, g, b, v);
+                    r = sanitise(d, r);
+                    g = sanitise(d, g);
+                    b = sanitise(d, b);
+                    v = sanitise(d, v);
+                    const size_t o = L.offset(x, y);
+                    hn::StoreU(r, d, S.r + o);
+                    hn::StoreU(g, d, S.g + o);
+                    hn::StoreU(b, d, S.b + o);
+                    hn::StoreU(v, d, S.v + o);
+                    hn::StoreU(luminanceOf(d, r, g, b), d, S.l + o);
+                }
+                for (; x < t.x1; ++x) {
+                    const size_t o = L.offset(x, y);
+                    const glm::vec4 p = row[x];
+                    S.r[o] = sanitiseScalar(p.r);
+                    S.g[o] = sanitiseScalar(p.g);
+                    S.b[o] = sanitiseScalar(p.b);
+                    S.v[o] = sanitiseScalar(p.a);
+                    // The same operations as luminanceOf, so the scalar tail matches the vector lanes.
+                    S.l[o] = std::fma(0.0722f, S.b[o], std::fma(0.7152f, S.g[o], 0.2126f * S.r[o]));
+                }
+            }
+        },
+        kTileSize);
+}
+
+void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out,
+                       int step, const AtrousParams& params) {
+    const LevelConstants c = makeConstants(step, params);
+    const bool series = c.phiNormal >= kSeriesMinPhi;
+    parallelFor2D(
+        L.width, L.height,
+        [&](const Tile& t) {
+            if (series)
+                filterRows<true>(L, G, in, out, c, t);
+            else
+                filterRows<false>(L, G, in, out, c, t);
+        },
+        kTileSize);
+}
+
+int64_t TargetBits() {
+    return HWY_TARGET;
+}
+
+}  // namespace loom::svgf::simd::HWY_NAMESPACE
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace loom::svgf::simd {
+
+using namespace detail;
+
+HWY_EXPORT(PackSignalTarget);
+HWY_EXPORT(FilterLevelTarget);
+HWY_EXPORT(TargetBits);
+
+PlaneLayout makeLayout(uint32_t width, uint32_t height, int maxStep) {
+    PlaneLayout L;
+    L.width = width;
+    L.height = height;
+    const uint64_t reach = std::min<uint64_t>(2 * uint64_t(std::max(maxStep, 1)), std::max(width, 1u));
+    L.margin = uint32_t(alignUp(std::max<uint64_t>(reach, kMaxLanes), kMaxLanes));
+    L.stride = alignUp(size_t(L.margin) * 2 + width + kMaxLanes, kMaxLanes);
+    return L;
+}
+
+void packGuide(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
+               const GuidePlanes& G) {
+    parallelFor2D(
+        L.width, L.height,
+        [&](const Tile& t) {
+            for (uint32_t y = t.y0; y < t.y1; ++y) {
+                const glm::vec2* zRow = linearZ.row(y);
+                const glm::vec4* nRow = normal.row(y);
+                for (uint32_t x = t.x0; x < t.x1; ++x) {
+                    const size_t o = L.offset(x, y);
+                    const glm::vec2 z = zRow[x];
+                    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
+                    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
+                    const glm::vec4 n = nRow[x];
+                    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
+                    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
+                    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
+                }
+            }
+        },
+        kTileSize);
+}
+
+void packSignal(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {
+    HWY_DYNAMIC_DISPATCH(PackSignalTarget)(L, src, S);
+}
+
+void filterLevel(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out, int step,
+                 const AtrousParams& params) {
+    HWY_DYNAMIC_DISPATCH(FilterLevelTarget)(L, G, in, out, step, params);
+}
+
+std::string targetName() {
+    return hwy::TargetName(HWY_DYNAMIC_DISPATCH(TargetBits)());
+}
+
+}  // namespace loom::svgf::simd
+#endif  // HWY_ONCE

@@ -1,0 +1,88 @@
+#pragma once
+// The vectorised à-trous level (Google Highway, dispatched at run time to the CPU's best target) behind AtrousFilter's
+// fast path. Everything works on float planes (structure of arrays) with a margin of off-frame columns on both sides,
+// so every tap of the interior loop is an unconditional unaligned load: off-frame columns read as miss pixels (depth
+// -1) and drop out through the same mask as real misses. Off-frame rows are skipped per row (uniform for a whole
+// vector).
+//
+// Approximations against the scalar reference (atrousPixel), with their bounds:
+// - exp: 2^-t = 2^-round(t) * p(f), p a degree-4 minimax polynomial on f in [-0.5, 0.5] (relative error
+//   <= 2.6e-6), the exponent built in the float's bits; t is clamped to 100 (a weight below 2^-100 counts as 0).
+// - the normal weight max(0, n_p.n_q)^phi, for phi >= kSeriesMinPhi: exp(-phi * (d + d^2/2 + d^3/3 + d^4/4)),
+//   d = 1 - n_p.n_q, the first four terms of -ln(1 - d); its absolute error is <= 3.2e-6 over d in [0, 2] for
+//   phi >= 32 (<= 1.5e-8 at the default 128), and it folds into the same exponential as depth and luminance.
+//   Smaller phi use exp2(phi * log2(max(dot, 1e-30))) with Highway's log2 (a few ulp).
+// Both give weights within ~1e-5 relative of the reference, so rgb and variance agree to about 1e-5 relative on
+// ordinary data (tests/integration/test_atrous.cpp checks 1e-4).
+//
+// Bad input: non-finite illumination values become 0 and magnitudes are clamped to 1e30 (no sums overflow);
+// non-finite depth counts as a miss; non-finite or negative depth derivatives and non-finite normals become 0.
+#include <cstddef>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <string>
+
+#include "AtrousKernels.h"
+#include "loom/Texture.h"
+
+namespace loom::svgf::simd {
+
+/// Widest vector the planes are padded for (AVX-512: 16 floats).
+inline constexpr uint32_t kMaxLanes = 16;
+/// phiNormal from which the series form of the normal weight is used (see the bound above).
+inline constexpr float kSeriesMinPhi = 32.f;
+
+/// Shape of every plane: pixel (x, y) at y * stride + margin + x. The margin (left; the right one is margin +
+/// kMaxLanes) covers taps up to `margin` columns off-frame; taps further out are off-frame for every pixel of the
+/// row and are skipped.
+struct PlaneLayout {
+    uint32_t width = 0, height = 0;
+    uint32_t margin = 0;
+    size_t stride = 0;
+
+    size_t offset(uint32_t x, uint32_t y) const { return size_t(y) * stride + margin + x; }
+    size_t planeSize() const { return stride * height; }
+};
+
+/// A layout for width x height that covers taps up to 2 * maxStep columns off-frame.
+PlaneLayout makeLayout(uint32_t width, uint32_t height, int maxStep);
+
+/// Per-frame guide planes: depth (-1 on a miss and in the margins), its derivative, the normal.
+struct GuidePlanes {
+    float* z = nullptr;
+    float* dz = nullptr;
+    float* nx = nullptr;
+    float* ny = nullptr;
+    float* nz = nullptr;
+};
+
+/// One signal: rgb, variance and luminance planes (zero in the margins).
+struct SignalPlanes {
+    float* r = nullptr;
+    float* g = nullptr;
+    float* b = nullptr;
+    float* v = nullptr;
+    float* l = nullptr;
+};
+
+/// Writes the guide planes' interior from linearZ (x: depth, y: derivative) and normal (xyz).
+void packGuide(const PlaneLayout& layout, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
+               const GuidePlanes& guide);
+
+/// Writes a signal's interior planes from rgb + variance pixels (sanitised, luminance computed).
+void packSignal(const PlaneLayout& layout, ImageView<const glm::vec4> src, const SignalPlanes& dst);
+
+/// Where one level writes: its planes (skipped when planes.r is null) and up to two rgb + variance images.
+struct LevelOutputs {
+    SignalPlanes planes;
+    ImageView<glm::vec4> image[2];
+};
+
+/// One à-trous level with tap spacing `step` from `in` to `out`.
+void filterLevel(const PlaneLayout& layout, const GuidePlanes& guide, const SignalPlanes& in, const LevelOutputs& out,
+                 int step, const AtrousParams& params);
+
+/// The instruction set the dispatcher chose on this CPU (e.g. "AVX2", "AVX3" for AVX-512).
+std::string targetName();
+
+}  // namespace loom::svgf::simd
