@@ -269,6 +269,44 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
     }
 }
 
+void PackGuideTarget(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
+                     const GuidePlanes& G) {
+    parallelFor2D(
+        L.width, L.height,
+        [&](const Tile& t) HWY_ATTR {
+            const D d;
+            const uint32_t N = uint32_t(hn::Lanes(d));
+            const V zero = hn::Zero(d), miss = hn::Set(d, -1.f);
+            for (uint32_t y = t.y0; y < t.y1; ++y) {
+                const glm::vec2* zRow = linearZ.row(y);
+                const glm::vec4* nRow = normal.row(y);
+                uint32_t x = t.x0;
+                for (; x + N <= t.x1; x += N) {
+                    V z, dz, nx, ny, nz, nw;
+                    hn::LoadInterleaved2(d, &zRow[x].x, z, dz);
+                    hn::LoadInterleaved4(d, &nRow[x].x, nx, ny, nz, nw);
+                    const size_t o = L.offset(x, y);
+                    hn::StoreU(hn::IfThenElse(hn::And(hn::IsFinite(z), hn::Ge(z, zero)), z, miss), d, G.z + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::And(hn::IsFinite(dz), hn::Gt(dz, zero)), dz), d, G.dz + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(nx), nx), d, G.nx + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(ny), ny), d, G.ny + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(nz), nz), d, G.nz + o);
+                }
+                for (; x < t.x1; ++x) {
+                    const size_t o = L.offset(x, y);
+                    const glm::vec2 z = zRow[x];
+                    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
+                    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
+                    const glm::vec4 n = nRow[x];
+                    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
+                    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
+                    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
+                }
+            }
+        },
+        kTileSize);
+}
+
 void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {
     parallelFor2D(
         L.width, L.height,
@@ -334,6 +372,7 @@ namespace loom::svgf::simd {
 
 using namespace detail;
 
+HWY_EXPORT(PackGuideTarget);
 HWY_EXPORT(PackSignalTarget);
 HWY_EXPORT(FilterLevelTarget);
 HWY_EXPORT(TargetBits);
@@ -350,25 +389,7 @@ PlaneLayout makeLayout(uint32_t width, uint32_t height, int maxStep) {
 
 void packGuide(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
                const GuidePlanes& G) {
-    parallelFor2D(
-        L.width, L.height,
-        [&](const Tile& t) {
-            for (uint32_t y = t.y0; y < t.y1; ++y) {
-                const glm::vec2* zRow = linearZ.row(y);
-                const glm::vec4* nRow = normal.row(y);
-                for (uint32_t x = t.x0; x < t.x1; ++x) {
-                    const size_t o = L.offset(x, y);
-                    const glm::vec2 z = zRow[x];
-                    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
-                    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
-                    const glm::vec4 n = nRow[x];
-                    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
-                    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
-                    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
-                }
-            }
-        },
-        kTileSize);
+    HWY_DYNAMIC_DISPATCH(PackGuideTarget)(L, linearZ, normal, G);
 }
 
 void packSignal(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {
