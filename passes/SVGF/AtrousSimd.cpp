@@ -21,7 +21,9 @@ constexpr float kMaxExponent = 100.f;
 // Degree-4 minimax fit of 2^f on [-0.5, 0.5] (relative error 2.6e-6), lowest degree first.
 constexpr float kExp2Poly[5] = {0.9999992614457146f, 0.6931218147367706f, 0.2402474482794381f, 0.05591786031930501f,
                                 0.009570101908089415f};
-constexpr float kB3[3] = {6.f / 16.f, 4.f / 16.f, 1.f / 16.f};
+// The B3 weights b(0), b(1), b(2) = 6/16, 4/16, 1/16 as exponents, -log2 b: the tap weight h(i, j) = b(i) b(j)
+// joins the edge-stopping exponent as kB3Exponent[|i|] + kB3Exponent[|j|] (an addend of an FMA, free).
+constexpr float kB3Exponent[3] = {1.4150374992788438f, 2.f, 4.f};
 // Screen distances of the taps |(i, j)| for |i|, |j| in 0..2, as indices into the five distinct non-zero ones.
 constexpr float kTapDistance[5] = {1.f, 1.41421356237f, 2.f, 2.2360679775f, 2.82842712475f};
 constexpr int kDistanceIndex[3][3] = {{-1, 0, 2}, {0, 1, 3}, {2, 3, 4}};
@@ -36,8 +38,7 @@ struct LevelConstants {
     int step;
     float phiColor, phiDepthStep;
     float phiNormal;
-    float series[4];      // phi * log2(e) / k, k = 1..4: the normal weight's exponent in powers of two
-    float poly[3][3][5];  // kExp2Poly * h(i, j) by |j|, |i|
+    float series[4];  // phi * log2(e) / k, k = 1..4: the normal weight's exponent in powers of two
 };
 
 inline LevelConstants makeConstants(int step, const AtrousParams& p) {
@@ -47,9 +48,6 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
     c.phiDepthStep = std::max(0.f, p.phiDepth) * float(step);
     c.phiNormal = std::max(0.f, p.phiNormal);
     for (int k = 0; k < 4; ++k) c.series[k] = c.phiNormal * kLog2e / float(k + 1);
-    for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i)
-            for (int k = 0; k < 5; ++k) c.poly[j][i][k] = kExp2Poly[k] * kB3[i] * kB3[j];
     return c;
 }
 
@@ -58,9 +56,11 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
 
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "AtrousSimd.cpp"
-#include <hwy/contrib/math/math-inl.h>
-#include <hwy/foreach_target.h>  // must come before highway.h
+// clang-format off
+#include <hwy/foreach_target.h>  // must come first: it includes this file once per target
 #include <hwy/highway.h>
+#include <hwy/contrib/math/math-inl.h>
+// clang-format on
 
 HWY_BEFORE_NAMESPACE();
 namespace loom::svgf::simd::HWY_NAMESPACE {
@@ -72,18 +72,18 @@ using D = hn::ScalableTag<float>;
 using DI = hn::RebindToSigned<D>;
 using V = hn::Vec<D>;
 
-/// h * 2^-t for t >= 0 (up to rounding), `poly` being kExp2Poly scaled by h.
-HWY_INLINE V exp2NegScaled(D d, V t, const float* poly) {
+/// 2^-t for t >= -126 (t above kMaxExponent is clamped), relative error <= 2.6e-6.
+HWY_INLINE V exp2Neg(D d, V t) {
     const DI di;
     const V magic = hn::Set(d, 12582912.f);  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
     t = hn::Min(t, hn::Set(d, kMaxExponent));
     const V r = hn::Add(t, magic);
     const V n = hn::Sub(r, magic);
     const V f = hn::Sub(n, t);  // in [-0.5, 0.5]
-    V p = hn::MulAdd(hn::Set(d, poly[4]), f, hn::Set(d, poly[3]));
-    p = hn::MulAdd(p, f, hn::Set(d, poly[2]));
-    p = hn::MulAdd(p, f, hn::Set(d, poly[1]));
-    p = hn::MulAdd(p, f, hn::Set(d, poly[0]));
+    V p = hn::MulAdd(hn::Set(d, kExp2Poly[4]), f, hn::Set(d, kExp2Poly[3]));
+    p = hn::MulAdd(p, f, hn::Set(d, kExp2Poly[2]));
+    p = hn::MulAdd(p, f, hn::Set(d, kExp2Poly[1]));
+    p = hn::MulAdd(p, f, hn::Set(d, kExp2Poly[0]));
     // The low bits of r hold round(t); shifting by 23 drops everything else and lands it on the exponent field.
     const auto e = hn::ShiftLeft<23>(hn::BitCast(di, r));
     return hn::BitCast(d, hn::Sub(hn::BitCast(di, p), e));
@@ -116,6 +116,57 @@ HWY_INLINE V addNormalExponent(D d, V e, V ncx, V ncy, V ncz, V nqx, V nqy, V nq
         const V lg = hn::Log2(d, hn::Max(dot, hn::Set(d, 1e-30f)));
         return hn::NegMulAdd(hn::Set(d, c.phiNormal), lg, e);
     }
+}
+
+/// What every tap of a centre vector compares against.
+struct Centre {
+    V z, l, nx, ny, nz, invPhiL;
+    V invPhiZ[5];
+};
+struct Sums {
+    V r, g, b, v, w;
+};
+struct TapContext {
+    const GuidePlanes& G;
+    const SignalPlanes& in;
+    const LevelConstants& c;
+    int W, H, y;
+    ptrdiff_t o, stride;
+};
+
+template <bool kSeries, int I, int J>
+HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Centre& k, Sums& s) {
+    constexpr int ai = I < 0 ? -I : I, aj = J < 0 ? -J : J;
+    if constexpr (I == 0 && J == 0) {
+        return;  // the centre tap is accumulated by the caller
+    } else {
+        if (ai * t.c.step >= t.W) return;  // off-frame for every pixel of the row
+        const ptrdiff_t q = row + I * t.c.step;
+        const V zq = hn::LoadU(d, t.G.z + q);
+        V e = hn::MulAdd(hn::Abs(hn::Sub(k.z, zq)), k.invPhiZ[kDistanceIndex[aj][ai]],
+                         hn::Set(d, kB3Exponent[ai] + kB3Exponent[aj]));
+        e = hn::MulAdd(hn::Abs(hn::Sub(k.l, hn::LoadU(d, t.in.l + q))), k.invPhiL, e);
+        e = addNormalExponent<kSeries>(d, e, k.nx, k.ny, k.nz, hn::LoadU(d, t.G.nx + q), hn::LoadU(d, t.G.ny + q),
+                                       hn::LoadU(d, t.G.nz + q), t.c);
+        const V w = hn::IfThenElseZero(hn::Ge(zq, hn::Zero(d)), exp2Neg(d, e));
+        s.r = hn::MulAdd(w, hn::LoadU(d, t.in.r + q), s.r);
+        s.g = hn::MulAdd(w, hn::LoadU(d, t.in.g + q), s.g);
+        s.b = hn::MulAdd(w, hn::LoadU(d, t.in.b + q), s.b);
+        s.v = hn::MulAdd(hn::Mul(w, w), hn::LoadU(d, t.in.v + q), s.v);
+        s.w = hn::Add(s.w, w);
+    }
+}
+
+template <bool kSeries, int J>
+HWY_INLINE void accumulateRow(D d, const TapContext& t, const Centre& k, Sums& s) {
+    const int qy = t.y + J * t.c.step;
+    if (qy < 0 || qy >= t.H) return;  // off-frame rows: uniform for the whole vector
+    const ptrdiff_t row = t.o + ptrdiff_t(J) * t.c.step * t.stride;
+    accumulateTap<kSeries, -2, J>(d, t, row, k, s);
+    accumulateTap<kSeries, -1, J>(d, t, row, k, s);
+    accumulateTap<kSeries, 0, J>(d, t, row, k, s);
+    accumulateTap<kSeries, 1, J>(d, t, row, k, s);
+    accumulateTap<kSeries, 2, J>(d, t, row, k, s);
 }
 
 template <bool kSeries>
@@ -161,34 +212,26 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Div(log2e, hn::MulAdd(phiZ, hn::Set(d, kTapDistance[k]), eps));
 
             // Centre tap: no depth or luminance difference, only its normal with itself.
-            V w = exp2NegScaled(d, addNormalExponent<kSeries>(d, zero, ncx, ncy, ncz, ncx, ncy, ncz, c), c.poly[0][0]);
+            V w = exp2Neg(
+                d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx, ncy, ncz, c));
             V sumR = hn::Mul(w, rc), sumG = hn::Mul(w, gc), sumB = hn::Mul(w, bc);
             V sumW = w, sumV = hn::Mul(hn::Mul(w, w), vc);
 
-            for (int j = -2; j <= 2; ++j) {
-                const int qy = int(y) + j * c.step;
-                if (qy < 0 || qy >= H) continue;
-                const int aj = j < 0 ? -j : j;
-                for (int i = -2; i <= 2; ++i) {
-                    if (i == 0 && j == 0) continue;
-                    const int ox = i * c.step;
-                    if (ox >= W || -ox >= W) continue;  // off-frame for every pixel of the row
-                    const int ai = i < 0 ? -i : i;
-                    const ptrdiff_t q = ptrdiff_t(o) + ptrdiff_t(j) * c.step * stride + ox;
-                    const V zq = hn::LoadU(d, G.z + q);
-                    const V lq = hn::LoadU(d, in.l + q);
-                    V e = hn::Mul(hn::Abs(hn::Sub(zc, zq)), invPhiZ[kDistanceIndex[aj][ai]]);
-                    e = hn::MulAdd(hn::Abs(hn::Sub(lc, lq)), invPhiL, e);
-                    e = addNormalExponent<kSeries>(d, e, ncx, ncy, ncz, hn::LoadU(d, G.nx + q), hn::LoadU(d, G.ny + q),
-                                                   hn::LoadU(d, G.nz + q), c);
-                    const V wq = hn::IfThenElseZero(hn::Ge(zq, zero), exp2NegScaled(d, e, c.poly[aj][ai]));
-                    sumR = hn::MulAdd(wq, hn::LoadU(d, in.r + q), sumR);
-                    sumG = hn::MulAdd(wq, hn::LoadU(d, in.g + q), sumG);
-                    sumB = hn::MulAdd(wq, hn::LoadU(d, in.b + q), sumB);
-                    sumV = hn::MulAdd(hn::Mul(wq, wq), hn::LoadU(d, in.v + q), sumV);
-                    sumW = hn::Add(sumW, wq);
-                }
-            }
+            // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
+            const Centre centre{
+                zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
+            Sums sums{sumR, sumG, sumB, sumV, sumW};
+            const TapContext ctx{G, in, c, W, H, int(y), ptrdiff_t(o), stride};
+            accumulateRow<kSeries, -2>(d, ctx, centre, sums);
+            accumulateRow<kSeries, -1>(d, ctx, centre, sums);
+            accumulateRow<kSeries, 0>(d, ctx, centre, sums);
+            accumulateRow<kSeries, 1>(d, ctx, centre, sums);
+            accumulateRow<kSeries, 2>(d, ctx, centre, sums);
+            sumR = sums.r;
+            sumG = sums.g;
+            sumB = sums.b;
+            sumV = sums.v;
+            sumW = sums.w;
 
             // Miss centres, and pixels whose every weight vanished (degenerate normal), keep their input.
             const auto keep = hn::Or(hn::Lt(zc, zero), hn::Not(hn::Gt(sumW, hn::Set(d, 1e-30f))));
@@ -224,6 +267,44 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             }
         }
     }
+}
+
+void PackGuideTarget(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
+                     const GuidePlanes& G) {
+    parallelFor2D(
+        L.width, L.height,
+        [&](const Tile& t) HWY_ATTR {
+            const D d;
+            const uint32_t N = uint32_t(hn::Lanes(d));
+            const V zero = hn::Zero(d), miss = hn::Set(d, -1.f);
+            for (uint32_t y = t.y0; y < t.y1; ++y) {
+                const glm::vec2* zRow = linearZ.row(y);
+                const glm::vec4* nRow = normal.row(y);
+                uint32_t x = t.x0;
+                for (; x + N <= t.x1; x += N) {
+                    V z, dz, nx, ny, nz, nw;
+                    hn::LoadInterleaved2(d, &zRow[x].x, z, dz);
+                    hn::LoadInterleaved4(d, &nRow[x].x, nx, ny, nz, nw);
+                    const size_t o = L.offset(x, y);
+                    hn::StoreU(hn::IfThenElse(hn::And(hn::IsFinite(z), hn::Ge(z, zero)), z, miss), d, G.z + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::And(hn::IsFinite(dz), hn::Gt(dz, zero)), dz), d, G.dz + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(nx), nx), d, G.nx + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(ny), ny), d, G.ny + o);
+                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(nz), nz), d, G.nz + o);
+                }
+                for (; x < t.x1; ++x) {
+                    const size_t o = L.offset(x, y);
+                    const glm::vec2 z = zRow[x];
+                    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
+                    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
+                    const glm::vec4 n = nRow[x];
+                    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
+                    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
+                    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
+                }
+            }
+        },
+        kTileSize);
 }
 
 void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {
@@ -291,6 +372,7 @@ namespace loom::svgf::simd {
 
 using namespace detail;
 
+HWY_EXPORT(PackGuideTarget);
 HWY_EXPORT(PackSignalTarget);
 HWY_EXPORT(FilterLevelTarget);
 HWY_EXPORT(TargetBits);
@@ -307,25 +389,7 @@ PlaneLayout makeLayout(uint32_t width, uint32_t height, int maxStep) {
 
 void packGuide(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
                const GuidePlanes& G) {
-    parallelFor2D(
-        L.width, L.height,
-        [&](const Tile& t) {
-            for (uint32_t y = t.y0; y < t.y1; ++y) {
-                const glm::vec2* zRow = linearZ.row(y);
-                const glm::vec4* nRow = normal.row(y);
-                for (uint32_t x = t.x0; x < t.x1; ++x) {
-                    const size_t o = L.offset(x, y);
-                    const glm::vec2 z = zRow[x];
-                    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
-                    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
-                    const glm::vec4 n = nRow[x];
-                    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
-                    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
-                    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
-                }
-            }
-        },
-        kTileSize);
+    HWY_DYNAMIC_DISPATCH(PackGuideTarget)(L, linearZ, normal, G);
 }
 
 void packSignal(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {

@@ -287,10 +287,13 @@ TEST(Atrous, FlatRegionIsTheB3SplineClosedForm) {
                             mean += glm::vec4(h * glm::vec3(q), h * h * q.a);
                         }
                     const glm::vec4 o = r.dst.view<glm::vec4>().at(x, y);
-                    for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(o[ch], mean[ch], 2e-6f) << x << "," << y;
-                    ASSERT_NEAR(o.a, mean.a, 1e-8f);
+                    // Float rounding for the reference; the stated tolerance for the fast path (its weights carry
+                    // the exp polynomial's error).
+                    const float tol = reference ? 2e-6f : float(kTolerance);
+                    for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(o[ch], mean[ch], tol * mean[ch]) << x << "," << y;
+                    ASSERT_NEAR(o.a, mean.a, tol * mean.a);
                     if (step == 1) {
-                        ASSERT_NEAR(o.a, 0.1f * std::pow(70.f / 256.f, 2.f), 1e-8f);
+                        ASSERT_NEAR(o.a, 0.1f * std::pow(70.f / 256.f, 2.f), tol * mean.a);
                     }
                 }
         }
