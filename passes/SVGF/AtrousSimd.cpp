@@ -208,8 +208,12 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
             const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, c.phiColor), sigma, eps));
             const V phiZ = hn::Mul(hn::Set(d, c.phiDepthStep), dzc);
+            // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five.
+            // They differ by eps (1 - |(i, j)|) / (|(i, j)| (phiZ + eps)) relative, below 1e-6 for phiZ >= 1e-4;
+            // only phiZ ~ eps (a zero depth derivative) moves the already enormous exponent of a depth step.
+            const V invPhiZ1 = hn::Div(log2e, hn::Add(phiZ, eps));
             V invPhiZ[5];
-            for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Div(log2e, hn::MulAdd(phiZ, hn::Set(d, kTapDistance[k]), eps));
+            for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Mul(invPhiZ1, hn::Set(d, 1.f / kTapDistance[k]));
 
             // Centre tap: no depth or luminance difference, only its normal with itself.
             V w = exp2Neg(
