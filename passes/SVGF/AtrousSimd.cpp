@@ -274,10 +274,17 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
 }
 
 void PackGuideTarget(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
-                     const GuidePlanes& G) {
+                     const GuidePlanes& guide) {
+    const struct {
+        const PlaneLayout& L;
+        ImageView<const glm::vec2> linearZ;
+        ImageView<const glm::vec4> normal;
+        const GuidePlanes& G;
+    } job{L, linearZ, normal, guide};
     parallelFor2D(
         L.width, L.height,
-        [&](const Tile& t) HWY_ATTR {
+        [j = &job](const Tile& t) HWY_ATTR {
+            const auto& [L, linearZ, normal, G] = *j;
             const D d;
             const uint32_t N = uint32_t(hn::Lanes(d));
             const V zero = hn::Zero(d), miss = hn::Set(d, -1.f);
@@ -311,10 +318,16 @@ void PackGuideTarget(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, I
         kTileSize);
 }
 
-void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& S) {
+void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, const SignalPlanes& signal) {
+    const struct {
+        const PlaneLayout& L;
+        ImageView<const glm::vec4> src;
+        const SignalPlanes& S;
+    } job{L, src, signal};
     parallelFor2D(
         L.width, L.height,
-        [&](const Tile& t) {
+        [j = &job](const Tile& t) HWY_ATTR {
+            const auto& [L, src, S] = *j;
             const D d;
             const uint32_t N = uint32_t(hn::Lanes(d));
             for (uint32_t y = t.y0; y < t.y1; ++y) {
@@ -353,13 +366,22 @@ void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalP
                        int step, const AtrousParams& params) {
     const LevelConstants c = makeConstants(step, params);
     const bool series = c.phiNormal >= kSeriesMinPhi;
+    // One pointer captured: the std::function holds it without allocating.
+    const struct {
+        const PlaneLayout& L;
+        const GuidePlanes& G;
+        const SignalPlanes& in;
+        const LevelOutputs& out;
+        const LevelConstants& c;
+        bool series;
+    } job{L, G, in, out, c, series};
     parallelFor2D(
         L.width, L.height,
-        [&](const Tile& t) {
-            if (series)
-                filterRows<true>(L, G, in, out, c, t);
+        [j = &job](const Tile& t) {
+            if (j->series)
+                filterRows<true>(j->L, j->G, j->in, j->out, j->c, t);
             else
-                filterRows<false>(L, G, in, out, c, t);
+                filterRows<false>(j->L, j->G, j->in, j->out, j->c, t);
         },
         kTileSize);
 }
