@@ -17,9 +17,9 @@ PluginRegistry& registry() {
 GraphDesc chainGraph(int n, const std::string& type) {
     GraphDesc g;
     g.name = "chain";
-    g.passes.push_back({"P0", type == "NoOp" ? "NoOp" : "Pattern", nlohmann::json::object()});
+    g.passes.push_back({"P0", type == "NoOp" ? "NoOp" : "Pattern", nlohmann::json::object(), {}});
     for (int i = 1; i < n; ++i) {
-        g.passes.push_back({"P" + std::to_string(i), type, nlohmann::json::object()});
+        g.passes.push_back({"P" + std::to_string(i), type, nlohmann::json::object(), {}});
         g.edges.push_back({{"P" + std::to_string(i - 1), "dst", false}, {"P" + std::to_string(i), "src", false}});
     }
     g.outputs.push_back({"P" + std::to_string(n - 1), "dst", false});

@@ -41,7 +41,7 @@ const Wire* wireTo(const CompiledPlan& plan, const std::string& dst) {
 /// floats in [0, 1] (RGB).
 std::vector<float> renderLast(const std::string& graph, uint64_t firstFrame, uint32_t frames,
                               const std::vector<std::pair<std::string, int>>& intParams = {}) {
-    const uint32_t w = 64, h = 64;
+    const uint32_t w = 128, h = 128;
     auto scene = Scene::load(test::dataScene("cornell_box.gltf"));
     scene->camera.jitterPattern = JitterPattern::Halton;
     auto g = compiled(graphPath(graph), scene, w, h);
@@ -101,8 +101,8 @@ TEST(ShippedGraphs, DefaultGraphFiltersTheCombinedColourAndTheSplitGraphTheSplit
 
 TEST(ShippedGraphs, DefaultGraphIsCloserToTheReferenceThanTheNoisyInput) {
     const uint64_t frames = 16, last = frames - 1;
-    // Reference: the same last frame, 1024 samples per pixel, through the same tone map.
-    const auto reference = renderLast("PathTracerAccumulate.json", last, 1, {{"PathTracer.samplesPerPixel", 1024}});
+    // Reference: the same last frame, 512 samples per pixel, through the same tone map.
+    const auto reference = renderLast("PathTracerAccumulate.json", last, 1, {{"PathTracer.samplesPerPixel", 512}});
     const auto noisy = renderLast("PathTracerRaw.json", last, 1);
     const auto denoised = renderLast("PathTracerSVGF.json", 0, frames);
     const auto atrous = renderLast("PathTracerATrous.json", 0, frames);
