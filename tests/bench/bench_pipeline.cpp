@@ -64,9 +64,9 @@ void runGraph(benchmark::State& state, const std::string& graphName, uint32_t wi
 void BM_PathTracerSVGF(benchmark::State& s) { runGraph(s, "PathTracerSVGF", 1280, 720); }
 void BM_PathTracerSVGFDirectIndirect(benchmark::State& s) { runGraph(s, "PathTracerSVGFDirectIndirect", 1280, 720); }
 void BM_PathTracerATrous(benchmark::State& s) { runGraph(s, "PathTracerATrous", 1280, 720); }
-BENCHMARK(BM_PathTracerSVGF)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(5.0);
-BENCHMARK(BM_PathTracerSVGFDirectIndirect)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(5.0);
-BENCHMARK(BM_PathTracerATrous)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(5.0);
+BENCHMARK(BM_PathTracerSVGF)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PathTracerSVGFDirectIndirect)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PathTracerATrous)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "loom/Format.h"
+#include "loom/Kernel.h"
 
 namespace loom {
 
@@ -29,11 +30,11 @@ struct ImageView {
     uint32_t height = 0;
     size_t rowPitch = 0;  ///< bytes between rows
 
-    T* row(uint32_t y) const {
+    LOOM_HD T* row(uint32_t y) const {
         using Byte = std::conditional_t<std::is_const_v<T>, const std::byte, std::byte>;
         return reinterpret_cast<T*>(reinterpret_cast<Byte*>(data) + rowPitch * y);
     }
-    T& at(uint32_t x, uint32_t y) const { return row(y)[x]; }
+    LOOM_HD T& at(uint32_t x, uint32_t y) const { return row(y)[x]; }
 };
 
 /// A 2D image. Either owns its memory or views memory owned elsewhere (a
