@@ -32,7 +32,7 @@ public:
 private:
     /// Log-average luminance of src over its finite pixels (deterministic: per-tile sums added in tile order);
     /// returns false when no pixel is finite.
-    bool measureLogAverage(const Texture& src, double& logAverage, uint64_t& finitePixels) const;
+    bool measureLogAverage(const Texture& src, double& logAverage) const;
 
     // Parameters.
     Operator mOperator = Operator::Aces;
@@ -41,6 +41,7 @@ private:
     float mKey = 0.18f;
     float mAdaptationTime = 1.f;
     float mWhitePoint = 4.f;
+    bool mReference = false;
 
     std::unique_ptr<tonemap::SrgbEncodeTable> mSrgbTable;
 };
