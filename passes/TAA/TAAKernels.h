@@ -172,20 +172,23 @@ LOOM_HD inline bool previousPosition(uint32_t x, uint32_t y, uint32_t width, uin
 }
 
 /// Bicubic (Catmull-Rom) history at a texel-centre position. Integer
-/// positions read one texel.
+/// positions read one texel. The 4x4 sum is formed as (even taps) + (odd
+/// taps) of each row, weighted by row, with the even and odd halves added
+/// last: the order in which the CPU path adds pairs of texels with 256-bit
+/// vectors, so the two give the same bits.
 LOOM_HD inline glm::vec4 sampleHistory(const ClampedImage<glm::vec4>& history, const glm::vec2& pos) {
     const float fx0 = glm::floor(pos.x), fy0 = glm::floor(pos.y);
     const int ix = int(fx0), iy = int(fy0);
     const float fx = pos.x - fx0, fy = pos.y - fy0;
     if (fx == 0.f && fy == 0.f) return history.at(ix, iy);
     const glm::vec4 wx = catmullRomWeights(fx), wy = catmullRomWeights(fy);
-    glm::vec4 result(0.f);
+    glm::vec4 even(0.f), odd(0.f);
     for (int j = 0; j < 4; ++j) {
-        glm::vec4 row(0.f);
-        for (int i = 0; i < 4; ++i) row += wx[i] * history.at(ix - 1 + i, iy - 1 + j);
-        result += wy[j] * row;
+        const int ty = iy - 1 + j;
+        even += wy[j] * (wx[0] * history.at(ix - 1, ty) + wx[2] * history.at(ix + 1, ty));
+        odd += wy[j] * (wx[1] * history.at(ix, ty) + wx[3] * history.at(ix + 2, ty));
     }
-    return result;
+    return even + odd;
 }
 
 /// The history point moved along the line to the box centre into the box
