@@ -1,5 +1,6 @@
 #include "TAAPass.h"
 
+#include <hwy/cache_control.h>
 #include <hwy/highway.h>
 
 #include <algorithm>
@@ -26,7 +27,9 @@ const char kStatNonFinite[] = "nonFinite";
 const char kStatNoHistory[] = "noHistory";
 const char kStatClipped[] = "clipped";
 
-constexpr uint32_t kTile = kDefaultTileSize;
+// Tiles of 128 x 16 pixels: rows long enough (2 KiB of colour) for the hardware prefetchers to stream, few enough
+// rows that the scratch below stays in L2. They are dispatched as the cells of a tile grid through parallelFor2D.
+constexpr uint32_t kTileW = 128, kTileH = 16;
 
 /// Pixel counts of one tile or frame.
 struct Counts {
@@ -42,10 +45,10 @@ struct Counts {
 /// the current colour in YCoCg + alpha (structure of arrays, so the loops over
 /// a row vectorize), the horizontal 3-tap statistics, and the motion vectors.
 struct TileScratch {
-    static constexpr uint32_t kW = kTile, kR = kTile + 2;
-    float v[4][kR][kR + 8];  // + 8: whole vectors at the end of a row
+    static constexpr uint32_t kW = kTileW, kR = kTileH + 2, kRW = kTileW + 2 + 8;  // + 8: whole vectors at the end
+    float v[4][kR][kRW];
     float rowSum[4][kR][kW], rowSumSq[4][kR][kW], rowMin[4][kR][kW], rowMax[4][kR][kW];
-    float mvx[kR][kR + 8], mvy[kR][kR + 8], mvLen[kR][kR + 8];
+    float mvx[kR][kRW], mvy[kR][kRW], mvLen[kR][kRW];
     float rowMvx[kR][kW], rowMvy[kR][kW], rowMvLen[kR][kW];
 };
 
@@ -244,8 +247,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     }
 
     const float sigma = p.sigma;
-    alignas(64) glm::vec4 sampled[TileScratch::kW];
-    alignas(64) float posX[TileScratch::kW], posY[TileScratch::kW];
+    alignas(64) glm::vec4 sampled[16];
+    alignas(64) float posX[16], posY[16];
     for (uint32_t y = 0; y < h; ++y) {
         const uint32_t py = t.y0 + y;
         glm::vec4* outRow = out.row(py);
@@ -377,7 +380,18 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             ob = hn::IfThenElse(keep, ob, cb);
             oa = hn::IfThenElse(keep, oa, ca);
             hn::StoreInterleaved4(orr, og, ob, oa, d, reinterpret_cast<float*>(outRow + t.x0 + x));
-            hn::StoreInterleaved4(orr, og, ob, oa, d, reinterpret_cast<float*>(historyRow + t.x0 + x));
+            // The history is read again only next frame, long after it has left the caches: streaming stores skip
+            // the read-for-ownership of its lines (rows are 64-byte aligned and x is a multiple of 8 pixels).
+            {
+                alignas(64) float packed[4 * 16];
+                hn::StoreInterleaved4(orr, og, ob, oa, d, packed);
+                float* dst = reinterpret_cast<float*>(historyRow + t.x0 + x);
+                if (reinterpret_cast<uintptr_t>(dst) % 64 == 0) {
+                    for (uint32_t k = 0; k < 4; ++k) hn::Stream(hn::Load(d, packed + k * N), d, dst + k * N);
+                } else {
+                    for (uint32_t k = 0; k < 4; ++k) hn::StoreU(hn::Load(d, packed + k * N), d, dst + k * N);
+                }
+            }
             counts.noHistory += N - hn::CountTrue(d, useHistory);
             counts.clipped += hn::CountTrue(d, clipped);
         }
@@ -411,6 +425,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             counts.add(flags);
         }
     }
+    hwy::FlushStream();  // order the streaming stores before the frame's end
 }
 
 template <class T>
@@ -453,9 +468,12 @@ void TAAPass::execute(PassContext& ctx) {
     std::atomic<uint64_t> nonFinite{0}, noHistory{0}, clipped{0};
     const taa::TaaParams params = mParams;
     const bool reference = mReference;
+    const uint32_t tilesX = (out.width + kTileW - 1) / kTileW, tilesY = (out.height + kTileH - 1) / kTileH;
     parallelFor2D(
-        out.width, out.height,
-        [&](const Tile& t) {
+        tilesX, tilesY,
+        [&](const Tile& cell) {
+            const Tile t{cell.x0 * kTileW, cell.y0 * kTileH, std::min(out.width, (cell.x0 + 1) * kTileW),
+                         std::min(out.height, (cell.y0 + 1) * kTileH)};
             Counts counts;
             if (reference)
                 resolveTileReference(in, params, t, out, history, counts);
@@ -466,7 +484,7 @@ void TAAPass::execute(PassContext& ctx) {
             noHistory += counts.noHistory;
             clipped += counts.clipped;
         },
-        kTile);
+        1);  // one cell of the tile grid per task
 
     ctx.stats().set(kStatNonFinite, double(nonFinite));
     ctx.stats().set(kStatNoHistory, double(noHistory));

@@ -136,8 +136,14 @@ void BM_TAA(benchmark::State& state) {
 }
 // Args: moving (0/1), reference kernel (0/1), threads (0 = all). With one thread the CPU column is the pass's own
 // cost even on a loaded machine.
-BENCHMARK(BM_TAA)->Args({1, 0, 0})->Args({0, 0, 0})->Args({1, 1, 0})->Args({1, 0, 1})->UseManualTime()->Unit(
-    benchmark::kMillisecond);
+BENCHMARK(BM_TAA)
+    ->Args({1, 0, 0})
+    ->Args({0, 0, 0})
+    ->Args({1, 1, 0})
+    ->Args({1, 0, 1})
+    ->Args({0, 0, 1})
+    ->UseManualTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_ToneMap(benchmark::State& state) {
     const bool autoExposure = state.range(0) != 0, withFloat = state.range(1) != 0;
