@@ -127,8 +127,8 @@ HWY_INLINE void catmullRomVec(FloatTag d, FloatVec t, FloatVec w[4]) {
 /// The tiled path. The 3x3 statistics and the motion dilation are separable: each current pixel is converted to
 /// YCoCg once (not nine times), sums, minima, maxima and the longest vector are formed over rows, then over
 /// columns, and the rest runs on vectors of 8 pixels (Highway, AVX2), with the bicubic history fetched per pixel
-/// with 128-bit vectors. Every step does the reference kernel's operations in its order (the plugin is built
-/// without FMA contraction), so the output is bit-identical to it; a test checks that. A tile with a non-finite
+/// as pairs of texels in 256-bit vectors. Every step does the reference kernel's operations in its order (the plugin is
+/// built without FMA contraction), so the output is bit-identical to it; a test checks that. A tile with a non-finite
 /// colour or motion vector in reach runs the reference kernel instead (it skips those samples).
 void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, const ImageView<glm::vec4>& out,
                  const ImageView<glm::vec4>& history, Counts& counts) {
