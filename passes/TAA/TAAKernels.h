@@ -26,7 +26,8 @@
 //   5. Blend with anti-flicker (Karis 2014, after T. Lottes): weights
 //        wc = alpha / (1 + Yc),  wh = (1 - alpha) / (1 + Yh),
 //      Yc and Yh the (non-negative) YCoCg luma of current and clipped history;
-//      out = c + wh / (wc + wh) (h - c). Luminance weighting stops a bright
+//      out = c + wh / (wc + wh) (h - c), computed as (1 - alpha)(1 + Yc) /
+//      (alpha (1 + Yh) + (1 - alpha)(1 + Yc)). Luminance weighting stops a bright
 //      sample (a firefly, a jittered specular) from dominating the average,
 //      which is what makes plain alpha blending of HDR colour flicker.
 //      Written as c + k (h - c) so that h == c gives exactly c.
@@ -204,17 +205,19 @@ LOOM_HD inline bool clipToBox(const ClipBox& b, glm::vec4& v) {
         if (a > extent[c]) unit = glm::max(unit, a / extent[c]);
     }
     if (unit <= 0.f) return false;
-    v = center + d / unit;
+    const float inv = 1.f / unit;  // one division for the four channels
+    v = center + d * inv;
     return true;
 }
 
 /// The final blend (step 5 above).
 LOOM_HD inline glm::vec4 blend(const TaaParams& p, const glm::vec4& current, float currentLuma,
                                const glm::vec4& history, float historyLuma) {
+    // wh / (wc + wh) with both weights multiplied by (1 + Yc)(1 + Yh): one division.
     float wc = p.alpha, wh = 1.f - p.alpha;
     if (p.antiFlicker) {
-        wc /= 1.f + glm::max(currentLuma, 0.f);
-        wh /= 1.f + glm::max(historyLuma, 0.f);
+        wc *= 1.f + glm::max(historyLuma, 0.f);
+        wh *= 1.f + glm::max(currentLuma, 0.f);
     }
     const float sum = wc + wh;
     const float k = sum > 0.f ? wh / sum : 0.f;

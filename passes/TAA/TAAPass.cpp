@@ -352,8 +352,9 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             }
             const FloatMask clipped = hn::And(useHistory, hn::Gt(unit, zero));
             FloatVec cv[4];
+            const FloatVec inv = hn::Div(hn::Set(d, 1.f), unit);
             for (int ch = 0; ch < 4; ++ch)
-                cv[ch] = hn::IfThenElse(clipped, hn::Add(center[ch], hn::Div(delta[ch], unit)), hv[ch]);
+                cv[ch] = hn::IfThenElse(clipped, hn::Add(center[ch], hn::Mul(delta[ch], inv)), hv[ch]);
             // fromYCoCg where clipped; the sampled RGB elsewhere.
             hr = hn::IfThenElse(clipped, hn::Sub(hn::Add(cv[0], cv[1]), cv[2]), hr);
             hg = hn::IfThenElse(clipped, hn::Add(cv[0], cv[2]), hg);
@@ -364,8 +365,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             if (p.antiFlicker) {
                 FloatVec yc, coc, cgc;
                 toYCoCgVec(d, cr, cgr, cb, yc, coc, cgc);
-                wc = hn::Div(wc, hn::Add(hn::Set(d, 1.f), hn::Max(yc, zero)));
-                wh = hn::Div(wh, hn::Add(hn::Set(d, 1.f), hn::Max(cv[0], zero)));
+                wc = hn::Mul(wc, hn::Add(hn::Set(d, 1.f), hn::Max(cv[0], zero)));
+                wh = hn::Mul(wh, hn::Add(hn::Set(d, 1.f), hn::Max(yc, zero)));
             }
             const FloatVec wsum = hn::Add(wc, wh);
             const FloatVec k = hn::IfThenElseZero(hn::Gt(wsum, zero), hn::Div(wh, wsum));
