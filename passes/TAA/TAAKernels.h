@@ -26,7 +26,8 @@
 //   5. Blend with anti-flicker (Karis 2014, after T. Lottes): weights
 //        wc = alpha / (1 + Yc),  wh = (1 - alpha) / (1 + Yh),
 //      Yc and Yh the (non-negative) YCoCg luma of current and clipped history;
-//      out = c + wh / (wc + wh) (h - c). Luminance weighting stops a bright
+//      out = c + wh / (wc + wh) (h - c), computed as (1 - alpha)(1 + Yc) /
+//      (alpha (1 + Yh) + (1 - alpha)(1 + Yc)). Luminance weighting stops a bright
 //      sample (a firefly, a jittered specular) from dominating the average,
 //      which is what makes plain alpha blending of HDR colour flicker.
 //      Written as c + k (h - c) so that h == c gives exactly c.
@@ -172,20 +173,23 @@ LOOM_HD inline bool previousPosition(uint32_t x, uint32_t y, uint32_t width, uin
 }
 
 /// Bicubic (Catmull-Rom) history at a texel-centre position. Integer
-/// positions read one texel.
+/// positions read one texel. The 4x4 sum is formed as (even taps) + (odd
+/// taps) of each row, weighted by row, with the even and odd halves added
+/// last: the order in which the CPU path adds pairs of texels with 256-bit
+/// vectors, so the two give the same bits.
 LOOM_HD inline glm::vec4 sampleHistory(const ClampedImage<glm::vec4>& history, const glm::vec2& pos) {
     const float fx0 = glm::floor(pos.x), fy0 = glm::floor(pos.y);
     const int ix = int(fx0), iy = int(fy0);
     const float fx = pos.x - fx0, fy = pos.y - fy0;
     if (fx == 0.f && fy == 0.f) return history.at(ix, iy);
     const glm::vec4 wx = catmullRomWeights(fx), wy = catmullRomWeights(fy);
-    glm::vec4 result(0.f);
+    glm::vec4 even(0.f), odd(0.f);
     for (int j = 0; j < 4; ++j) {
-        glm::vec4 row(0.f);
-        for (int i = 0; i < 4; ++i) row += wx[i] * history.at(ix - 1 + i, iy - 1 + j);
-        result += wy[j] * row;
+        const int ty = iy - 1 + j;
+        even += wy[j] * (wx[0] * history.at(ix - 1, ty) + wx[2] * history.at(ix + 1, ty));
+        odd += wy[j] * (wx[1] * history.at(ix, ty) + wx[3] * history.at(ix + 2, ty));
     }
-    return result;
+    return even + odd;
 }
 
 /// The history point moved along the line to the box centre into the box
@@ -201,17 +205,19 @@ LOOM_HD inline bool clipToBox(const ClipBox& b, glm::vec4& v) {
         if (a > extent[c]) unit = glm::max(unit, a / extent[c]);
     }
     if (unit <= 0.f) return false;
-    v = center + d / unit;
+    const float inv = 1.f / unit;  // one division for the four channels
+    v = center + d * inv;
     return true;
 }
 
 /// The final blend (step 5 above).
 LOOM_HD inline glm::vec4 blend(const TaaParams& p, const glm::vec4& current, float currentLuma,
                                const glm::vec4& history, float historyLuma) {
+    // wh / (wc + wh) with both weights multiplied by (1 + Yc)(1 + Yh): one division.
     float wc = p.alpha, wh = 1.f - p.alpha;
     if (p.antiFlicker) {
-        wc /= 1.f + glm::max(currentLuma, 0.f);
-        wh /= 1.f + glm::max(historyLuma, 0.f);
+        wc *= 1.f + glm::max(historyLuma, 0.f);
+        wh *= 1.f + glm::max(currentLuma, 0.f);
     }
     const float sum = wc + wh;
     const float k = sum > 0.f ? wh / sum : 0.f;

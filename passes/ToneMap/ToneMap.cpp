@@ -1,5 +1,7 @@
 #include "ToneMap.h"
 
+#include <hwy/highway.h>
+
 #include <atomic>
 #include <cmath>
 #include <vector>
@@ -25,17 +27,230 @@ const char kStatMeasured[] = "measuredLuminance";
 const char kStatAdapted[] = "adaptedLuminance";
 const char kStatNonFinite[] = "nonFinite";
 
-constexpr uint32_t kTile = kDefaultTileSize;
+// Work is split into bands of whole rows (parallelFor2D over a 1 x height domain): long contiguous runs keep the
+// hardware prefetchers streaming, which this memory-bound pass needs. One partial log-average sum per band.
+constexpr uint32_t kBandRows = 8;
 
-uint32_t tilesAcross(uint32_t size) {
-    return (size + kTile - 1) / kTile;
+
+namespace hn = hwy::HWY_NAMESPACE;
+using FloatTag = hn::ScalableTag<float>;
+using IntTag = hn::RebindToSigned<FloatTag>;
+using FloatVec = hn::Vec<FloatTag>;
+using IntVec = hn::Vec<IntTag>;
+
+// The vector path below computes exactly what ToneMapKernels.h computes per pixel: the same operations in the same
+// order (the plugin is built without FMA contraction, and the vector min / max are chosen to treat NaN as the
+// scalar comparisons do), so its output is bit-identical to the reference kernel; a test checks it.
+
+/// Channel exposure: NaN and negatives -> 0 (x86 max returns its second operand for NaN), clamp at kMaxExposed.
+HWY_INLINE FloatVec exposeVec(FloatTag d, FloatVec v, FloatVec scale) {
+    return hn::Min(hn::Mul(hn::Max(v, hn::Zero(d)), scale), hn::Set(d, tonemap::kMaxExposed));
 }
 
-/// Maps every pixel of src to dst (and dstFloat when given) with operator Op; returns the number of pixels with a
-/// non-finite channel (they map to finite values like any other).
+HWY_INLINE FloatVec saturateVec(FloatTag d, FloatVec v) {
+    return hn::Min(hn::Max(v, hn::Zero(d)), hn::Set(d, 1.f));
+}
+
+template <Operator Op>
+HWY_INLINE FloatVec operatorVec(FloatTag d, FloatVec v, const ToneMapParams& p) {
+    const FloatVec one = hn::Set(d, 1.f);
+    if constexpr (Op == Operator::Linear) {
+        return v;
+    } else if constexpr (Op == Operator::Reinhard) {
+        return hn::Div(v, hn::Add(one, v));
+    } else if constexpr (Op == Operator::ModifiedReinhard) {
+        return hn::Div(hn::Mul(v, hn::Add(one, hn::Mul(v, hn::Set(d, p.invWhiteSquared)))), hn::Add(one, v));
+    } else if constexpr (Op == Operator::Aces) {
+        const FloatVec num = hn::Mul(v, hn::Add(hn::Mul(hn::Set(d, 2.51f), v), hn::Set(d, 0.03f)));
+        const FloatVec den =
+            hn::Add(hn::Mul(v, hn::Add(hn::Mul(hn::Set(d, 2.43f), v), hn::Set(d, 0.59f))), hn::Set(d, 0.14f));
+        return hn::Div(num, den);
+    } else {
+        using namespace tonemap;
+        const FloatVec a = hn::Set(d, kHableA);
+        const FloatVec num =
+            hn::Add(hn::Mul(v, hn::Add(hn::Mul(a, v), hn::Set(d, kHableC * kHableB))), hn::Set(d, kHableD * kHableE));
+        const FloatVec den =
+            hn::Add(hn::Mul(v, hn::Add(hn::Mul(a, v), hn::Set(d, kHableB))), hn::Set(d, kHableD * kHableF));
+        return hn::Mul(hn::Sub(hn::Div(num, den), hn::Set(d, kHableE / kHableF)), hn::Set(d, p.hableInvWhite));
+    }
+}
+
+/// encodeSrgb8 on a vector of saturated values: one gather per vector.
+HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const tonemap::SrgbEncodeTable& t, FloatVec v) {
+    using Table = tonemap::SrgbEncodeTable;
+    const IntTag di;
+    const IntVec bits = hn::BitCast(di, v);
+    IntVec index =
+        hn::Sub(hn::ShiftRight<Table::kShift>(bits), hn::Set(di, int32_t(Table::kFirstBits >> Table::kShift)));
+    index = hn::Min(hn::Max(index, hn::Zero(di)), hn::Set(di, int32_t(Table::kBuckets - 1)));  // lanes below are masked
+    const IntVec entry = hn::GatherIndex(di, t.entry, index);
+    const IntVec offset = hn::And(bits, hn::Set(di, int32_t(Table::kOffsetMask)));
+    // offset >= threshold offset, as "not less than" (both non-negative).
+    const auto reached = hn::Not(hn::Lt(offset, hn::ShiftRight<8>(entry)));
+    IntVec code = hn::Add(hn::And(entry, hn::Set(di, 255)), hn::IfThenElseZero(reached, hn::Set(di, 1)));
+    code = hn::IfThenZeroElse(hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits))), code);
+    return hn::IfThenElse(hn::RebindMask(di, hn::Ge(v, hn::Set(d, 1.f))), hn::Set(di, 255), code);
+}
+
+/// Lanes with a non-finite value.
+HWY_INLINE hn::Mask<IntTag> nonFiniteVec(FloatVec v) {
+    const IntTag di;
+    const IntVec exponent = hn::Set(di, 0x7F800000);
+    return hn::Eq(hn::And(hn::BitCast(di, v), exponent), exponent);
+}
+
+/// One row segment [x0, x1) through the operator: vectors of pixels, then the reference kernel for the rest.
+/// Returns the pixels with a non-finite channel.
+template <Operator Op>
+uint64_t mapRow(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, const glm::vec4* in, uint32_t* out,
+                glm::vec4* outFloat, uint32_t x0, uint32_t x1) {
+    const FloatTag d;
+    const IntTag di;
+    const uint32_t n = uint32_t(hn::Lanes(d));
+    const FloatVec scale = hn::Set(d, p.scale);
+    uint64_t nonFinite = 0;
+    uint32_t x = x0;
+    for (; x + n <= x1; x += n) {
+        FloatVec r, g, b, a;
+        hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x), r, g, b, a);
+        nonFinite += hn::CountTrue(
+            di, hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), hn::Or(nonFiniteVec(b), nonFiniteVec(a))));
+        r = saturateVec(d, operatorVec<Op>(d, exposeVec(d, r, scale), p));
+        g = saturateVec(d, operatorVec<Op>(d, exposeVec(d, g, scale), p));
+        b = saturateVec(d, operatorVec<Op>(d, exposeVec(d, b, scale), p));
+        a = saturateVec(d, a);
+        if (outFloat) hn::StoreInterleaved4(r, g, b, a, d, reinterpret_cast<float*>(outFloat + x));
+        const IntVec alpha = hn::ConvertTo(di, hn::Add(hn::Mul(a, hn::Set(d, 255.f)), hn::Set(d, 0.5f)));
+        IntVec packed = encodeSrgbVec(d, table, r);
+        packed = hn::Or(packed, hn::ShiftLeft<8>(encodeSrgbVec(d, table, g)));
+        packed = hn::Or(packed, hn::ShiftLeft<16>(encodeSrgbVec(d, table, b)));
+        packed = hn::Or(packed, hn::ShiftLeft<24>(alpha));
+        hn::StoreU(packed, di, reinterpret_cast<int32_t*>(out + x));
+    }
+    ToneMapParams scalar = p;
+    scalar.op = Op;
+    for (; x < x1; ++x) {
+        const glm::vec4 c = in[x];
+        nonFinite +=
+            !tonemap::isFinite(c.x) || !tonemap::isFinite(c.y) || !tonemap::isFinite(c.z) || !tonemap::isFinite(c.w);
+        const glm::vec4 mapped = tonemap::toneMapPixel(scalar, c);
+        out[x] = tonemap::packSrgb8(table, mapped);
+        if (outFloat) outFloat[x] = mapped;
+    }
+    return nonFinite;
+}
+
+/// The same row with the per-pixel reference kernel only.
+uint64_t mapRowReference(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, const glm::vec4* in,
+                         uint32_t* out, glm::vec4* outFloat, uint32_t x0, uint32_t x1) {
+    uint64_t nonFinite = 0;
+    for (uint32_t x = x0; x < x1; ++x) {
+        const glm::vec4 c = in[x];
+        nonFinite +=
+            !tonemap::isFinite(c.x) || !tonemap::isFinite(c.y) || !tonemap::isFinite(c.z) || !tonemap::isFinite(c.w);
+        const glm::vec4 mapped = tonemap::toneMapPixel(p, c);
+        out[x] = tonemap::packSrgb8(table, mapped);
+        if (outFloat) outFloat[x] = mapped;
+    }
+    return nonFinite;
+}
+
+/// Sum of the log-luminance terms of a row segment and the number of finite pixels in it. Vector lanes sum in
+/// float, then the lanes and the scalar rest are added in a fixed order.
+void logLuminanceRow(const glm::vec4* in, uint32_t x0, uint32_t x1, double& sum, uint64_t& count) {
+    const FloatTag d;
+    const IntTag di;
+    const uint32_t n = uint32_t(hn::Lanes(d));
+    FloatVec acc = hn::Zero(d);
+    IntVec finiteCount = hn::Zero(di);
+    const FloatVec one = hn::Set(d, 1.f);
+    uint32_t x = x0;
+    for (; x + n <= x1; x += n) {
+        FloatVec r, g, b, a;
+        hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x), r, g, b, a);
+        const auto bad = hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), nonFiniteVec(b));
+        r = exposeVec(d, r, one);
+        g = exposeVec(d, g, one);
+        b = exposeVec(d, b, one);
+        const FloatVec lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
+                                     hn::Mul(hn::Set(d, 0.0722f), b));
+        const FloatVec v = hn::Add(hn::Set(d, tonemap::kLogEpsilon), lum);
+        // fastLog2, lane-wise.
+        const IntVec bits = hn::BitCast(di, v);
+        IntVec exponent = hn::Sub(hn::ShiftRight<23>(bits), hn::Set(di, 127));
+        FloatVec m = hn::BitCast(d, hn::Or(hn::And(bits, hn::Set(di, 0x007FFFFF)), hn::Set(di, 0x3F800000)));
+        const auto high = hn::Gt(m, hn::Set(d, 1.41421356f));
+        m = hn::IfThenElse(high, hn::Mul(m, hn::Set(d, 0.5f)), m);
+        exponent = hn::Add(exponent, hn::IfThenElseZero(hn::RebindMask(di, high), hn::Set(di, 1)));
+        const FloatVec t = hn::Div(hn::Sub(m, one), hn::Add(m, one));
+        const FloatVec t2 = hn::Mul(t, t);
+        FloatVec series = hn::Add(hn::Set(d, 1.f / 7.f), hn::Mul(t2, hn::Set(d, 1.f / 9.f)));
+        series = hn::Add(hn::Set(d, 1.f / 5.f), hn::Mul(t2, series));
+        series = hn::Add(hn::Set(d, 1.f / 3.f), hn::Mul(t2, series));
+        series = hn::Mul(t, hn::Add(one, hn::Mul(t2, series)));
+        const FloatVec term = hn::Add(hn::ConvertTo(d, exponent), hn::Mul(hn::Set(d, 2.8853900817779268f), series));
+        acc = hn::Add(acc, hn::IfThenZeroElse(hn::RebindMask(d, bad), term));
+        finiteCount = hn::Add(finiteCount, hn::IfThenZeroElse(bad, hn::Set(di, 1)));
+    }
+    alignas(64) float lanes[hn::MaxLanes(d)];
+    alignas(64) int32_t counts[hn::MaxLanes(d)];
+    hn::Store(acc, d, lanes);
+    hn::Store(finiteCount, di, counts);
+    for (uint32_t i = 0; i < n; ++i) {
+        sum += double(lanes[i]);
+        count += uint64_t(counts[i]);
+    }
+    for (; x < x1; ++x) {
+        float term;
+        if (tonemap::logLuminance(in[x], term)) {
+            sum += double(term);
+            ++count;
+        }
+    }
+}
+
+/// The log-luminance terms of a row segment, by the reference kernel.
+void logLuminanceRowReference(const glm::vec4* in, uint32_t x0, uint32_t x1, double& sum, uint64_t& count) {
+    for (uint32_t x = x0; x < x1; ++x) {
+        float term;
+        if (tonemap::logLuminance(in[x], term)) {
+            sum += double(term);
+            ++count;
+        }
+    }
+}
+
+/// Per-band partial sums of the log-average, added in band order at the end: the same bits for any thread count.
+struct LogAverageSums {
+    explicit LogAverageSums(uint32_t height)
+        : sums((height + kBandRows - 1) / kBandRows, 0.0), counts(sums.size(), 0) {}
+    void store(const Tile& band, double sum, uint64_t count) {
+        sums[band.y0 / kBandRows] = sum;
+        counts[band.y0 / kBandRows] = count;
+    }
+    /// exp2 of the mean term; false when no pixel was finite.
+    bool logAverage(double& result) const {
+        double sum = 0.0;
+        uint64_t count = 0;
+        for (size_t i = 0; i < sums.size(); ++i) {
+            sum += sums[i];
+            count += counts[i];
+        }
+        if (count == 0) return false;
+        result = std::exp2(sum / double(count));
+        return true;
+    }
+    std::vector<double> sums;
+    std::vector<uint64_t> counts;
+};
+
+/// Maps every pixel of src to dst (and dstFloat when given) with operator Op, and, when `measure` is given, sums
+/// the log-luminance of the same rows while they are in cache (one read of src for both). Returns the number of
+/// pixels with a non-finite channel (they map to finite values like any other).
 template <Operator Op>
 uint64_t mapFrame(const ToneMapParams& params, const tonemap::SrgbEncodeTable& table, const Texture& srcTexture,
-                  Texture& dstTexture, Texture* dstFloatTexture) {
+                  Texture& dstTexture, Texture* dstFloatTexture, LogAverageSums* measure, bool reference) {
     ToneMapParams p = params;
     p.op = Op;  // a constant inside the loop: the switch in toneMapChannel folds away
     const auto src = srcTexture.view<glm::vec4>();
@@ -43,26 +258,29 @@ uint64_t mapFrame(const ToneMapParams& params, const tonemap::SrgbEncodeTable& t
     ImageView<glm::vec4> dstFloat{};
     if (dstFloatTexture) dstFloat = dstFloatTexture->view<glm::vec4>();
     std::atomic<uint64_t> nonFinite{0};
+    const uint32_t width = src.width;
     parallelFor2D(
-        src.width, src.height,
+        1, src.height,
         [&](const Tile& t) {
             uint64_t tileNonFinite = 0;
+            double logSum = 0.0;
+            uint64_t logCount = 0;
             for (uint32_t y = t.y0; y < t.y1; ++y) {
                 const glm::vec4* in = src.row(y);
-                uint32_t* out = dst.row(y);
-                glm::vec4* outFloat = dstFloatTexture ? dstFloat.row(y) : nullptr;
-                for (uint32_t x = t.x0; x < t.x1; ++x) {
-                    const glm::vec4 c = in[x];
-                    tileNonFinite += !(tonemap::isFinite(c.x) && tonemap::isFinite(c.y) && tonemap::isFinite(c.z) &&
-                                       tonemap::isFinite(c.w));
-                    const glm::vec4 mapped = tonemap::toneMapPixel(p, c);
-                    out[x] = tonemap::packSrgb8(table, mapped);
-                    if (outFloat) outFloat[x] = mapped;
+                if (measure) {
+                    if (reference)
+                        logLuminanceRowReference(in, 0, width, logSum, logCount);
+                    else
+                        logLuminanceRow(in, 0, width, logSum, logCount);
                 }
+                glm::vec4* outFloat = dstFloatTexture ? dstFloat.row(y) : nullptr;
+                tileNonFinite += reference ? mapRowReference(p, table, in, dst.row(y), outFloat, 0, width)
+                                           : mapRow<Op>(p, table, in, dst.row(y), outFloat, 0, width);
             }
+            if (measure) measure->store(t, logSum, logCount);
             nonFinite += tileNonFinite;  // integers: the same total in any order
         },
-        kTile);
+        kBandRows);
     return nonFinite;
 }
 
@@ -103,47 +321,28 @@ void ToneMapPass::declareParams(ParamList& p) {
     p.add("whitePoint", &mWhitePoint, 4.f)
         .range(1e-3, 1e6)
         .doc("modifiedReinhard: the smallest exposed value that maps to white");
+    p.add("reference", &mReference, false)
+        .doc("run the plain per-pixel reference kernel instead of the vector CPU path (same output, slower)");
 }
 
-bool ToneMapPass::measureLogAverage(const Texture& srcTexture, double& logAverage, uint64_t& finitePixels) const {
+bool ToneMapPass::measureLogAverage(const Texture& srcTexture, double& logAverage) const {
     const auto src = srcTexture.view<glm::vec4>();
-    const uint32_t tilesX = tilesAcross(src.width), tilesY = tilesAcross(src.height);
-    std::vector<double> sums(size_t(tilesX) * tilesY, 0.0);
-    std::vector<uint64_t> counts(sums.size(), 0);
+    LogAverageSums sums(src.height);
     parallelFor2D(
-        src.width, src.height,
+        1, src.height,
         [&](const Tile& t) {
-            double tileSum = 0.0;
-            uint64_t tileCount = 0;
+            double sum = 0.0;
+            uint64_t count = 0;
             for (uint32_t y = t.y0; y < t.y1; ++y) {
-                const glm::vec4* in = src.row(y);
-                // Rows are summed in float (at most kTile terms of magnitude < 128), tiles in double.
-                float rowSum = 0.f;
-                uint32_t rowCount = 0;
-                for (uint32_t x = t.x0; x < t.x1; ++x) {
-                    float term;
-                    if (tonemap::logLuminance(in[x], term)) {
-                        rowSum += term;
-                        ++rowCount;
-                    }
-                }
-                tileSum += double(rowSum);
-                tileCount += rowCount;
+                if (mReference)
+                    logLuminanceRowReference(src.row(y), 0, src.width, sum, count);
+                else
+                    logLuminanceRow(src.row(y), 0, src.width, sum, count);
             }
-            const size_t index = size_t(t.y0 / kTile) * tilesX + t.x0 / kTile;
-            sums[index] = tileSum;
-            counts[index] = tileCount;
+            sums.store(t, sum, count);
         },
-        kTile);
-    double sum = 0.0;
-    finitePixels = 0;
-    for (size_t i = 0; i < sums.size(); ++i) {  // fixed order: bit-identical for any thread count
-        sum += sums[i];
-        finitePixels += counts[i];
-    }
-    if (finitePixels == 0) return false;
-    logAverage = std::exp2(sum / double(finitePixels));
-    return true;
+        kBandRows);
+    return sums.logAverage(logAverage);
 }
 
 void ToneMapPass::execute(PassContext& ctx) {
@@ -158,48 +357,64 @@ void ToneMapPass::execute(PassContext& ctx) {
     const float timeHi = float(time);
     const float timeLo = float(time - double(timeHi));
 
+    // Auto exposure. While adapting (history valid, adaptationTime > 0), this frame is exposed by the luminance
+    // adapted up to the previous frame, and its own log-average is measured in the same pass as the mapping (one
+    // read of src); the adapted value then moves towards it. Otherwise (first frame, reset, adaptationTime 0, time
+    // going backwards) src is measured first and the frame is exposed by its own log-average: immediate adaptation.
     double scale = std::exp2(double(mExposureEv));
     float adapted = 0.f, measured = 0.f;
+    bool measureWhileMapping = false;
+    double dt = 0.0;
     if (mAutoExposure) {
-        double logAverage = 0.0;
-        uint64_t finitePixels = 0;
         const bool prevUsable = ctx.historyValid() && prevState.x > 0.f && tonemap::isFinite(prevState.x);
-        const double dt = time - (double(prevState.z) + double(prevState.w));
-        if (measureLogAverage(src, logAverage, finitePixels)) {
-            measured = float(logAverage);
-            adapted = prevUsable && dt >= 0.0 ? tonemap::adaptLuminance(prevState.x, measured, dt, mAdaptationTime)
-                                              : measured;
+        dt = time - (double(prevState.z) + double(prevState.w));
+        measureWhileMapping = prevUsable && dt >= 0.0 && mAdaptationTime > 0.f;
+        if (measureWhileMapping) {
+            adapted = prevState.x;
         } else {
+            double logAverage = 0.0;
             // Nothing finite to measure: keep the previous adaptation, or the key itself (scale 1).
-            adapted = prevUsable ? prevState.x : mKey;
+            adapted = measureLogAverage(src, logAverage) ? (measured = float(logAverage))
+                      : prevUsable                       ? prevState.x
+                                                         : mKey;
         }
         scale *= double(mKey) / double(adapted);
     }
-    state = glm::vec4(adapted, measured, timeHi, timeLo);
 
     ToneMapParams params;
     params.scale = float(scale);
     params.invWhiteSquared = 1.f / (mWhitePoint * mWhitePoint);
     params.hableInvWhite = 1.f / tonemap::hableCurve(tonemap::kHableWhite);
 
+    std::unique_ptr<LogAverageSums> sums;
+    if (measureWhileMapping) sums = std::make_unique<LogAverageSums>(src.height());
     uint64_t nonFinite = 0;
     switch (mOperator) {
         case Operator::Linear:
-            nonFinite = mapFrame<Operator::Linear>(params, *mSrgbTable, src, dst, dstFloat);
+            nonFinite = mapFrame<Operator::Linear>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
             break;
         case Operator::Reinhard:
-            nonFinite = mapFrame<Operator::Reinhard>(params, *mSrgbTable, src, dst, dstFloat);
+            nonFinite = mapFrame<Operator::Reinhard>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
             break;
         case Operator::ModifiedReinhard:
-            nonFinite = mapFrame<Operator::ModifiedReinhard>(params, *mSrgbTable, src, dst, dstFloat);
+            nonFinite =
+                mapFrame<Operator::ModifiedReinhard>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
             break;
         case Operator::Aces:
-            nonFinite = mapFrame<Operator::Aces>(params, *mSrgbTable, src, dst, dstFloat);
+            nonFinite = mapFrame<Operator::Aces>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
             break;
         case Operator::Hable:
-            nonFinite = mapFrame<Operator::Hable>(params, *mSrgbTable, src, dst, dstFloat);
+            nonFinite = mapFrame<Operator::Hable>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
             break;
     }
+    if (sums) {
+        double logAverage = 0.0;
+        if (sums->logAverage(logAverage)) {
+            measured = float(logAverage);
+            adapted = tonemap::adaptLuminance(prevState.x, measured, dt, mAdaptationTime);
+        }  // else: nothing finite, the adaptation stays where it was
+    }
+    state = glm::vec4(adapted, measured, timeHi, timeLo);
 
     ctx.stats().set(kStatExposure, scale);
     ctx.stats().set(kStatMeasured, measured);

@@ -13,6 +13,18 @@
 //                                      luminance, z + w the frame time in seconds (a float pair
 //                                      whose sum is the double time), so the time step needs no
 //                                      state in the pass.
+//
+// Auto exposure, frame by frame: with valid history and adaptationTime > 0 a
+// frame is exposed by the luminance adapted up to the previous frame, and its
+// own log-average is measured while it is mapped (one read of src, the pass is
+// memory bound); the adapted luminance then moves towards it,
+//   L(t + dt) = Lmeasured + (L(t) - Lmeasured) exp(-dt / adaptationTime).
+// On the first frame, after a reset, with adaptationTime 0 or when time runs
+// backwards, src is measured first and the frame is exposed by its own
+// log-average (immediate adaptation). The scale is 2^EV * key / L.
+//
+// The CPU path (ToneMap.cpp) runs 8 pixels per AVX2 vector (Google Highway)
+// and gives the same bits as the per-pixel kernels (`reference` runs those).
 #include <memory>
 
 #include "ToneMapKernels.h"
@@ -32,7 +44,7 @@ public:
 private:
     /// Log-average luminance of src over its finite pixels (deterministic: per-tile sums added in tile order);
     /// returns false when no pixel is finite.
-    bool measureLogAverage(const Texture& src, double& logAverage, uint64_t& finitePixels) const;
+    bool measureLogAverage(const Texture& src, double& logAverage) const;
 
     // Parameters.
     Operator mOperator = Operator::Aces;
@@ -41,6 +53,7 @@ private:
     float mKey = 0.18f;
     float mAdaptationTime = 1.f;
     float mWhitePoint = 4.f;
+    bool mReference = false;
 
     std::unique_ptr<tonemap::SrgbEncodeTable> mSrgbTable;
 };

@@ -126,13 +126,18 @@ inline double srgbOetf(double v) {
 /// boundary (the code changes by at most 112 * 2^-8 < 1 across one: the
 /// OETF's slope in log space, 255 * 1.055 / 2.4 * v^(1/2.4), is <= 112), so
 /// the code is the bucket's first code plus one when v reaches the next
-/// code's threshold. Below 2^-16 the code is 0 (code 1 starts at ~1.5e-4).
+/// code's threshold. A bucket spans 2^15 consecutive float bit patterns, so
+/// the threshold is stored as its offset in the bucket (15 bits, 2^15 = not
+/// in this bucket) next to the first code: one 32-bit entry, one lookup (one
+/// vector gather per channel on the CPU path). Below 2^-16 the code is 0
+/// (code 1 starts at ~1.5e-4).
 struct SrgbEncodeTable {
     static constexpr uint32_t kFirstBits = 111u << 23;  ///< 2^-16
     static constexpr uint32_t kShift = 15;              ///< keeps exponent + 8 mantissa bits
     static constexpr uint32_t kBuckets = 16u << 8;
-    float nextThreshold[kBuckets];  ///< smallest float whose code is base + 1 (or above the bucket)
-    uint8_t base[kBuckets];         ///< code of the bucket's smallest value
+    static constexpr uint32_t kOffsetMask = (1u << kShift) - 1u;
+    /// Per bucket: first code (bits 0-7) | offset of the next code's threshold in the bucket << 8.
+    int32_t entry[kBuckets];
 };
 
 /// Code of v in [0, 1] (v already saturated: no NaN).
@@ -141,7 +146,8 @@ LOOM_HD inline uint32_t encodeSrgb8(const SrgbEncodeTable& t, float v) {
     if (bits < SrgbEncodeTable::kFirstBits) return 0u;
     if (v >= 1.f) return 255u;
     const uint32_t i = (bits >> SrgbEncodeTable::kShift) - (SrgbEncodeTable::kFirstBits >> SrgbEncodeTable::kShift);
-    return uint32_t(t.base[i]) + (v >= t.nextThreshold[i] ? 1u : 0u);
+    const uint32_t e = uint32_t(t.entry[i]);
+    return (e & 255u) + ((bits & SrgbEncodeTable::kOffsetMask) >= (e >> 8) ? 1u : 0u);
 }
 
 /// The exact code of a float, computed in double (reference for the table).
@@ -169,10 +175,12 @@ inline void buildSrgbEncodeTable(SrgbEncodeTable& t) {
     }
     threshold[256] = 2.f;
     for (uint32_t i = 0; i < SrgbEncodeTable::kBuckets; ++i) {
-        const float lo = bitsToFloat(SrgbEncodeTable::kFirstBits + (i << SrgbEncodeTable::kShift));
-        const uint32_t code = srgbCodeExact(lo);
-        t.base[i] = uint8_t(code);
-        t.nextThreshold[i] = threshold[code + 1];
+        const uint32_t loBits = SrgbEncodeTable::kFirstBits + (i << SrgbEncodeTable::kShift);
+        const uint32_t code = srgbCodeExact(bitsToFloat(loBits));
+        const uint32_t next = floatBits(threshold[code + 1]);
+        const uint32_t offset =
+            next - loBits > (1u << SrgbEncodeTable::kShift) ? (1u << SrgbEncodeTable::kShift) : next - loBits;
+        t.entry[i] = int32_t(code | (offset << 8));
     }
 }
 

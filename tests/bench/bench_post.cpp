@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "loom/Parallel.h"
 #include "loom/RenderGraph.h"
 #include "loom/Texture.h"
 
@@ -128,23 +129,41 @@ BENCHMARK(BM_CopyFrameRGBA32F)->UseManualTime()->Unit(benchmark::kMillisecond);
 
 void BM_TAA(benchmark::State& state) {
     const bool moving = state.range(0) != 0, reference = state.range(1) != 0;
+    ThreadLimit limit(unsigned(state.range(2)));
     auto graph = makeGraph(moving ? "BenchSourceMoving" : "BenchSourceStatic", "TAAPass", {{"reference", reference}},
                            "colorIn", {"Pass.colorOut"});
     runFrames(state, *graph);
 }
-// Args: moving (0/1), reference kernel (0/1).
-BENCHMARK(BM_TAA)->Args({1, 0})->Args({0, 0})->Args({1, 1})->UseManualTime()->Unit(benchmark::kMillisecond);
+// Args: moving (0/1), reference kernel (0/1), threads (0 = all). With one thread the CPU column is the pass's own
+// cost even on a loaded machine.
+BENCHMARK(BM_TAA)
+    ->Args({1, 0, 0})
+    ->Args({0, 0, 0})
+    ->Args({1, 1, 0})
+    ->Args({1, 0, 1})
+    ->Args({0, 0, 1})
+    ->UseManualTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_ToneMap(benchmark::State& state) {
     const bool autoExposure = state.range(0) != 0, withFloat = state.range(1) != 0;
+    ThreadLimit limit(unsigned(state.range(3)));
     std::vector<std::string> outputs = {"Pass.dst"};
     if (withFloat) outputs.push_back("Pass.dstFloat");
-    auto graph = makeGraph("BenchSourceStatic", "ToneMap", {{"operator", "aces"}, {"autoExposure", autoExposure}},
+    auto graph = makeGraph("BenchSourceStatic", "ToneMap",
+                           {{"operator", "aces"}, {"autoExposure", autoExposure}, {"reference", state.range(2) != 0}},
                            "src", outputs);
     runFrames(state, *graph);
 }
-// Args: auto exposure (0/1), dstFloat consumed (0/1).
-BENCHMARK(BM_ToneMap)->Args({1, 0})->Args({0, 0})->Args({1, 1})->UseManualTime()->Unit(benchmark::kMillisecond);
+// Args: auto exposure (0/1), dstFloat consumed (0/1), reference kernel (0/1), threads (0 = all).
+BENCHMARK(BM_ToneMap)
+    ->Args({1, 0, 0, 0})
+    ->Args({0, 0, 0, 0})
+    ->Args({1, 1, 0, 0})
+    ->Args({1, 0, 1, 0})
+    ->Args({1, 0, 0, 1})
+    ->UseManualTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_ToneMapOperator(benchmark::State& state) {
     const char* ops[] = {"linear", "reinhard", "modifiedReinhard", "aces", "hable"};

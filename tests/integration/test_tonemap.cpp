@@ -72,6 +72,12 @@ double rec709(const glm::vec4& c) {
     return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
 }
 
+std::unique_ptr<Texture> copyOf(const Texture& t) {
+    auto c = std::make_unique<Texture>(t.width(), t.height(), t.format());
+    c->copyFrom(t);
+    return c;
+}
+
 const char* const kOperators[] = {"linear", "reinhard", "modifiedReinhard", "aces", "hable"};
 
 /// ImageSource -> ToneMap, one frame at a time.
@@ -215,16 +221,28 @@ TEST(ToneMap, AutoExposureMapsTheLogAverageToTheKey) {
     // Half the image 16x brighter: the geometric mean of the two (epsilon included) is the new target.
     h.source->fn = [&](uint64_t, uint32_t x, uint32_t) { return x < 8 ? color * glm::vec4(16, 16, 16, 1) : color; };
     const double target = std::sqrt((1e-4 + 16.0 * lum) * (1e-4 + lum));
+    // While adapting, frame k is exposed by the luminance adapted up to frame k - 1 and then measured (one read of
+    // the input); the adapted value follows target + (start - target) exp(-t / tau).
+    double previous = logAverage;
     for (int k = 1; k <= 30; ++k) {
         h.run(dt);
         const double want = target + (logAverage - target) * std::exp(-double(k) * dt / tau);
         ASSERT_NEAR(h.stat("measuredLuminance"), target, 2e-6 * target) << "frame " << k;
         ASSERT_NEAR(h.stat("adaptedLuminance"), want, 1e-5 * want) << "frame " << k;
-        ASSERT_NEAR(h.stat("exposure"), 0.25 / want, 1e-5 * (0.25 / want)) << "frame " << k;
+        ASSERT_NEAR(h.stat("exposure"), 0.25 / previous, 1e-5 * (0.25 / previous)) << "frame " << k;
+        ASSERT_NEAR(h.mapped(12, 3).z, 0.4 * 0.25 / previous, 1e-5) << "frame " << k;
+        previous = want;
     }
     // After 30 frames = 1.2 s = 2.4 tau: within exp(-2.4) of the way; it keeps converging to key / target.
     for (int k = 0; k < 200; ++k) h.run(dt);
     EXPECT_NEAR(h.stat("exposure"), 0.25 / target, 1e-5 * 0.25 / target);
+
+    // adaptationTime 0: this frame is measured first and exposed by its own log-average.
+    h.graph.setParam("ToneMap", "adaptationTime", 0.f, "test");
+    h.source->fn = [&](uint64_t, uint32_t, uint32_t) { return color; };
+    h.run(dt);
+    EXPECT_NEAR(h.stat("exposure"), 0.25 / logAverage, 1e-5 * 0.25 / logAverage);
+    h.graph.setParam("ToneMap", "adaptationTime", 0.5f, "test");
 
     // A history reset adapts immediately again.
     h.graph.resetHistory();
@@ -372,6 +390,40 @@ TEST(ToneMap, IdenticalResultsForAnyThreadCount) {
     EXPECT_EQ(exposure[0], exposure[1]);
     EXPECT_TRUE(results[0][0]->samePixels(*results[1][0]));
     EXPECT_TRUE(results[0][1]->samePixels(*results[1][1]));
+}
+
+TEST(ToneMap, VectorPathEqualsTheReferenceKernel) {
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    const ImageFn input = [&](uint64_t, uint32_t x, uint32_t y) {
+        const uint32_t h = (x * 2654435761u) ^ (y * 40503u);
+        if (h % 53u == 0) return glm::vec4(nan, 1.f, inf, -inf);
+        const float v = float(h % 100000u) * 1e-3f * (h % 7u == 0 ? 1e-4f : 1.f);
+        return glm::vec4(v, 0.37f * v, v * v, float(h % 300u) / 256.f - 0.1f);
+    };
+    for (const char* op : kOperators) {
+        for (bool autoExposure : {false, true}) {
+            SCOPED_TRACE(std::string(op) + (autoExposure ? " auto" : ""));
+            std::unique_ptr<Texture> results[2][2];
+            double measured[2];
+            for (int reference = 0; reference < 2; ++reference) {
+                Harness h(nlohmann::json{{"operator", op},
+                                         {"exposure", 0.7f},
+                                         {"autoExposure", autoExposure},
+                                         {"reference", reference == 1}},
+                          true, 77, 41);  // rows that are not a multiple of the vector width
+                h.source->fn = input;
+                h.run();
+                measured[reference] = h.stat("measuredLuminance");
+                for (int i = 0; i < 2; ++i) results[reference][i] = copyOf(h.field(i == 0 ? "dst" : "dstFloat"));
+            }
+            // The log-average sums in a different order (vector lanes); the mapping itself is bit-identical.
+            EXPECT_NEAR(measured[0], measured[1], 1e-6 * std::max(1.0, measured[1]));
+            if (!autoExposure) {
+                EXPECT_TRUE(results[0][0]->samePixels(*results[1][0]));
+                EXPECT_TRUE(results[0][1]->samePixels(*results[1][1]));
+            }
+        }
+    }
 }
 
 TEST(ToneMap, ReflectionDoesNotDependOnParameters) {
