@@ -154,8 +154,8 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
     const bool lastVertex = bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
 
     // Next-event estimation: the shadow ray is left to the caller, with the contribution it carries when clear.
-    const float l0 = rng.next(), l1 = rng.next(), l2 = rng.next(), l3 = rng.next();
-    LightSample ls = sampleLight(lights, p, l0, l1, l2, l3);
+    const glm::vec2 l01 = rng.next2(), l23 = rng.next2();
+    LightSample ls = sampleLight(lights, p, l01.x, l01.y, l23.x, l23.y);
     if (ls.valid && (set.lightSampling != kBsdfOnly || ls.delta)) {
         const float cosI = glm::dot(n, ls.wi);
         if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
@@ -195,7 +195,8 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
     if (lastVertex) return request;
 
     // Continue the path by sampling the BRDF.
-    const float b0 = rng.next(), b1 = rng.next(), b2 = rng.next();
+    const glm::vec2 b01 = rng.next2();
+    const float b0 = b01.x, b1 = b01.y, b2 = rng.next();
     glm::vec3 wi;
     if (set.lambertOnly) {
         const glm::vec3 local = sampleCosineHemisphere(glm::vec2(b0, b1));
