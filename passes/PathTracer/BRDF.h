@@ -393,7 +393,7 @@ LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm:
     v.transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(v.wo.z));
     v.smithWo = std::sqrt(v.a2 + (1.f - v.a2) * v.wo.z * v.wo.z);
     v.invA2 = 1.f / v.a2;
-    v.invPiA2 = 1.f / (kPi * v.a2);
+    v.invPiA2 = v.invA2 * kInvPi;
     v.specPdfScale = v.pSpec / (2.f * (v.wo.z + v.smithWo));
     return v;
 }
@@ -425,8 +425,9 @@ LOOM_HD inline BrdfEval evalBrdfVertexLocal(const BrdfVertex& v, glm::vec3 wi) {
         D = r * g;
         DV = 0.5f * r;
     }
-    // |wo.h| = |wo.s| / |s| (Schlick's weight; off D's critical path).
-    const float VdotH = lenSq > 1e-12f ? std::fabs(glm::dot(wo, hSum)) / std::sqrt(lenSq) : 0.f;
+    // |wo.h| = |wo.s| / |s| (Schlick's weight). For unit wo and wi, |s|^2 = 2 (1 + wo.wi) = 2 wo.s, so this is
+    // sqrt(|wo.s| / 2): one square root and no division.
+    const float VdotH = lenSq > 1e-12f ? std::sqrt(0.5f * std::fabs(glm::dot(wo, hSum))) : 0.f;
     e.pdf = v.specPdfScale * D + (1.f - v.pSpec) * (wi.z * kInvPi);
     const float w = schlickWeight(VdotH);
     const glm::vec3 fSpec = v.f0 + (glm::vec3(1.f) - v.f0) * w;

@@ -182,9 +182,12 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
                     ++r.rays;
                     st.shadowDir = ls.wi;
                     st.shadowTMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
-                    const float w =
-                        (!ls.delta && set.lightSampling == kMis && !lastVertex) ? powerHeuristic(ls.pdf, bsdfPdf) : 1.f;
-                    st.shadowContrib = st.throughput * f * cosI * Li * (w / ls.pdf);
+                    // MIS weight over the light pdf, w / pdf, with the power heuristic's division shared:
+                    // (p^2 / (p^2 + q^2)) / p = p / (p^2 + q^2).
+                    const float wOverPdf = (!ls.delta && set.lightSampling == kMis && !lastVertex)
+                                               ? ls.pdf / (ls.pdf * ls.pdf + bsdfPdf * bsdfPdf)
+                                               : 1.f / ls.pdf;
+                    st.shadowContrib = st.throughput * f * cosI * Li * wOverPdf;
                     st.shadowNearSurface = nearSurface;
                     request = kShadowRay;
                 }
