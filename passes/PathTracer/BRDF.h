@@ -74,7 +74,7 @@ LOOM_HD inline float luminance(glm::vec3 c) {
 
 /// Orthonormal basis (t, b, n) with t x b = n.
 struct Frame {
-    glm::vec3 t, b, n;
+    glm::vec3 t{1.f, 0.f, 0.f}, b{0.f, 1.f, 0.f}, n{0.f, 0.f, 1.f};
 
     LOOM_HD glm::vec3 toLocal(glm::vec3 v) const { return glm::vec3(glm::dot(v, t), glm::dot(v, b), glm::dot(v, n)); }
     LOOM_HD glm::vec3 toWorld(glm::vec3 v) const { return t * v.x + b * v.y + n * v.z; }
