@@ -58,6 +58,12 @@ inline constexpr float kDielectricF0 = 0.04f;
 /// D's peak 1 / (pi alpha^2) ~ 3e5 stays far from float overflow.
 inline constexpr float kMinAlpha = 1e-3f;
 
+/// max(x, lo) with std::fmax's answer lo for a NaN x, as a compare and select: GCC keeps std::fmax a libm call
+/// (fmaxf) unless NaN and signed-zero rules are relaxed for the whole file.
+LOOM_HD inline float maxOr(float x, float lo) {
+    return x > lo ? x : lo;
+}
+
 /// Luminance of linear sRGB / Rec. 709 primaries (ITU-R BT.709, Y coefficients).
 LOOM_HD inline float luminance(glm::vec3 c) {
     return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b;
@@ -68,7 +74,7 @@ LOOM_HD inline float luminance(glm::vec3 c) {
 
 /// Orthonormal basis (t, b, n) with t x b = n.
 struct Frame {
-    glm::vec3 t, b, n;
+    glm::vec3 t{1.f, 0.f, 0.f}, b{0.f, 1.f, 0.f}, n{0.f, 0.f, 1.f};
 
     LOOM_HD glm::vec3 toLocal(glm::vec3 v) const { return glm::vec3(glm::dot(v, t), glm::dot(v, b), glm::dot(v, n)); }
     LOOM_HD glm::vec3 toWorld(glm::vec3 v) const { return t * v.x + b * v.y + n * v.z; }
@@ -111,7 +117,7 @@ LOOM_HD inline glm::vec2 sampleConcentricDisk(glm::vec2 u) {
 /// et al., "Physically Based Rendering"). pdf = cos(theta) / pi.
 LOOM_HD inline glm::vec3 sampleCosineHemisphere(glm::vec2 u) {
     const glm::vec2 d = sampleConcentricDisk(u);
-    return glm::vec3(d.x, d.y, std::sqrt(std::fmax(0.f, 1.f - d.x * d.x - d.y * d.y)));
+    return glm::vec3(d.x, d.y, std::sqrt(maxOr(1.f - d.x * d.x - d.y * d.y, 0.f)));
 }
 
 /// Solid-angle pdf of sampleCosineHemisphere() for a direction with n.w = cosTheta.
@@ -125,7 +131,7 @@ LOOM_HD inline float cosineHemispherePdf(float cosTheta) {
 /// GGX alpha from glTF perceptual roughness: alpha = roughness^2 (glTF Appendix B, "Specular BRDF"), clamped to
 /// kMinAlpha.
 LOOM_HD inline float alphaFromRoughness(float roughness) {
-    return std::fmax(roughness * roughness, kMinAlpha);
+    return maxOr(roughness * roughness, kMinAlpha);
 }
 
 /// GGX normal distribution D(h) for a unit local half vector (Walter et al. 2007, eq. 33), written as
@@ -183,9 +189,9 @@ LOOM_HD inline glm::vec3 sampleGgxVndf(glm::vec3 wo, float alpha, glm::vec2 u) {
     const float r = std::sqrt(u.x), phi = 2.f * kPi * u.y;
     const float p1 = r * std::cos(phi);
     const float s = 0.5f * (1.f + vh.z);
-    const float p2 = (1.f - s) * std::sqrt(std::fmax(0.f, 1.f - p1 * p1)) + s * r * std::sin(phi);
-    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(std::fmax(0.f, 1.f - p1 * p1 - p2 * p2)) * vh;
-    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, std::fmax(0.f, nh.z)));
+    const float p2 = (1.f - s) * std::sqrt(maxOr(1.f - p1 * p1, 0.f)) + s * r * std::sin(phi);
+    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(maxOr(1.f - p1 * p1 - p2 * p2, 0.f)) * vh;
+    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, maxOr(nh.z, 0.f)));
 }
 
 /// Solid-angle density of wi = reflect(-wo, h) for h drawn by sampleGgxVndf(): D_wo(h) / (4 wo.h) (Heitz 2018; the
@@ -387,7 +393,7 @@ LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm:
     v.transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(v.wo.z));
     v.smithWo = std::sqrt(v.a2 + (1.f - v.a2) * v.wo.z * v.wo.z);
     v.invA2 = 1.f / v.a2;
-    v.invPiA2 = 1.f / (kPi * v.a2);
+    v.invPiA2 = v.invA2 * kInvPi;
     v.specPdfScale = v.pSpec / (2.f * (v.wo.z + v.smithWo));
     return v;
 }
@@ -419,8 +425,9 @@ LOOM_HD inline BrdfEval evalBrdfVertexLocal(const BrdfVertex& v, glm::vec3 wi) {
         D = r * g;
         DV = 0.5f * r;
     }
-    // |wo.h| = |wo.s| / |s| (Schlick's weight; off D's critical path).
-    const float VdotH = lenSq > 1e-12f ? std::fabs(glm::dot(wo, hSum)) / std::sqrt(lenSq) : 0.f;
+    // |wo.h| = |wo.s| / |s| (Schlick's weight). For unit wo and wi, |s|^2 = 2 (1 + wo.wi) = 2 wo.s, so this is
+    // sqrt(|wo.s| / 2): one square root and no division.
+    const float VdotH = lenSq > 1e-12f ? std::sqrt(0.5f * std::fabs(glm::dot(wo, hSum))) : 0.f;
     e.pdf = v.specPdfScale * D + (1.f - v.pSpec) * (wi.z * kInvPi);
     const float w = schlickWeight(VdotH);
     const glm::vec3 fSpec = v.f0 + (glm::vec3(1.f) - v.f0) * w;

@@ -1,10 +1,12 @@
 #include "PathTracer.h"
 
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
-
-#include <spdlog/spdlog.h>
+#include <vector>
 
 #include "PathTracerKernels.h"
 #include "loom/CameraKernels.h"
@@ -26,19 +28,110 @@ const char kEmission[] = "emission";
 const char kDirect[] = "direct";
 const char kIndirect[] = "indirect";
 
-/// Adapts RayScene to the integrator's tracer interface.
-/// Adapts Embree to the integrator's tracer interface, with the inline ray
-/// functions (same rays and results as RayScene, without a library call per ray).
-struct EmbreeTracer {
-    const RayScene& rays;
-    RTCScene scene = static_cast<RTCScene>(rays.embreeScene());
-    RayHit intersect(glm::vec3 o, glm::vec3 d) const { return embreeIntersect(scene, o, d, 0.f, 1e30f); }
-    bool occluded(glm::vec3 o, glm::vec3 d, float tMin, float tMax) const {
-        return embreeOccluded(scene, o, d, tMin, tMax);
+bool finite(glm::vec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+/// Paths of one tile kept in flight together (see execute()).
+constexpr uint32_t kPathBatch = 256;
+
+/// Per-thread scratch of a tile: its primary hits and one batch of paths with their rays.
+struct TileScratch {
+    std::vector<RayHit> primary;
+    std::vector<glm::vec3> dir;
+    std::vector<pt::PathState> paths;
+    std::vector<RayHit> hits;
+    std::vector<uint32_t> live, shadow;  // indices into paths: live paths, paths with a shadow ray
+    std::vector<RTCRay> shadowRays;
+    std::vector<RTCRayHit> nextRays;
+    void resize(uint32_t pixels) {
+        if (primary.size() < pixels) {
+            primary.resize(pixels);
+            dir.resize(pixels);
+        }
+        if (paths.empty()) {
+            paths.resize(kPathBatch);
+            hits.resize(kPathBatch);
+            live.resize(kPathBatch);
+            shadow.resize(kPathBatch);
+            shadowRays.resize(kPathBatch);
+            nextRays.resize(kPathBatch);
+        }
     }
 };
 
-bool finite(glm::vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+TileScratch& tileScratch() {
+    thread_local TileScratch scratch;
+    return scratch;
+}
+
+/// Traces the pending shadow rays of paths ts.shadow[0, n) as one Embree stream of incoherent rays and resolves
+/// them into their paths (the same rays and tests as RayScene::occluded).
+void traceShadowRays(RTCScene scene, TileScratch& ts, uint32_t n) {
+    if (n == 0) return;
+    for (uint32_t j = 0; j < n; ++j) {
+        const pt::PathState& st = ts.paths[ts.shadow[j]];
+        RTCRay& r = ts.shadowRays[j];
+        r.org_x = st.rayOrigin.x;
+        r.org_y = st.rayOrigin.y;
+        r.org_z = st.rayOrigin.z;
+        r.tnear = 0.f;
+        r.dir_x = st.shadowDir.x;
+        r.dir_y = st.shadowDir.y;
+        r.dir_z = st.shadowDir.z;
+        r.time = 0.f;
+        r.tfar = st.shadowTMax;
+        r.mask = 0xFFFFFFFFu;
+        r.id = j;
+        r.flags = 0;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    rtcOccluded1M(scene, &ctx, ts.shadowRays.data(), n, sizeof(RTCRay));
+    for (uint32_t j = 0; j < n; ++j)
+        pt::resolveShadowRay(ts.paths[ts.shadow[j]], ts.shadowRays[j].tfar < 0.f);  // tfar = -inf: blocked
+}
+
+/// Traces the continuation rays of paths ts.live[0, n) as one incoherent Embree stream; hits go to ts.hits (the
+/// same rays and hits as RayScene::intersect).
+void traceNextRays(RTCScene scene, TileScratch& ts, uint32_t n) {
+    if (n == 0) return;
+    for (uint32_t j = 0; j < n; ++j) {
+        const pt::PathState& st = ts.paths[ts.live[j]];
+        RTCRayHit& rh = ts.nextRays[j];
+        rh.ray.org_x = st.rayOrigin.x;
+        rh.ray.org_y = st.rayOrigin.y;
+        rh.ray.org_z = st.rayOrigin.z;
+        rh.ray.tnear = 0.f;
+        rh.ray.dir_x = st.rayDir.x;
+        rh.ray.dir_y = st.rayDir.y;
+        rh.ray.dir_z = st.rayDir.z;
+        rh.ray.time = 0.f;
+        rh.ray.tfar = 1e30f;
+        rh.ray.mask = 0xFFFFFFFFu;
+        rh.ray.id = j;
+        rh.ray.flags = 0;
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    rtcIntersect1M(scene, &ctx, ts.nextRays.data(), n, sizeof(RTCRayHit));
+    for (uint32_t j = 0; j < n; ++j) {
+        const RTCRayHit& rh = ts.nextRays[j];
+        RayHit h;
+        if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
+            h.instance = rh.hit.instID[0];
+            h.primitive = rh.hit.primID;
+            h.u = rh.hit.u;
+            h.v = rh.hit.v;
+            h.t = rh.ray.tfar;
+        }
+        ts.hits[ts.live[j]] = h;
+    }
+}
 }  // namespace
 
 void PathTracer::reflect(Reflection& r, const CompileInfo&) const {
@@ -72,7 +165,9 @@ void PathTracer::compile(const CompileInfo&) {
                      mDevice == Device::Cuda ? "cuda" : "auto");
 }
 
-void PathTracer::setScene(const std::shared_ptr<const Scene>&) { mEnvSource = nullptr; }
+void PathTracer::setScene(const std::shared_ptr<const Scene>&) {
+    mEnvSource = nullptr;
+}
 
 void PathTracer::buildEnvironment(const Scene& scene) {
     const Environment& env = scene.environment;
@@ -141,8 +236,8 @@ void PathTracer::buildLights(const Scene& scene) {
             const SceneImage& img = scene.images[size_t(md.emissiveTexture)];
             double sum = 0.0;
             for (const auto& t : img.texels)
-                sum += pt::luminance(glm::vec3(srgbToLinear(t.r / 255.f), srgbToLinear(t.g / 255.f),
-                                               srgbToLinear(t.b / 255.f)));
+                sum += pt::luminance(
+                    glm::vec3(srgbToLinear(t.r / 255.f), srgbToLinear(t.g / 255.f), srgbToLinear(t.b / 255.f)));
             texMean = img.texels.empty() ? 1.f : float(sum / double(img.texels.size()));
         }
         const float lum = pt::luminance(mat.emissiveFactor) * texMean;
@@ -203,8 +298,7 @@ void PathTracer::buildLights(const Scene& scene) {
     L.pTris = total > 0.0 ? 1.f / kinds : 0.f;
     L.pPunctual = !mPunctual.empty() ? 1.f / kinds : 0.f;
     L.pEnv = L.hasEnv ? 1.f / kinds : 0.f;
-    for (pt::EmissiveTri& t : mTris)
-        t.pdfArea = t.area > 0.f ? L.pTris * (t.power / L.triPowerSum) / t.area : 0.f;
+    for (pt::EmissiveTri& t : mTris) t.pdfArea = t.area > 0.f ? L.pTris * (t.power / L.triPowerSum) / t.area : 0.f;
 }
 
 void PathTracer::execute(PassContext& ctx) {
@@ -222,7 +316,7 @@ void PathTracer::execute(PassContext& ctx) {
     const CameraData cam = makeCameraData(camera, w, h);
     const SceneView& view = scene->view();
     const RayScene& rayScene = scene->rayScene();
-    const EmbreeTracer tracer{rayScene};
+    const auto embree = static_cast<RTCScene>(rayScene.embreeScene());
     pt::PathTracerSettings set;
     set.maxBounces = uint32_t(mMaxBounces);
     set.rrStartBounce = uint32_t(mRrStartBounce);
@@ -250,32 +344,107 @@ void PathTracer::execute(PassContext& ctx) {
 
     parallelFor2D(w, h, [&](const Tile& tile) {
         const size_t tileIndex = size_t(tile.y0 / kDefaultTileSize) * tilesX + tile.x0 / kDefaultTileSize;
+        const uint32_t tw = tile.x1 - tile.x0, th = tile.y1 - tile.y0, tilePixels = tw * th;
+        TileScratch& ts = tileScratch();
+        ts.resize(tilePixels);
         uint64_t rays = 0, dropped = 0;
-        // Shades pixel (x, y) given its primary hit.
-        auto shade = [&](uint32_t x, uint32_t y, const glm::vec3& dir, const RayHit& primary) {
-            // Double sums: many finite samples near FLT_MAX must not overflow to Inf.
-            glm::dvec3 sum(0.0), sumDirect(0.0), sumIndirect(0.0);
-            uint32_t kept = 0;
-            for (uint32_t s = 0; s < spp; ++s) {
-                pt::PathRng rng(y * w + x, frame, s);
-                const pt::PathResult r = pt::tracePath(tracer, view, lights, set, cam.origin, dir, primary, rng);
-                rays += r.rays;
-                if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) {
-                    ++dropped;  // never written: a NaN would spread through every filter downstream
-                    continue;
+
+        // Primary hits of the tile, row-major within it.
+        if (vbuffer.data) {
+            for (uint32_t y = tile.y0; y < tile.y1; ++y) {
+                for (uint32_t x = tile.x0; x < tile.x1; ++x) {
+                    const uint32_t i = (y - tile.y0) * tw + (x - tile.x0);
+                    RayHit primary;
+                    const glm::uvec4 vb = vbuffer.at(x, y);
+                    if (vb.x != kInvalidId) {
+                        primary.instance = vb.x;
+                        primary.primitive = vb.y;
+                        primary.u = bitsToFloat(vb.z);
+                        primary.v = bitsToFloat(vb.w);
+                    }
+                    ts.primary[i] = primary;
+                    ts.dir[i] = glm::normalize(pixelRayDir(cam, x, y));
                 }
-                sum += glm::dvec3(r.color);
-                sumDirect += glm::dvec3(r.direct);
-                sumIndirect += glm::dvec3(r.indirect);
-                ++kept;
             }
+        } else {
+            // Camera rays in coherent 4x4 packets. The same (unnormalised) primary ray as GBufferRT, so hits
+            // from its vbuffer and from camera rays are bit-identical.
+            traceCameraRays(rayScene, cam, tile, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
+                const uint32_t i = (y - tile.y0) * tw + (x - tile.x0);
+                ts.primary[i] = hit;
+                ts.dir[i] = glm::normalize(dir);
+            });
+            rays += tilePixels;
+        }
+
+        // Paths (pixel-major, sample-minor) in batches kept in flight together (a small wavefront): each round
+        // shades every live path of the batch, then traces all their shadow rays as one Embree stream, then all
+        // their continuation rays as another. Shading runs as a loop over independent paths and Embree gets whole
+        // streams. A path's own arithmetic is that of pt::tracePath, and samples are summed per pixel in sample
+        // order, so results depend neither on batching nor on threads.
+        const uint64_t totalPaths = uint64_t(tilePixels) * spp;
+        uint32_t accPixel = 0;  // pixel whose sums are being accumulated
+        glm::dvec3 sum(0.0), sumDirect(0.0), sumIndirect(0.0);
+        uint32_t kept = 0, samplesSeen = 0;
+        auto finishPixel = [&](uint32_t i) {
+            const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
             const double inv = kept ? 1.0 / double(kept) : 0.0;
             color.at(x, y) = glm::vec4(glm::vec3(sum * inv), 1.f);
             if (split) {
                 if (direct.data) direct.at(x, y) = glm::vec4(glm::vec3(sumDirect * inv), 1.f);
                 if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(sumIndirect * inv), 1.f);
             }
-            if (wantsPrimary) {
+            sum = sumDirect = sumIndirect = glm::dvec3(0.0);
+            kept = 0;
+        };
+        for (uint64_t first = 0; first < totalPaths; first += kPathBatch) {
+            const uint32_t count = uint32_t(std::min<uint64_t>(kPathBatch, totalPaths - first));
+            uint32_t live = count;
+            for (uint32_t k = 0; k < count; ++k) {
+                const uint64_t item = first + k;
+                const uint32_t i = uint32_t(item / spp), s = uint32_t(item % spp);
+                const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
+                pt::beginPath(ts.paths[k], cam.origin, ts.dir[i], pt::PathRng(y * w + x, frame, s));
+                ts.hits[k] = ts.primary[i];
+                ts.live[k] = k;
+            }
+            while (live > 0) {
+                uint32_t shadows = 0, next = 0;
+                for (uint32_t j = 0; j < live; ++j) {
+                    const uint32_t k = ts.live[j];
+                    const uint32_t request = pt::shadeVertex(ts.paths[k], ts.hits[k], view, lights, set);
+                    ts.shadow[shadows] = k;
+                    shadows += (request & pt::kShadowRay) ? 1u : 0u;
+                    ts.live[next] = k;
+                    next += (request & pt::kNextRay) ? 1u : 0u;
+                }
+                traceShadowRays(embree, ts, shadows);
+                traceNextRays(embree, ts, next);
+                live = next;
+            }
+            for (uint32_t k = 0; k < count; ++k) {
+                const pt::PathResult& r = ts.paths[k].r;
+                rays += r.rays;
+                if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) {
+                    ++dropped;  // never written: a NaN would spread through every filter downstream
+                } else {
+                    sum += glm::dvec3(r.color);
+                    sumDirect += glm::dvec3(r.direct);
+                    sumIndirect += glm::dvec3(r.indirect);
+                    ++kept;
+                }
+                if (++samplesSeen == spp) {
+                    finishPixel(accPixel++);
+                    samplesSeen = 0;
+                }
+            }
+        }
+
+        if (wantsPrimary) {
+            for (uint32_t i = 0; i < tilePixels; ++i) {
+                const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
+                const RayHit& primary = ts.primary[i];
+                const glm::vec3 dir = ts.dir[i];
                 glm::vec4 a(0.f), sa(0.f), e(0.f);
                 if (primary.hit()) {
                     const SurfaceHit hs =
@@ -289,28 +458,6 @@ void PathTracer::execute(PassContext& ctx) {
                 if (specAlbedo.data) specAlbedo.at(x, y) = sa;
                 if (emission.data) emission.at(x, y) = e;
             }
-        };
-        if (vbuffer.data) {
-            for (uint32_t y = tile.y0; y < tile.y1; ++y) {
-                for (uint32_t x = tile.x0; x < tile.x1; ++x) {
-                    RayHit primary;
-                    const glm::uvec4 vb = vbuffer.at(x, y);
-                    if (vb.x != kInvalidId) {
-                        primary.instance = vb.x;
-                        primary.primitive = vb.y;
-                        primary.u = bitsToFloat(vb.z);
-                        primary.v = bitsToFloat(vb.w);
-                    }
-                    shade(x, y, glm::normalize(pixelRayDir(cam, x, y)), primary);
-                }
-            }
-        } else {
-            // Camera rays in coherent 4x4 packets. The same (unnormalised) primary ray as GBufferRT, so hits
-            // from its vbuffer and from camera rays are bit-identical.
-            traceCameraRays(rayScene, cam, tile, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
-                ++rays;
-                shade(x, y, glm::normalize(dir), hit);
-            });
         }
         tileRays[tileIndex] = rays;
         tileDropped[tileIndex] = dropped;

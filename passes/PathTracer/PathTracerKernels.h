@@ -6,7 +6,6 @@
 // CPU or a device tracer later.
 #include <cmath>
 #include <cstdint>
-
 #include <glm/glm.hpp>
 
 #include "BRDF.h"
@@ -25,7 +24,7 @@ struct PathTracerSettings {
     uint32_t maxBounces = 3;     ///< scattering events; 0 shows only what the camera sees directly
     uint32_t rrStartBounce = 2;  ///< Russian roulette from this bounce on
     uint32_t lightSampling = kMis;
-    bool lambertOnly = false;    ///< f = baseColor / pi, for analytic tests
+    bool lambertOnly = false;  ///< f = baseColor / pi, for analytic tests
 };
 
 struct PathResult {
@@ -55,147 +54,204 @@ LOOM_HD inline glm::vec3 lambertEval(const SurfaceHit& s, glm::vec3 n, glm::vec3
     return glm::dot(n, wi) > 0.f ? s.baseColor * kInvPi : glm::vec3(0.f);
 }
 
+/// One path between its vertices. tracePath() runs it to the end; the pass keeps many of them in flight per tile
+/// (wavefront), calling the same functions in a different order, so both give bit-identical results.
+struct PathState {
+    glm::vec3 throughput{1.f};
+    glm::vec3 rayOrigin{0.f};  ///< origin of the ray that reaches the next hit (and of the pending shadow ray)
+    glm::vec3 rayDir{0.f, 0.f, -1.f};
+    float prevBsdfPdf = 0.f;  ///< solid-angle pdf of the BSDF sample that produced rayDir
+    bool prevDelta = true;    ///< camera ray: emission always counts fully
+    bool shadowNearSurface = false;
+    uint32_t bounce = 0;
+    glm::vec3 shadowDir{0.f};  ///< pending shadow ray from rayOrigin (valid when shadeVertex() returned kShadowRay)
+    float shadowTMax = 0.f;
+    glm::vec3 shadowContrib{0.f};  ///< added to the result when the shadow ray is not occluded
+    PathRng rng;
+    PathResult r;
+};
+
+/// What shadeVertex() asks the caller to trace next.
+enum PathRequest : uint32_t { kShadowRay = 1u, kNextRay = 2u };
+
+/// Starts st as a camera path along (origin, dir); the shadow-ray fields are set by shadeVertex() when used.
+LOOM_HD inline void beginPath(PathState& st, glm::vec3 origin, glm::vec3 dir, const PathRng& rng) {
+    st.throughput = glm::vec3(1.f);
+    st.rayOrigin = origin;
+    st.rayDir = glm::normalize(dir);
+    st.prevBsdfPdf = 0.f;
+    st.prevDelta = true;
+    st.bounce = 0;
+    st.rng = rng;
+    st.r = PathResult{};
+}
+
+/// Shades the hit (or miss) of st.rayOrigin + t st.rayDir: emission reached there, a light sample (the shadow ray
+/// from st.rayOrigin along st.shadowDir, on return) and the BRDF-sampled continuation (st.rayOrigin/rayDir, on
+/// return). Returns kShadowRay and/or kNextRay; without kNextRay the path has ended (after its shadow ray).
+LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const SceneView& scene, const LightsView& lights,
+                                    const PathTracerSettings& set) {
+    PathResult& r = st.r;
+    const uint32_t bounce = st.bounce;
+    const bool directSlot = bounce <= 1;  // emission reached here belongs to "direct"
+    const glm::vec3 rayDir = st.rayDir;
+    if (!hit.hit()) {
+        const glm::vec3 Le = envRadiance(lights.env, rayDir);
+        float w = 1.f;
+        if (!st.prevDelta && lights.hasEnv) {
+            if (set.lightSampling == kNeeOnly)
+                w = 0.f;
+            else if (set.lightSampling == kMis)
+                w = powerHeuristic(st.prevBsdfPdf, lights.pEnv * envPdf(lights.env, rayDir));
+        }
+        const glm::vec3 c = st.throughput * Le * w;
+        r.color += c;
+        (directSlot ? r.direct : r.indirect) += c;
+        return 0u;
+    }
+    const SurfaceHit s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir, SurfaceEval::Shading);
+    const glm::vec3 Le = emittedRadiance(scene, s, rayDir);
+    if (Le != glm::vec3(0.f)) {
+        float w = 1.f;
+        if (!st.prevDelta) {
+            if (set.lightSampling == kNeeOnly) {
+                w = 0.f;
+            } else if (set.lightSampling == kMis && lights.instanceTriBase &&
+                       lights.instanceTriBase[hit.instance] != 0xFFFFFFFFu) {
+                const EmissiveTri& t = lights.tris[lights.instanceTriBase[hit.instance] + hit.primitive];
+                const glm::vec3 d = s.posW - st.rayOrigin;
+                float cosLight = -glm::dot(t.normal, rayDir);
+                if (t.doubleSided) cosLight = std::fabs(cosLight);
+                w = powerHeuristic(st.prevBsdfPdf, triLightPdf(lights, t, glm::dot(d, d), cosLight));
+            }
+        }
+        const glm::vec3 c = st.throughput * Le * w;
+        r.color += c;
+        (directSlot ? r.direct : r.indirect) += c;
+    }
+    if (bounce >= set.maxBounces) return 0u;
+    PathRng& rng = st.rng;
+    rng.startBounce(bounce);
+
+    // Shade on the side the ray arrived from.
+    const glm::vec3 wo = -rayDir;
+    glm::vec3 fn = s.faceNormalW, n = s.normalW;
+    if (glm::dot(fn, wo) < 0.f) {
+        fn = -fn;
+        n = -n;
+    }
+    if (glm::dot(n, wo) <= 0.f) n = fn;  // shading normal beyond the silhouette: fall back to geometry
+    const glm::vec3 p = offsetOrigin(s.posW, fn);
+    st.rayOrigin = p;
+    uint32_t request = 0u;
+    // Everything the BRDF needs from this vertex alone, computed once for NEE and the BRDF sample.
+    // Made when first needed (a light sample that reaches the surface, or the BRDF sample).
+    BrdfVertex bv;
+    bool bvReady = false;
+    const bool nearSurface = bounce == 0;
+    // At the last scattering vertex no BRDF-sampled ray follows, so light sampling alone estimates direct
+    // light there (weight 1): unbiased, and it saves a closest-hit ray per path. BRDF-only mode still traces it.
+    const bool lastVertex = bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
+
+    // Next-event estimation: the shadow ray is left to the caller, with the contribution it carries when clear.
+    const glm::vec2 l01 = rng.next2(), l23 = rng.next2();
+    LightSample ls = sampleLight(lights, p, l01.x, l01.y, l23.x, l23.y);
+    if (ls.valid && (set.lightSampling != kBsdfOnly || ls.delta)) {
+        const float cosI = glm::dot(n, ls.wi);
+        if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
+            glm::vec3 Li = ls.Li;
+            if (ls.isTriangle) {
+                const SurfaceHit e =
+                    evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi, SurfaceEval::Shading);
+                Li = emittedRadiance(scene, e, ls.wi);
+            }
+            if (Li != glm::vec3(0.f)) {
+                glm::vec3 f;
+                float bsdfPdf;
+                if (set.lambertOnly) {
+                    f = lambertEval(s, n, ls.wi);
+                    bsdfPdf = cosI * kInvPi;
+                } else {
+                    bv = makeBrdfVertex(brdfInputs(s), n, wo);
+                    bvReady = true;
+                    const BrdfEval e = evalBrdfVertex(bv, ls.wi);
+                    f = e.f;
+                    bsdfPdf = e.pdf;
+                }
+                if (f != glm::vec3(0.f)) {
+                    ++r.rays;
+                    st.shadowDir = ls.wi;
+                    st.shadowTMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
+                    // MIS weight over the light pdf, w / pdf, with the power heuristic's division shared:
+                    // (p^2 / (p^2 + q^2)) / p = p / (p^2 + q^2).
+                    const float wOverPdf = (!ls.delta && set.lightSampling == kMis && !lastVertex)
+                                               ? ls.pdf / (ls.pdf * ls.pdf + bsdfPdf * bsdfPdf)
+                                               : 1.f / ls.pdf;
+                    st.shadowContrib = st.throughput * f * cosI * Li * wOverPdf;
+                    st.shadowNearSurface = nearSurface;
+                    request = kShadowRay;
+                }
+            }
+        }
+    }
+
+    if (lastVertex) return request;
+
+    // Continue the path by sampling the BRDF.
+    const glm::vec2 b01 = rng.next2();
+    const float b0 = b01.x, b1 = b01.y, b2 = rng.next();
+    glm::vec3 wi;
+    if (set.lambertOnly) {
+        const glm::vec3 local = sampleCosineHemisphere(glm::vec2(b0, b1));
+        wi = makeFrame(n).toWorld(local);
+        const float cosI = glm::dot(n, wi);
+        if (cosI <= 0.f || glm::dot(fn, wi) <= 0.f) return request;
+        st.throughput *= s.baseColor;  // f cos / pdf = (a/pi) cos / (cos/pi)
+        st.prevBsdfPdf = cosI * kInvPi;
+    } else {
+        if (!bvReady) bv = makeBrdfVertex(brdfInputs(s), n, wo);
+        const BrdfSample bs = sampleBrdfVertex(bv, glm::vec2(b0, b1), b2);
+        if (!bs.valid || glm::dot(fn, bs.wi) <= 0.f) return request;
+        wi = bs.wi;
+        st.throughput *= bs.weight;
+        st.prevBsdfPdf = bs.pdf;
+    }
+    st.prevDelta = false;
+
+    // Russian roulette (unbiased: survivors are reweighted by 1 / q).
+    if (bounce + 1 >= set.rrStartBounce) {
+        const float q = glm::min(glm::max(glm::max(st.throughput.x, st.throughput.y), st.throughput.z), 0.95f);
+        if (rng.next() >= q) return request;
+        st.throughput /= q;
+    }
+    if (st.throughput == glm::vec3(0.f)) return request;
+    st.rayDir = wi;
+    st.bounce = bounce + 1;
+    ++r.rays;
+    return request | kNextRay;
+}
+
+/// Adds the pending light sample of the last shadeVertex() unless its shadow ray was blocked.
+LOOM_HD inline void resolveShadowRay(PathState& st, bool occluded) {
+    if (occluded) return;
+    st.r.color += st.shadowContrib;
+    (st.shadowNearSurface ? st.r.direct : st.r.indirect) += st.shadowContrib;
+}
+
+/// Traces one whole path from a camera ray (origin, dir) whose first hit is `hit`.
 template <class Tracer>
 LOOM_HD PathResult tracePath(const Tracer& tracer, const SceneView& scene, const LightsView& lights,
-                             const PathTracerSettings& set, glm::vec3 origin, glm::vec3 dir, RayHit hit,
-                             PathRng& rng) {
-    PathResult r;
-    glm::vec3 throughput(1.f);
-    glm::vec3 rayOrigin = origin, rayDir = glm::normalize(dir);
-    float prevBsdfPdf = 0.f;  // solid-angle pdf of the BSDF sample that produced this ray
-    bool prevDelta = true;    // camera ray: emission always counts fully
-    for (uint32_t bounce = 0;; ++bounce) {
-        const bool directSlot = bounce <= 1;  // emission reached here belongs to "direct"
-        if (!hit.hit()) {
-            const glm::vec3 Le = envRadiance(lights.env, rayDir);
-            float w = 1.f;
-            if (!prevDelta && lights.hasEnv) {
-                if (set.lightSampling == kNeeOnly) w = 0.f;
-                else if (set.lightSampling == kMis)
-                    w = powerHeuristic(prevBsdfPdf, lights.pEnv * envPdf(lights.env, rayDir));
-            }
-            const glm::vec3 c = throughput * Le * w;
-            r.color += c;
-            (directSlot ? r.direct : r.indirect) += c;
-            break;
-        }
-        const SurfaceHit s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir, SurfaceEval::Shading);
-        const glm::vec3 Le = emittedRadiance(scene, s, rayDir);
-        if (Le != glm::vec3(0.f)) {
-            float w = 1.f;
-            if (!prevDelta) {
-                if (set.lightSampling == kNeeOnly) {
-                    w = 0.f;
-                } else if (set.lightSampling == kMis && lights.instanceTriBase &&
-                           lights.instanceTriBase[hit.instance] != 0xFFFFFFFFu) {
-                    const EmissiveTri& t = lights.tris[lights.instanceTriBase[hit.instance] + hit.primitive];
-                    const glm::vec3 d = s.posW - rayOrigin;
-                    float cosLight = -glm::dot(t.normal, rayDir);
-                    if (t.doubleSided) cosLight = std::fabs(cosLight);
-                    w = powerHeuristic(prevBsdfPdf, triLightPdf(lights, t, glm::dot(d, d), cosLight));
-                }
-            }
-            const glm::vec3 c = throughput * Le * w;
-            r.color += c;
-            (directSlot ? r.direct : r.indirect) += c;
-        }
-        if (bounce >= set.maxBounces) break;
-        rng.startBounce(bounce);
-
-        // Shade on the side the ray arrived from.
-        const glm::vec3 wo = -rayDir;
-        glm::vec3 fn = s.faceNormalW, n = s.normalW;
-        if (glm::dot(fn, wo) < 0.f) {
-            fn = -fn;
-            n = -n;
-        }
-        if (glm::dot(n, wo) <= 0.f) n = fn;  // shading normal beyond the silhouette: fall back to geometry
-        const glm::vec3 p = offsetOrigin(s.posW, fn);
-        // Everything the BRDF needs from this vertex alone, computed once for NEE and the BRDF sample.
-        // Made when first needed (a light sample that reaches the surface, or the BRDF sample).
-        BrdfVertex bv;
-        bool bvReady = false;
-        const bool nearSurface = bounce == 0;
-        // At the last scattering vertex no BRDF-sampled ray follows, so light sampling alone estimates direct
-        // light there (weight 1): unbiased, and it saves a closest-hit ray per path. BRDF-only mode still traces it.
-        const bool lastVertex = bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
-
-        // Next-event estimation.
-        const float l0 = rng.next(), l1 = rng.next(), l2 = rng.next(), l3 = rng.next();
-        LightSample ls = sampleLight(lights, p, l0, l1, l2, l3);
-        if (ls.valid && (set.lightSampling != kBsdfOnly || ls.delta)) {
-            const float cosI = glm::dot(n, ls.wi);
-            if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
-                glm::vec3 Li = ls.Li;
-                if (ls.isTriangle) {
-                    const SurfaceHit e = evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi,
-                                                       SurfaceEval::Shading);
-                    Li = emittedRadiance(scene, e, ls.wi);
-                }
-                if (Li != glm::vec3(0.f)) {
-                    glm::vec3 f;
-                    float bsdfPdf;
-                    if (set.lambertOnly) {
-                        f = lambertEval(s, n, ls.wi);
-                        bsdfPdf = cosI * kInvPi;
-                    } else {
-                        bv = makeBrdfVertex(brdfInputs(s), n, wo);
-                        bvReady = true;
-                        const BrdfEval e = evalBrdfVertex(bv, ls.wi);
-                        f = e.f;
-                        bsdfPdf = e.pdf;
-                    }
-                    if (f != glm::vec3(0.f)) {
-                        ++r.rays;
-                        const float tMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
-                        if (!tracer.occluded(p, ls.wi, 0.f, tMax)) {
-                            const float w = (!ls.delta && set.lightSampling == kMis && !lastVertex)
-                                                ? powerHeuristic(ls.pdf, bsdfPdf)
-                                                : 1.f;
-                            const glm::vec3 c = throughput * f * cosI * Li * (w / ls.pdf);
-                            r.color += c;
-                            (nearSurface ? r.direct : r.indirect) += c;
-                        }
-                    }
-                }
-            }
-        }
-
-        if (lastVertex) break;
-
-        // Continue the path by sampling the BRDF.
-        const float b0 = rng.next(), b1 = rng.next(), b2 = rng.next();
-        glm::vec3 wi;
-        if (set.lambertOnly) {
-            const glm::vec3 local = sampleCosineHemisphere(glm::vec2(b0, b1));
-            wi = makeFrame(n).toWorld(local);
-            const float cosI = glm::dot(n, wi);
-            if (cosI <= 0.f || glm::dot(fn, wi) <= 0.f) break;
-            throughput *= s.baseColor;  // f cos / pdf = (a/pi) cos / (cos/pi)
-            prevBsdfPdf = cosI * kInvPi;
-        } else {
-            if (!bvReady) bv = makeBrdfVertex(brdfInputs(s), n, wo);
-            const BrdfSample bs = sampleBrdfVertex(bv, glm::vec2(b0, b1), b2);
-            if (!bs.valid || glm::dot(fn, bs.wi) <= 0.f) break;
-            wi = bs.wi;
-            throughput *= bs.weight;
-            prevBsdfPdf = bs.pdf;
-        }
-        prevDelta = false;
-
-        // Russian roulette (unbiased: survivors are reweighted by 1 / q).
-        if (bounce + 1 >= set.rrStartBounce) {
-            const float q = glm::min(glm::max(glm::max(throughput.x, throughput.y), throughput.z), 0.95f);
-            if (rng.next() >= q) break;
-            throughput /= q;
-        }
-        if (throughput == glm::vec3(0.f)) break;
-        rayOrigin = p;
-        rayDir = wi;
-        ++r.rays;
-        hit = tracer.intersect(p, wi);
+                             const PathTracerSettings& set, glm::vec3 origin, glm::vec3 dir, RayHit hit, PathRng& rng) {
+    PathState st;
+    beginPath(st, origin, dir, rng);
+    for (;;) {
+        const uint32_t request = shadeVertex(st, hit, scene, lights, set);
+        if (request & kShadowRay) resolveShadowRay(st, tracer.occluded(st.rayOrigin, st.shadowDir, 0.f, st.shadowTMax));
+        if (!(request & kNextRay)) break;
+        hit = tracer.intersect(st.rayOrigin, st.rayDir);
     }
-    return r;
+    rng = st.rng;
+    return st.r;
 }
 
 }  // namespace loom::pt

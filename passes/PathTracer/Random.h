@@ -4,6 +4,8 @@
 // thread rendered which pixel, and any sample can be regenerated.
 #include <cstdint>
 
+#include <glm/glm.hpp>
+
 #include "loom/Kernel.h"
 
 namespace loom::pt {
@@ -23,6 +25,7 @@ struct PathRng {
     uint64_t key = 0;
     uint32_t dim = 0;
 
+    PathRng() = default;
     LOOM_HD PathRng(uint32_t pixelIndex, uint64_t frame, uint32_t sample)
         : key(mix64(mix64(uint64_t(pixelIndex) * 0x9E3779B97F4A7C15ull + frame) + uint64_t(sample) * 0xD1B54A32D192ED03ull)) {}
 
@@ -30,6 +33,11 @@ struct PathRng {
     LOOM_HD float next() {
         const uint64_t r = mix64(key + uint64_t(dim++) * 0x632BE59BD9B4E019ull);
         return float(r >> 40) * (1.f / 16777216.f);
+    }
+    /// Two uniform numbers in [0, 1) from one hash: its top 24 bits and the 24 below them.
+    LOOM_HD glm::vec2 next2() {
+        const uint64_t r = mix64(key + uint64_t(dim++) * 0x632BE59BD9B4E019ull);
+        return glm::vec2(float(r >> 40) * (1.f / 16777216.f), float((r >> 16) & 0xFFFFFFu) * (1.f / 16777216.f));
     }
     LOOM_HD void startBounce(uint32_t bounce) { dim = 64u * bounce; }
 };
