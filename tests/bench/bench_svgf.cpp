@@ -91,7 +91,8 @@ void BM_SVGF(benchmark::State& state) {
     std::map<std::string, double> sums;
     for (auto _ : state) {
         graph.execute(FrameInfo{frame++, 0.0, nullptr, nullptr});
-        for (const auto& [name, value] : graph.lastStats().at("SVGF"))
+        const auto stats = graph.lastStats();
+        for (const auto& [name, value] : stats.at("SVGF"))
             if (name.rfind("ms.", 0) == 0) sums[name] += value;
         for (const auto& t : graph.timings())
             if (t.name == "SVGF") sums["ms.pass"] += t.lastMs;
