@@ -48,6 +48,15 @@ LOOM_HD inline T& texel(const ImageView<T>& v, uint32_t x, uint32_t y) {
     return reinterpret_cast<T*>(reinterpret_cast<Byte*>(v.data) + v.rowPitch * y)[x];
 }
 
+/// max and min that compile to one instruction (fmaxf/fminf stay library calls without -ffinite-math-only, for
+/// their NaN rules). maxf(NaN, b) and minf(NaN, b) are b.
+LOOM_HD inline float maxf(float a, float b) {
+    return a > b ? a : b;
+}
+LOOM_HD inline float minf(float a, float b) {
+    return a < b ? a : b;
+}
+
 /// True unless the float is a NaN or an infinity (a bit test: holds under any math flags and on devices).
 LOOM_HD inline bool isFiniteBits(float v) {
     return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
@@ -67,12 +76,12 @@ LOOM_HD inline glm::vec3 finiteOrZero(const glm::vec3& v) {
 /// The albedo demodulation divides by (and remodulation multiplies with).
 LOOM_HD inline glm::vec3 guardedAlbedo(const glm::vec4& albedo) {
     const glm::vec3 a = finiteOrZero(glm::vec3(albedo));
-    return glm::vec3(fmaxf(a.x, kMinAlbedo), fmaxf(a.y, kMinAlbedo), fmaxf(a.z, kMinAlbedo));
+    return glm::vec3(maxf(a.x, kMinAlbedo), maxf(a.y, kMinAlbedo), maxf(a.z, kMinAlbedo));
 }
 
 LOOM_HD inline glm::vec3 clampIllumination(const glm::vec3& v) {
-    return glm::vec3(fminf(fmaxf(v.x, 0.f), kMaxIllumination), fminf(fmaxf(v.y, 0.f), kMaxIllumination),
-                     fminf(fmaxf(v.z, 0.f), kMaxIllumination));
+    return glm::vec3(minf(maxf(v.x, 0.f), kMaxIllumination), minf(maxf(v.y, 0.f), kMaxIllumination),
+                     minf(maxf(v.z, 0.f), kMaxIllumination));
 }
 
 /// Parameters of the temporal stage.
@@ -222,9 +231,9 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         m = r.moments;
         length = r.valid ? r.length : 0.f;
     } else if (r.valid) {
-        length = fminf(r.length + 1.f, p.maxHistory);
+        length = minf(r.length + 1.f, p.maxHistory);
         // Paper eq. 1 with Falcor's max(alpha, 1 / n): a plain mean until the history is 1 / alpha long.
-        const float a = fmaxf(p.alpha, 1.f / length), am = fmaxf(p.momentsAlpha, 1.f / length);
+        const float a = maxf(p.alpha, 1.f / length), am = maxf(p.momentsAlpha, 1.f / length);
         i0 = glm::vec4(glm::mix(glm::vec3(r.illum0), l0, a), 0.f);
         i1 = glm::vec4(glm::mix(glm::vec3(r.illum1), l1, a), 0.f);
         m = glm::mix(r.moments, moments, am);
@@ -234,8 +243,8 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         i1 = glm::vec4(l1, 0.f);
         m = moments;
     }
-    i0.a = fmaxf(0.f, m.y - m.x * m.x);
-    i1.a = fmaxf(0.f, m.w - m.z * m.z);
+    i0.a = maxf(0.f, m.y - m.x * m.x);
+    i1.a = maxf(0.f, m.w - m.z * m.z);
     texel(v.integrated0, x, y) = i0;
     if (p.split) texel(v.integrated1, x, y) = i1;
     texel(v.curMoments, x, y) = m;
@@ -247,7 +256,9 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 /// terms times the normal power, paper eq. 3-5 without the variance in the luminance term).
 LOOM_HD inline float varianceWeight(float zCentre, float zTap, float phiDepth, const glm::vec3& nCentre,
                                     const glm::vec3& nTap, float phiNormal, float lCentre, float lTap, float phiL) {
-    const float wn = powf(fmaxf(0.f, glm::dot(nCentre, nTap)), phiNormal);
+    // Flat surfaces (equal normals) skip the power.
+    const float cosine = glm::dot(nCentre, nTap);
+    const float wn = cosine >= 1.f ? 1.f : cosine <= 0.f ? 0.f : powf(cosine, phiNormal);
     const float wz = phiDepth > 0.f ? fabsf(zCentre - zTap) / phiDepth : 0.f;
     const float wl = fabsf(lCentre - lTap) / phiL;
     return expf(-wl - wz) * wn;
@@ -278,7 +289,7 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
     }
     const glm::vec3 n = glm::vec3(texel(v.normW, x, y));
     const float l0 = luminance(glm::vec3(i0)), l1 = luminance(glm::vec3(i1));
-    const float phiDepth = fmaxf(z.y, 1e-8f) * 3.f;
+    const float phiDepth = maxf(z.y, 1e-8f) * 3.f;
     glm::vec3 sum0(0.f), sum1(0.f);
     glm::vec4 sumMoments(0.f);
     float sumW0 = 0.f, sumW1 = 0.f;
@@ -313,17 +324,17 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
         }
     }
     // The centre tap has weight 1 unless its normal is degenerate; then keep the temporal values.
-    const float boost = kSpatialVarianceFrames / fmaxf(length, 1.f);
+    const float boost = kSpatialVarianceFrames / maxf(length, 1.f);
     glm::vec4 e0 = i0, e1 = i1;
     if (sumW0 > 0.f) {
         sum0 /= sumW0;
         const float m1 = sumMoments.x / sumW0, m2 = sumMoments.y / sumW0;
-        e0 = glm::vec4(sum0, fmaxf(0.f, m2 - m1 * m1) * boost);
+        e0 = glm::vec4(sum0, maxf(0.f, m2 - m1 * m1) * boost);
     }
     if (split && sumW1 > 0.f) {
         sum1 /= sumW1;
         const float m1 = sumMoments.z / sumW1, m2 = sumMoments.w / sumW1;
-        e1 = glm::vec4(sum1, fmaxf(0.f, m2 - m1 * m1) * boost);
+        e1 = glm::vec4(sum1, maxf(0.f, m2 - m1 * m1) * boost);
     }
     texel(v.estimate0, x, y) = e0;
     if (split) texel(v.estimate1, x, y) = e1;

@@ -12,6 +12,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "TestUtil.h"
@@ -98,6 +99,7 @@ struct Harness {
         o.width = w;
         o.height = h;
         o.observe = {"SVGF.estimate"};
+        o.poisonTransients = true;  // a read of scratch before it is written shows up as NaN
         graph.compile(o);
         dynamic_cast<SyntheticSource*>(graph.pass("Source"))->fn = std::move(fn);
     }
@@ -219,6 +221,31 @@ TEST(SVGF, ConstantImagePassesThroughUnchanged) {
                 EXPECT_EQ(h.length(0, 0), 0.f) << "a miss pixel has no history";
             }
         }
+    }
+}
+
+// Nothing is tied to one frame size: after a resize SVGF runs at the new size (history restarts) and a constant
+// image still passes through.
+TEST(SVGF, RunsAtWhateverSizeItsInputsHave) {
+    const glm::vec4 color(0.3f, 0.2f, 0.1f, 1.f);
+    auto fn = [&](uint64_t, uint32_t, uint32_t) {
+        GPixel p;
+        p.albedo = glm::vec4(0.5f, 0.5f, 0.5f, 1.f);
+        p.color = color;
+        return p;
+    };
+    Harness h({}, fn);
+    h.run(2);
+    for (auto [w, h2] : {std::pair<uint32_t, uint32_t>{50, 20}, {17, 61}}) {
+        h.graph.resize(w, h2);
+        h.run(2);
+        const Texture& out = h.field("filtered");
+        ASSERT_EQ(out.width(), w);
+        ASSERT_EQ(out.height(), h2);
+        for (uint32_t y = 0; y < h2; ++y)
+            for (uint32_t x = 0; x < w; ++x)
+                for (int c = 0; c < 4; ++c) ASSERT_NEAR(h.filtered(x, y)[c], color[c], 1e-6f) << x << "," << y;
+        EXPECT_EQ(h.length(w / 2, h2 / 2), 2.f);
     }
 }
 
