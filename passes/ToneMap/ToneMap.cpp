@@ -31,7 +31,6 @@ const char kStatNonFinite[] = "nonFinite";
 // hardware prefetchers streaming, which this memory-bound pass needs. One partial log-average sum per band.
 constexpr uint32_t kBandRows = 8;
 
-
 namespace hn = hwy::HWY_NAMESPACE;
 using FloatTag = hn::ScalableTag<float>;
 using IntTag = hn::RebindToSigned<FloatTag>;
@@ -100,20 +99,95 @@ HWY_INLINE hn::Mask<IntTag> nonFiniteVec(FloatVec v) {
     return hn::Eq(hn::And(hn::BitCast(di, v), exponent), exponent);
 }
 
+/// The log-luminance terms (fastLog2 of kLogEpsilon + luminance, lane-wise) of 8 pixels added to `acc`, and their
+/// finite count to `finiteCount`; non-finite pixels add nothing.
+HWY_INLINE void logLuminanceVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, FloatVec& acc, IntVec& finiteCount) {
+    const IntTag di;
+    const FloatVec one = hn::Set(d, 1.f);
+    const auto bad = hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), nonFiniteVec(b));
+    r = exposeVec(d, r, one);
+    g = exposeVec(d, g, one);
+    b = exposeVec(d, b, one);
+    const FloatVec lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
+                                 hn::Mul(hn::Set(d, 0.0722f), b));
+    const FloatVec v = hn::Add(hn::Set(d, tonemap::kLogEpsilon), lum);
+    // fastLog2, lane-wise.
+    const IntVec bits = hn::BitCast(di, v);
+    IntVec exponent = hn::Sub(hn::ShiftRight<23>(bits), hn::Set(di, 127));
+    FloatVec m = hn::BitCast(d, hn::Or(hn::And(bits, hn::Set(di, 0x007FFFFF)), hn::Set(di, 0x3F800000)));
+    const auto high = hn::Gt(m, hn::Set(d, 1.41421356f));
+    m = hn::IfThenElse(high, hn::Mul(m, hn::Set(d, 0.5f)), m);
+    exponent = hn::Add(exponent, hn::IfThenElseZero(hn::RebindMask(di, high), hn::Set(di, 1)));
+    const FloatVec t = hn::Div(hn::Sub(m, one), hn::Add(m, one));
+    const FloatVec t2 = hn::Mul(t, t);
+    FloatVec series = hn::Add(hn::Set(d, 1.f / 7.f), hn::Mul(t2, hn::Set(d, 1.f / 9.f)));
+    series = hn::Add(hn::Set(d, 1.f / 5.f), hn::Mul(t2, series));
+    series = hn::Add(hn::Set(d, 1.f / 3.f), hn::Mul(t2, series));
+    series = hn::Mul(t, hn::Add(one, hn::Mul(t2, series)));
+    const FloatVec term = hn::Add(hn::ConvertTo(d, exponent), hn::Mul(hn::Set(d, 2.8853900817779268f), series));
+    acc = hn::Add(acc, hn::IfThenZeroElse(hn::RebindMask(d, bad), term));
+    finiteCount = hn::Add(finiteCount, hn::IfThenZeroElse(bad, hn::Set(di, 1)));
+}
+
+/// Adds the lanes of the vector sums, then the scalar terms of [x, x1), in a fixed order.
+HWY_INLINE void finishLogLuminance(FloatVec acc, IntVec finiteCount, const glm::vec4* in, uint32_t x, uint32_t x1,
+                                   double& sum, uint64_t& count) {
+    const FloatTag d;
+    const IntTag di;
+    const uint32_t n = uint32_t(hn::Lanes(d));
+    alignas(64) float lanes[hn::MaxLanes(d)];
+    alignas(64) int32_t counts[hn::MaxLanes(d)];
+    hn::Store(acc, d, lanes);
+    hn::Store(finiteCount, di, counts);
+    for (uint32_t i = 0; i < n; ++i) {
+        sum += double(lanes[i]);
+        count += uint64_t(counts[i]);
+    }
+    for (; x < x1; ++x) {
+        float term;
+        if (tonemap::logLuminance(in[x], term)) {
+            sum += double(term);
+            ++count;
+        }
+    }
+}
+
+/// Sum of the log-luminance terms of a row segment and the number of finite pixels in it. Vector lanes sum in
+/// float, then the lanes and the scalar rest are added in a fixed order.
+void logLuminanceRow(const glm::vec4* in, uint32_t x0, uint32_t x1, double& sum, uint64_t& count) {
+    const FloatTag d;
+    const IntTag di;
+    const uint32_t n = uint32_t(hn::Lanes(d));
+    FloatVec acc = hn::Zero(d);
+    IntVec finiteCount = hn::Zero(di);
+    uint32_t x = x0;
+    for (; x + n <= x1; x += n) {
+        FloatVec r, g, b, a;
+        hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x), r, g, b, a);
+        logLuminanceVec(d, r, g, b, acc, finiteCount);
+    }
+    finishLogLuminance(acc, finiteCount, in, x, x1, sum, count);
+}
+
 /// One row segment [x0, x1) through the operator: vectors of pixels, then the reference kernel for the rest.
 /// Returns the pixels with a non-finite channel.
-template <Operator Op>
+/// With Measure, also sums the row's log-luminance terms into logSum / logCount from the same loads, with the same
+/// operations and order as logLuminanceRow (so the sums are the same bits).
+template <Operator Op, bool Measure>
 uint64_t mapRow(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, const glm::vec4* in, uint32_t* out,
-                glm::vec4* outFloat, uint32_t x0, uint32_t x1) {
+                glm::vec4* outFloat, uint32_t x0, uint32_t x1, double& logSum, uint64_t& logCount) {
     const FloatTag d;
     const IntTag di;
     const uint32_t n = uint32_t(hn::Lanes(d));
     const FloatVec scale = hn::Set(d, p.scale);
     uint64_t nonFinite = 0;
+    FloatVec logAcc = hn::Zero(d);
+    IntVec logFinite = hn::Zero(di);
     uint32_t x = x0;
     for (; x + n <= x1; x += n) {
         FloatVec r, g, b, a;
         hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x), r, g, b, a);
+        if constexpr (Measure) logLuminanceVec(d, r, g, b, logAcc, logFinite);
         nonFinite += hn::CountTrue(
             di, hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), hn::Or(nonFiniteVec(b), nonFiniteVec(a))));
         r = saturateVec(d, operatorVec<Op>(d, exposeVec(d, r, scale), p));
@@ -128,6 +202,7 @@ uint64_t mapRow(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, c
         packed = hn::Or(packed, hn::ShiftLeft<24>(alpha));
         hn::StoreU(packed, di, reinterpret_cast<int32_t*>(out + x));
     }
+    if constexpr (Measure) finishLogLuminance(logAcc, logFinite, in, x, x1, logSum, logCount);
     ToneMapParams scalar = p;
     scalar.op = Op;
     for (; x < x1; ++x) {
@@ -154,60 +229,6 @@ uint64_t mapRowReference(const ToneMapParams& p, const tonemap::SrgbEncodeTable&
         if (outFloat) outFloat[x] = mapped;
     }
     return nonFinite;
-}
-
-/// Sum of the log-luminance terms of a row segment and the number of finite pixels in it. Vector lanes sum in
-/// float, then the lanes and the scalar rest are added in a fixed order.
-void logLuminanceRow(const glm::vec4* in, uint32_t x0, uint32_t x1, double& sum, uint64_t& count) {
-    const FloatTag d;
-    const IntTag di;
-    const uint32_t n = uint32_t(hn::Lanes(d));
-    FloatVec acc = hn::Zero(d);
-    IntVec finiteCount = hn::Zero(di);
-    const FloatVec one = hn::Set(d, 1.f);
-    uint32_t x = x0;
-    for (; x + n <= x1; x += n) {
-        FloatVec r, g, b, a;
-        hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x), r, g, b, a);
-        const auto bad = hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), nonFiniteVec(b));
-        r = exposeVec(d, r, one);
-        g = exposeVec(d, g, one);
-        b = exposeVec(d, b, one);
-        const FloatVec lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
-                                     hn::Mul(hn::Set(d, 0.0722f), b));
-        const FloatVec v = hn::Add(hn::Set(d, tonemap::kLogEpsilon), lum);
-        // fastLog2, lane-wise.
-        const IntVec bits = hn::BitCast(di, v);
-        IntVec exponent = hn::Sub(hn::ShiftRight<23>(bits), hn::Set(di, 127));
-        FloatVec m = hn::BitCast(d, hn::Or(hn::And(bits, hn::Set(di, 0x007FFFFF)), hn::Set(di, 0x3F800000)));
-        const auto high = hn::Gt(m, hn::Set(d, 1.41421356f));
-        m = hn::IfThenElse(high, hn::Mul(m, hn::Set(d, 0.5f)), m);
-        exponent = hn::Add(exponent, hn::IfThenElseZero(hn::RebindMask(di, high), hn::Set(di, 1)));
-        const FloatVec t = hn::Div(hn::Sub(m, one), hn::Add(m, one));
-        const FloatVec t2 = hn::Mul(t, t);
-        FloatVec series = hn::Add(hn::Set(d, 1.f / 7.f), hn::Mul(t2, hn::Set(d, 1.f / 9.f)));
-        series = hn::Add(hn::Set(d, 1.f / 5.f), hn::Mul(t2, series));
-        series = hn::Add(hn::Set(d, 1.f / 3.f), hn::Mul(t2, series));
-        series = hn::Mul(t, hn::Add(one, hn::Mul(t2, series)));
-        const FloatVec term = hn::Add(hn::ConvertTo(d, exponent), hn::Mul(hn::Set(d, 2.8853900817779268f), series));
-        acc = hn::Add(acc, hn::IfThenZeroElse(hn::RebindMask(d, bad), term));
-        finiteCount = hn::Add(finiteCount, hn::IfThenZeroElse(bad, hn::Set(di, 1)));
-    }
-    alignas(64) float lanes[hn::MaxLanes(d)];
-    alignas(64) int32_t counts[hn::MaxLanes(d)];
-    hn::Store(acc, d, lanes);
-    hn::Store(finiteCount, di, counts);
-    for (uint32_t i = 0; i < n; ++i) {
-        sum += double(lanes[i]);
-        count += uint64_t(counts[i]);
-    }
-    for (; x < x1; ++x) {
-        float term;
-        if (tonemap::logLuminance(in[x], term)) {
-            sum += double(term);
-            ++count;
-        }
-    }
 }
 
 /// The log-luminance terms of a row segment, by the reference kernel.
@@ -267,15 +288,15 @@ uint64_t mapFrame(const ToneMapParams& params, const tonemap::SrgbEncodeTable& t
             uint64_t logCount = 0;
             for (uint32_t y = t.y0; y < t.y1; ++y) {
                 const glm::vec4* in = src.row(y);
-                if (measure) {
-                    if (reference)
-                        logLuminanceRowReference(in, 0, width, logSum, logCount);
-                    else
-                        logLuminanceRow(in, 0, width, logSum, logCount);
-                }
                 glm::vec4* outFloat = dstFloatTexture ? dstFloat.row(y) : nullptr;
-                tileNonFinite += reference ? mapRowReference(p, table, in, dst.row(y), outFloat, 0, width)
-                                           : mapRow<Op>(p, table, in, dst.row(y), outFloat, 0, width);
+                if (reference) {
+                    if (measure) logLuminanceRowReference(in, 0, width, logSum, logCount);
+                    tileNonFinite += mapRowReference(p, table, in, dst.row(y), outFloat, 0, width);
+                } else if (measure) {
+                    tileNonFinite += mapRow<Op, true>(p, table, in, dst.row(y), outFloat, 0, width, logSum, logCount);
+                } else {
+                    tileNonFinite += mapRow<Op, false>(p, table, in, dst.row(y), outFloat, 0, width, logSum, logCount);
+                }
             }
             if (measure) measure->store(t, logSum, logCount);
             nonFinite += tileNonFinite;  // integers: the same total in any order
