@@ -681,6 +681,35 @@ FlipSetup makeFlipSetup(double ppd) {
     return f;
 }
 
+/// One source row of an image (linear R, G, B planes) to YyCxCz over n padded positions: source
+/// x = x0 + i, or index[i] when given (the clamped border). The three outputs are followed in memory
+/// by room for three more rows (the gathered R, G, B).
+[[gnu::noinline]] void yccRow(const FlipSetup& f, const float* r, const float* g, const float* b, const int* index,
+                              int x0, int n, float* __restrict yy, float* __restrict cx, float* __restrict cz) {
+    float* __restrict rr = cz + n;
+    float* __restrict gg = rr + n;
+    float* __restrict bb = gg + n;
+    if (index) {
+        for (int i = 0; i < n; ++i) {
+            rr[i] = r[index[i]];
+            gg[i] = g[index[i]];
+            bb[i] = b[index[i]];
+        }
+    } else {
+        std::copy_n(r + x0, n, rr);
+        std::copy_n(g + x0, n, gg);
+        std::copy_n(b + x0, n, bb);
+    }
+    const float m00 = f.rgbToYcc[0][0], m01 = f.rgbToYcc[0][1], m02 = f.rgbToYcc[0][2];
+    const float m10 = f.rgbToYcc[1][0], m11 = f.rgbToYcc[1][1], m12 = f.rgbToYcc[1][2];
+    const float m20 = f.rgbToYcc[2][0], m21 = f.rgbToYcc[2][1], m22 = f.rgbToYcc[2][2];
+    for (int i = 0; i < n; ++i) {
+        yy[i] = m00 * rr[i] + m01 * gg[i] + m02 * bb[i] - 16.0f;
+        cx[i] = m10 * rr[i] + m11 * gg[i] + m12 * bb[i];
+        cz[i] = m20 * rr[i] + m21 * gg[i] + m22 * bb[i];
+    }
+}
+
 /// Filtered YyCxCz rows of one image back to linear RGB (clamped to [0, 1]) and then to XYZ over the
 /// white (3 rows). Not inlined: both images must take exactly the same instructions (with FMA
 /// contraction, two inlined copies can round differently, and identical images must give 0).
@@ -751,12 +780,13 @@ MetricValue flip(MetricImage test, MetricImage ref, ImageView<float>* errorImage
         const int tw = int(tile.x1 - tile.x0), th = int(tile.y1 - tile.y0);
         const int rows = th + 2 * halo, padW = tw + 2 * halo;
         std::vector<float>& hbuf = scratch(0, size_t(kH) * rows * tw);
-        std::vector<float>& pad = scratch(1, size_t(3) * padW);
+        std::vector<float>& pad = scratch(1, size_t(6) * padW);
         std::vector<float>& vbuf = scratch(2, size_t(2) * kV * th * tw);
         thread_local std::vector<int> xIndexStore;
         if (xIndexStore.size() < size_t(padW)) xIndexStore.resize(size_t(padW));
         int* xIndex = xIndexStore.data();
         for (int i = 0; i < padW; ++i) xIndex[i] = clampIndex(int(tile.x0) + i - halo, W);
+        const bool interior = int(tile.x0) >= halo && int(tile.x1) + halo <= W;
         for (int img = 0; img < 2; ++img) {
             const float* pr = planes.plane[3 * img].data();
             const float* pg = planes.plane[3 * img + 1].data();
@@ -767,13 +797,8 @@ MetricValue flip(MetricImage test, MetricImage ref, ImageView<float>* errorImage
                 float* yy = pad.data();
                 float* cx = yy + padW;
                 float* cz = cx + padW;
-                for (int i = 0; i < padW; ++i) {
-                    const size_t sx = base + size_t(xIndex[i]);
-                    const float rr = pr[sx], gg = pg[sx], bb = pb[sx];
-                    yy[i] = f.rgbToYcc[0][0] * rr + f.rgbToYcc[0][1] * gg + f.rgbToYcc[0][2] * bb - 16.0f;
-                    cx[i] = f.rgbToYcc[1][0] * rr + f.rgbToYcc[1][1] * gg + f.rgbToYcc[1][2] * bb;
-                    cz[i] = f.rgbToYcc[2][0] * rr + f.rgbToYcc[2][1] * gg + f.rgbToYcc[2][2] * bb;
-                }
+                yccRow(f, pr + base, pg + base, pb + base, interior ? nullptr : xIndex, int(tile.x0) - halo, padW, yy,
+                       cx, cz);
                 auto hrow = [&](int q) { return hbuf.data() + (size_t(q) * rows + r) * tw; };
                 const int co = halo - cr, fo = halo - fr;
                 convolveRow(yy + co, f.csf[0].data(), csfTaps, tw, hrow(0));

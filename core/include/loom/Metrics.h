@@ -65,10 +65,10 @@ MetricValue smape(const Texture& test, const Texture& ref, Texture* errorImage =
 // LDR metrics (PSNR, SSIM, FLIP) on the one documented tone map
 
 /// The tone map of the LDR metrics: clamp(x, 0, 1), then the sRGB OETF (IEC 61966-2-1:
-/// 12.92 x for x <= 0.0031308, else 1.055 x^(1/2.4) - 0.055). The result lies in [0, 1] and the
-/// data range is L = 1. The OETF is evaluated from a table indexed by the float's exponent and
-/// top 8 mantissa bits with linear interpolation: maximum absolute error below 1e-6 against the
-/// formula (tested). Non-finite input returns 0 (the metrics apply the rule above first).
+/// 12.92 x for x <= 0.0031308, else 1.055 x^(1/2.4) - 0.055). The result lies in [0, 1] (white is
+/// exactly 1) and the data range is L = 1. The power is exp(log(x) / 2.4) with Highway's vector
+/// Exp and Log: maximum absolute error below 1e-6 against the formula (tested). Non-finite input
+/// returns 0 (the metrics apply the rule above first).
 float ldrToneMap(float linear);
 
 /// PSNR in dB: 10 log10(1 / MSE), MSE over pixels and the R, G, B channels of the tone-mapped
@@ -82,7 +82,7 @@ MetricValue psnr(const Texture& test, const Texture& ref, Texture* errorImage = 
 /// evaluated at every pixel; window taps outside the image are mirrored without repeating the
 /// edge pixel (gfedcb|abcdefgh|gfedcba). The value is the mean of the map over all pixels and
 /// channels. This is the convention of OpenCV's cv::quality::QualitySSIM (there with L = 255), which
-/// the tests compare against.
+/// the tests compare against (within 1e-4). Symmetric in its arguments.
 MetricValue ssim(MetricImage test, MetricImage ref, ImageView<float>* ssimImage = nullptr);
 MetricValue ssim(const Texture& test, const Texture& ref, Texture* ssimImage = nullptr);
 
@@ -98,9 +98,11 @@ struct FlipViewing {
 
 /// LDR FLIP (Andersson et al. 2020, "FLIP: A Difference Evaluator for Alternating Images") on the
 /// tone-mapped images (FLIP's sRGB input, so its linear RGB is clamp(x, 0, 1)). The value is the
-/// mean of the per-pixel FLIP error, which lies in [0, 1]. See docs/METRICS.md for the pipeline and
-/// constants. Not symmetric in general (the feature term uses max of edge and point differences
-/// which is symmetric, but the colour term is; see the docs for what is and is not).
+/// mean of the per-pixel FLIP error, which lies in [0, 1]; identical images give exactly 0. See
+/// docs/METRICS.md for the pipeline and constants (CSF filters in YyCxCz, Hunt-adjusted L*a*b*,
+/// HyAB with qc = 0.7, pc = 0.4, pt = 0.95, edge and point features with w = 0.082 degrees and
+/// qf = 0.5). Symmetric in exact arithmetic (both terms are), so flip(a, b) and flip(b, a) agree to
+/// float rounding, except where the non-finite rule applies.
 MetricValue flip(MetricImage test, MetricImage ref, ImageView<float>* errorImage = nullptr,
                  const FlipViewing& viewing = {});
 MetricValue flip(const Texture& test, const Texture& ref, Texture* errorImage = nullptr,
