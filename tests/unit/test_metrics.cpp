@@ -358,3 +358,17 @@ TEST(Metrics, DeterministicForAnyThreadCount) {
     EXPECT_EQ(runs[0], runs[1]);
     EXPECT_TRUE(maps[0] == maps[1]);
 }
+
+TEST(Metrics, TinyAndThinImagesStayFiniteAndExact) {
+    // Border paths: tiles narrower than the filter blocks and images smaller than the windows.
+    for (auto [w, h] : {std::pair{1u, 1u}, {3u, 200u}, {200u, 3u}, {17u, 9u}, {65u, 33u}}) {
+        const Texture ref = makeImage(w, h, [](uint32_t x, uint32_t y) { return scene(x % 96, y % 80); });
+        const Texture test = withNoise(ref, 0.1f, w * 131 + h);
+        EXPECT_EQ(flip(ref, ref).value, 0.0) << w << "x" << h;
+        EXPECT_NEAR(ssim(ref, ref).value, 1.0, 1e-5) << w << "x" << h;
+        const double f = flip(test, ref).value, s = ssim(test, ref).value;
+        EXPECT_TRUE(std::isfinite(f) && f >= 0.0 && f <= 1.0) << w << "x" << h;
+        EXPECT_TRUE(std::isfinite(s) && s <= 1.0) << w << "x" << h;
+        EXPECT_TRUE(std::isfinite(psnr(test, ref).value)) << w << "x" << h;
+    }
+}
