@@ -66,9 +66,9 @@ MetricValue smape(const Texture& test, const Texture& ref, Texture* errorImage =
 
 /// The tone map of the LDR metrics: clamp(x, 0, 1), then the sRGB OETF (IEC 61966-2-1:
 /// 12.92 x for x <= 0.0031308, else 1.055 x^(1/2.4) - 0.055). The result lies in [0, 1] (white is
-/// exactly 1) and the data range is L = 1. The power is exp(log(x) / 2.4) with Highway's vector
-/// Exp and Log: maximum absolute error below 1e-6 against the formula (tested). Non-finite input
-/// returns 0 (the metrics apply the rule above first).
+/// exactly 1) and the data range is L = 1. The OETF comes from a table indexed by the float's
+/// exponent and top 8 mantissa bits, linearly interpolated: maximum absolute error below 1e-6
+/// against the formula (tested). Non-finite input returns 0 (the metrics apply the rule above first).
 float ldrToneMap(float linear);
 
 /// PSNR in dB: 10 log10(1 / MSE), MSE over pixels and the R, G, B channels of the tone-mapped
