@@ -9,6 +9,7 @@ PACKAGES=(
   libopenexr-dev libimath-dev libspdlog-dev libfmt-dev
   libembree-dev libtbb-dev libimgui-dev libstb-dev libcli11-dev libhwy-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  libopencv-contrib-dev
   libegl-dev libgl-dev libegl1-mesa-dev libgl1-mesa-dri libgles-dev
 )
 
