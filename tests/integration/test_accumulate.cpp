@@ -3,6 +3,8 @@
 // dumpable history, parameter independence of reflection; and the per-pixel kernels on their own.
 #include <gtest/gtest.h>
 
+#include "TestUtil.h"
+
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -31,28 +33,10 @@ namespace {
 
 using SampleFn = std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)>;
 
-/// Emits "color" = fn(frame index, x, y): any frame-dependent input the tests need.
-class SequencePass final : public RenderPass {
-public:
-    void reflect(Reflection& r, const CompileInfo&) const override { r.output("color", Format::RGBA32F); }
-    void execute(PassContext& ctx) override {
-        auto dst = ctx.output("color")->view<glm::vec4>();
-        for (uint32_t y = 0; y < dst.height; ++y)
-            for (uint32_t x = 0; x < dst.width; ++x) dst.at(x, y) = fn ? fn(ctx.frameIndex(), x, y) : glm::vec4(0.f);
-    }
-    SampleFn fn;
-};
+using SequencePass = test::FunctionSource;
 
 /// The build's plugins (AccumulatePass, the test passes) plus Sequence.
-PluginRegistry& registry() {
-    static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
-    static const bool registered = [] {
-        reg.registerPass("Sequence", "frame-dependent test input", [] { return std::make_unique<SequencePass>(); });
-        return true;
-    }();
-    (void)registered;
-    return reg;
-}
+PluginRegistry& registry() { return test::registryWithFunctionSource(); }
 
 const char* const kPrecisions[] = {"float", "kahan", "double"};
 
@@ -76,7 +60,7 @@ struct Harness {
             {"loom_graph", 1},
             {"name", "accumulate"},
             {"passes",
-             {{{"name", "Source"}, {"type", "Sequence"}},
+             {{{"name", "Source"}, {"type", "FunctionSource"}},
               {{"name", "Accumulate"}, {"type", "AccumulatePass"}, {"params", params}}}},
             {"edges", nlohmann::json::array({nlohmann::json::array({"Source.color", "Accumulate.src"})})},
             {"outputs", {"Accumulate.dst"}}};
@@ -231,7 +215,7 @@ TEST(AccumulatePass, MeanOfOneToNIsExactInDouble) {
 /// Max absolute error of each of three accumulators (float, kahan, double) fed the same sequence, against the mean
 /// computed exactly (in long double from the very float values the source emitted).
 std::map<std::string, double> precisionErrors(const SampleFn& fn, int frames, uint32_t size) {
-    nlohmann::json passes = {{{"name", "Source"}, {"type", "Sequence"}}};
+    nlohmann::json passes = {{{"name", "Source"}, {"type", "FunctionSource"}}};
     nlohmann::json edges = nlohmann::json::array(), outputs = nlohmann::json::array();
     for (const char* precision : kPrecisions) {
         const std::string name = std::string("Acc_") + precision;

@@ -4,6 +4,8 @@
 // reflection.
 #include <gtest/gtest.h>
 
+#include "TestUtil.h"
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -27,27 +29,9 @@ namespace {
 
 using ImageFn = std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)>;
 
-/// Emits "color" = fn(frame, x, y).
-class ImageSource final : public RenderPass {
-public:
-    void reflect(Reflection& r, const CompileInfo&) const override { r.output("color", Format::RGBA32F); }
-    void execute(PassContext& ctx) override {
-        auto dst = ctx.output("color")->view<glm::vec4>();
-        for (uint32_t y = 0; y < dst.height; ++y)
-            for (uint32_t x = 0; x < dst.width; ++x) dst.at(x, y) = fn ? fn(ctx.frameIndex(), x, y) : glm::vec4(0.f);
-    }
-    ImageFn fn;
-};
+using ImageSource = test::FunctionSource;
 
-PluginRegistry& registry() {
-    static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
-    static const bool registered = [] {
-        reg.registerPass("ImageSource", "test input", [] { return std::make_unique<ImageSource>(); });
-        return true;
-    }();
-    (void)registered;
-    return reg;
-}
+PluginRegistry& registry() { return test::registryWithFunctionSource(); }
 
 // Closed forms, in double, independent of the kernel header.
 double srgbExact(double v) {
@@ -96,7 +80,7 @@ struct Harness {
         nlohmann::json g = {{"loom_graph", 1},
                             {"name", "tonemap"},
                             {"passes",
-                             {{{"name", "Source"}, {"type", "ImageSource"}},
+                             {{{"name", "Source"}, {"type", "FunctionSource"}},
                               {{"name", "ToneMap"}, {"type", "ToneMap"}, {"params", params}}}},
                             {"edges", nlohmann::json::array({nlohmann::json::array({"Source.color", "ToneMap.src"})})},
                             {"outputs", outputs}};
