@@ -255,3 +255,40 @@ TEST(ErrorMeasure, DeterministicForOneAndTwoThreads) {
     ASSERT_EQ(e1.size(), e2.size());
     EXPECT_EQ(std::memcmp(e1.data(), e2.data(), e1.size() * sizeof(float)), 0);
 }
+
+TEST(ErrorMeasure, NonFiniteInputIsCountedAndNeverReachesTheStatsOrTheErrorImage) {
+    for (const char* metric : {"relMSE", "smape", "psnr", "ssim", "flip"}) {
+        SCOPED_TRACE(metric);
+        Harness h(nlohmann::json{{"errorImage", metric}, {"warmupFrames", 0}}, {"Measure.dst", "Measure.error"});
+        h.ref->fn = [](uint64_t, uint32_t x, uint32_t y) { return image(x, y); };
+        h.src->fn = [](uint64_t, uint32_t x, uint32_t y) {
+            if (x == 5 && y == 9) return glm::vec4(std::nanf(""), 0.f, 0.f, 1.f);
+            if (x == 40 && y == 2) return glm::vec4(0.f, INFINITY, 0.f, 1.f);
+            return image(x, y);
+        };
+        h.run();
+        h.run();
+        EXPECT_EQ(h.stat("nonFinite"), 2.0);
+        const auto stats = h.graph.lastStats();
+        for (const auto& [name, value] : stats.at("Measure")) EXPECT_TRUE(std::isfinite(value)) << name;
+        const auto err = h.field("Measure.error").view<float>();
+        for (uint32_t y = 0; y < kSize; ++y)
+            for (uint32_t x = 0; x < kSize; ++x) ASSERT_TRUE(std::isfinite(err.at(x, y))) << x << ", " << y;
+    }
+}
+
+TEST(ErrorMeasure, DisabledPassesSrcThroughAndReportsNothing) {
+    Harness h(nlohmann::json{{"enabled", false}}, {"Measure.dst", "Measure.error"});
+    h.ref->fn = [](uint64_t, uint32_t x, uint32_t y) { return image(x, y); };
+    h.src->fn = [](uint64_t f, uint32_t x, uint32_t y) { return image(x, y) * float(f + 2); };
+    h.run();
+    h.run();
+    EXPECT_FALSE(h.hasStat("flip"));
+    EXPECT_FALSE(h.hasStat("temporal"));
+    EXPECT_TRUE(sameBits(h.field("Measure.dst"), h.field("Src.color")));
+    // Enabled again: history was kept, so the temporal error is there at once.
+    h.graph.setParam("Measure", "enabled", true, "test");
+    h.run();
+    EXPECT_TRUE(h.hasStat("temporal"));
+    EXPECT_GT(h.stat("flip"), 0.0);
+}
