@@ -1,10 +1,12 @@
 #include "ErrorMeasurePass.h"
 
 #include <algorithm>
+#include <cmath>
 #include <vector>
 
 #include "loom/Error.h"
 #include "loom/Metrics.h"
+#include "loom/Parallel.h"
 #include "loom/Plugin.h"
 
 namespace loom {
@@ -60,7 +62,9 @@ MetricValue measure(ErrorMeasurePass::Metric m, MetricImage test, MetricImage re
 void ErrorMeasurePass::reflect(Reflection& r, const CompileInfo&) const {
     r.input(kSrc, Format::RGBA32F).doc("image under evaluation, e.g. PathTracer.color (connect with an explicit edge)");
     r.input(kReference, Format::RGBA32F).doc("reference image, e.g. Accumulate.dst (connect with an explicit edge)");
-    r.output(kDst, Format::RGBA32F).doc("src unchanged (bit-identical), so the pass can sit in a chain");
+    r.output(kDst, Format::RGBA32F)
+        .doc(
+            "src unchanged (bit-identical) except non-finite channels, which become 0, so the pass can sit in a chain");
     r.output(kError, Format::R32F)
         .optional()
         .doc("per-pixel error of the metric chosen by errorImage; computed only when consumed");
@@ -114,7 +118,18 @@ void ErrorMeasurePass::resetHistory() {
 void ErrorMeasurePass::execute(PassContext& ctx) {
     const Texture& srcTex = *ctx.input(kSrc);
     const Texture& refTex = *ctx.input(kReference);
-    ctx.output(kDst)->copyFrom(srcTex);
+    // dst is src, except that a non-finite channel becomes 0: the metrics count such pixels (nonFinite), and no
+    // output of Loom carries NaN or Inf on to the next pass.
+    {
+        const auto in = srcTex.view<glm::vec4>();
+        const auto out = ctx.output(kDst)->view<glm::vec4>();
+        parallelForPixels(in.width, in.height, [&](uint32_t x, uint32_t y) {
+            glm::vec4 v = in.at(x, y);
+            for (int c = 0; c < 4; ++c)
+                if (!std::isfinite(v[c])) v[c] = 0.f;
+            out.at(x, y) = v;
+        });
+    }
     Texture* errorTex = ctx.output(kError);
 
     // A parameter set between frames is validated here (compile validated the one it saw).

@@ -256,7 +256,7 @@ TEST(ErrorMeasure, DeterministicForOneAndTwoThreads) {
     EXPECT_EQ(std::memcmp(e1.data(), e2.data(), e1.size() * sizeof(float)), 0);
 }
 
-TEST(ErrorMeasure, NonFiniteInputIsCountedAndNeverReachesTheStatsOrTheErrorImage) {
+TEST(ErrorMeasure, NonFiniteInputIsCountedAndNeverReachesTheStatsTheErrorImageOrDst) {
     for (const char* metric : {"relMSE", "smape", "psnr", "ssim", "flip"}) {
         SCOPED_TRACE(metric);
         Harness h(nlohmann::json{{"errorImage", metric}, {"warmupFrames", 0}}, {"Measure.dst", "Measure.error"});
@@ -274,6 +274,11 @@ TEST(ErrorMeasure, NonFiniteInputIsCountedAndNeverReachesTheStatsOrTheErrorImage
         const auto err = h.field("Measure.error").view<float>();
         for (uint32_t y = 0; y < kSize; ++y)
             for (uint32_t x = 0; x < kSize; ++x) ASSERT_TRUE(std::isfinite(err.at(x, y))) << x << ", " << y;
+        // dst is src with the non-finite channels set to 0.
+        const auto dst = h.field("Measure.dst").view<glm::vec4>();
+        EXPECT_EQ(dst.at(5, 9), glm::vec4(0.f, 0.f, 0.f, 1.f));
+        EXPECT_EQ(dst.at(40, 2), glm::vec4(0.f, 0.f, 0.f, 1.f));
+        EXPECT_EQ(dst.at(6, 9), image(6, 9));
     }
 }
 
