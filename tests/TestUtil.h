@@ -9,7 +9,9 @@
 #include <functional>
 #include <glm/vec4.hpp>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "loom/Error.h"
 #include "loom/Plugin.h"
@@ -62,6 +64,30 @@ inline PluginRegistry& registryWithFunctionSource() {
     }();
     (void)registered;
     return r;
+}
+
+/// The fields a pass of `type` declares at 32x32 after its parameters are set to `params`: reflection must not
+/// depend on parameter values, so tests compare this against the defaults' fields.
+inline std::vector<FieldDesc> reflectedFields(PluginRegistry& registry, const std::string& type,
+                                              const nlohmann::json& params) {
+    std::unique_ptr<RenderPass> pass = registry.create(type);
+    pass->params().setAll(params, "test");
+    Reflection r;
+    CompileInfo info;
+    info.frameWidth = info.frameHeight = 32;
+    pass->reflect(r, info);
+    return r.fields();
+}
+
+/// A deterministic pseudo-random value in [0, 1) from three integers (e.g. frame, x, y).
+inline float hash01(uint64_t a, uint32_t b, uint32_t c) {
+    uint64_t v = a * 0x9E3779B97F4A7C15ull ^ (uint64_t(b) << 32 | c);
+    v ^= v >> 33;
+    v *= 0xFF51AFD7ED558CCDull;
+    v ^= v >> 33;
+    v *= 0xC4CEB9FE1A85EC53ull;
+    v ^= v >> 33;
+    return float(v >> 40) / float(1u << 24);
 }
 
 /// Path of a scene shipped in data/scenes.

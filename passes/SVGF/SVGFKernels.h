@@ -17,7 +17,6 @@
 #include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>
-#include <type_traits>
 
 #include "AtrousKernels.h"
 #include "loom/Kernel.h"
@@ -40,13 +39,6 @@ inline constexpr float kDepthEpsilon = 1e-3f;
 inline constexpr float kNormalThreshold = 0.9f;
 /// Bilinear footprints whose valid weights sum below this fall back to the 3x3 search (Falcor).
 inline constexpr float kMinBilinearWeight = 0.01f;
-
-/// Pixel (x, y) of a view. ImageView::at is host-only; this is the same address computation for both sides.
-template <class T>
-LOOM_HD inline T& texel(const ImageView<T>& v, uint32_t x, uint32_t y) {
-    using Byte = std::conditional_t<std::is_const_v<T>, const unsigned char, unsigned char>;
-    return reinterpret_cast<T*>(reinterpret_cast<Byte*>(v.data) + v.rowPitch * y)[x];
-}
 
 /// max and min that compile to one instruction (fmaxf/fminf stay library calls without -ffinite-math-only, for
 /// their NaN rules). maxf(NaN, b) and minf(NaN, b) are b.
@@ -117,12 +109,12 @@ LOOM_HD inline bool reprojectionTapValid(const TemporalViews& v, int px, int py,
     if (px < 0 || py < 0 || px >= int(v.color.width) || py >= int(v.color.height)) return false;
     const uint32_t qx = uint32_t(px), qy = uint32_t(py);
     // History length 0: no history there (first frame, reset, or SVGF was disabled).
-    if (!(texel(v.prevLength, qx, qy) > 0.f)) return false;
-    const float zPrev = texel(v.prevLinearZ, qx, qy).x;
+    if (!(v.prevLength.at(qx, qy) > 0.f)) return false;
+    const float zPrev = v.prevLinearZ.at(qx, qy).x;
     if (zPrev < 0.f) return false;
-    if (v.meshId.data && texel(v.prevMeshId, qx, qy) != mesh) return false;
+    if (v.meshId.data && v.prevMeshId.at(qx, qy) != mesh) return false;
     if (fabsf(z - zPrev) > kDepthThreshold * (dz + kDepthEpsilon * z)) return false;
-    if (glm::dot(n, glm::vec3(texel(v.prevNormW, qx, qy))) < kNormalThreshold) return false;
+    if (glm::dot(n, glm::vec3(v.prevNormW.at(qx, qy))) < kNormalThreshold) return false;
     return true;
 }
 
@@ -134,10 +126,10 @@ struct Reprojected {
 };
 
 LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, uint32_t y, float w) {
-    r.illum0 += w * texel(v.prevIllum0, x, y);
-    if (v.prevIllum1.data) r.illum1 += w * texel(v.prevIllum1, x, y);
-    r.moments += w * texel(v.prevMoments, x, y);
-    r.length += w * texel(v.prevLength, x, y);
+    r.illum0 += w * v.prevIllum0.at(x, y);
+    if (v.prevIllum1.data) r.illum1 += w * v.prevIllum1.at(x, y);
+    r.moments += w * v.prevMoments.at(x, y);
+    r.length += w * v.prevLength.at(x, y);
 }
 
 /// Last frame's history at pixel (x, y) through the motion vector: bilinear over the valid taps of the 2x2
@@ -145,7 +137,7 @@ LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, u
 LOOM_HD inline Reprojected reproject(const TemporalViews& v, uint32_t x, uint32_t y, float z, float dz,
                                      const glm::vec3& n, uint32_t mesh) {
     Reprojected r;
-    const glm::vec2 mv = texel(v.mvec, x, y);
+    const glm::vec2 mv = v.mvec.at(x, y);
     if (!isFiniteBits(mv.x) || !isFiniteBits(mv.y)) return r;
     // uvPrev = uv + mvec with uv = (x + 0.5) / width: the previous pixel centre coordinate is (uv + mvec) size - 0.5.
     const float w = float(v.color.width), h = float(v.color.height);
@@ -190,30 +182,30 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, uint32_t x, uint32_
 
 /// Stage 1 for pixel (x, y). Returns true when this pixel's colour sample was not finite (and was rejected).
 LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y, const TemporalParams& p) {
-    const glm::vec2 z = texel(v.linearZ, x, y);
-    const glm::vec4 normal = texel(v.normW, x, y);
-    const uint32_t mesh = v.meshId.data ? texel(v.meshId, x, y) : 0u;
+    const glm::vec2 z = v.linearZ.at(x, y);
+    const glm::vec4 normal = v.normW.at(x, y);
+    const uint32_t mesh = v.meshId.data ? v.meshId.at(x, y) : 0u;
     // Guides for next frame's tests.
-    texel(v.curLinearZ, x, y) = z;
-    texel(v.curNormW, x, y) = normal;
-    texel(v.curMeshId, x, y) = mesh;
+    v.curLinearZ.at(x, y) = z;
+    v.curNormW.at(x, y) = normal;
+    v.curMeshId.at(x, y) = mesh;
 
-    const glm::vec4 c0 = p.split ? texel(v.direct, x, y) : texel(v.color, x, y);
-    const glm::vec4 c1 = p.split ? texel(v.indirect, x, y) : glm::vec4(0.f);
+    const glm::vec4 c0 = p.split ? v.direct.at(x, y) : v.color.at(x, y);
+    const glm::vec4 c1 = p.split ? v.indirect.at(x, y) : glm::vec4(0.f);
     const bool sampleFinite = isFinite3(glm::vec3(c0)) && isFinite3(glm::vec3(c1));
     if (!(z.x >= 0.f)) {
         // Miss: passed through by the modulation stage; no history.
-        texel(v.integrated0, x, y) = glm::vec4(0.f);
-        if (p.split) texel(v.integrated1, x, y) = glm::vec4(0.f);
-        texel(v.curMoments, x, y) = glm::vec4(0.f);
-        texel(v.curLength, x, y) = 0.f;
+        v.integrated0.at(x, y) = glm::vec4(0.f);
+        if (p.split) v.integrated1.at(x, y) = glm::vec4(0.f);
+        v.curMoments.at(x, y) = glm::vec4(0.f);
+        v.curLength.at(x, y) = 0.f;
         return !sampleFinite;
     }
 
     // Emission seen by the camera is taken out first (it is part of `direct` in the split) and added back after
     // remodulation; only the reflected light is demodulated and filtered.
-    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(texel(v.emission, x, y))) : glm::vec3(0.f);
-    const glm::vec3 albedo = guardedAlbedo(texel(v.albedo, x, y));
+    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(v.emission.at(x, y))) : glm::vec3(0.f);
+    const glm::vec3 albedo = guardedAlbedo(v.albedo.at(x, y));
     const glm::vec3 l0 = clampIllumination((glm::vec3(c0) - emission) / albedo);
     const glm::vec3 l1 = clampIllumination(glm::vec3(c1) / albedo);
     const float lum0 = luminance(l0), lum1 = luminance(l1);
@@ -245,10 +237,10 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
     }
     i0.a = maxf(0.f, m.y - m.x * m.x);
     i1.a = maxf(0.f, m.w - m.z * m.z);
-    texel(v.integrated0, x, y) = i0;
-    if (p.split) texel(v.integrated1, x, y) = i1;
-    texel(v.curMoments, x, y) = m;
-    texel(v.curLength, x, y) = length;
+    v.integrated0.at(x, y) = i0;
+    if (p.split) v.integrated1.at(x, y) = i1;
+    v.curMoments.at(x, y) = m;
+    v.curLength.at(x, y) = length;
     return !sampleFinite;
 }
 
@@ -277,17 +269,17 @@ struct VarianceViews {
 /// the integrated colour and the moments whose variance is boosted by 4 / n for the first frames (Falcor).
 LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, uint32_t y, const AtrousParams& p,
                                           bool split) {
-    const glm::vec4 i0 = texel(v.integrated0, x, y);
-    const glm::vec4 i1 = split ? texel(v.integrated1, x, y) : glm::vec4(0.f);
-    const float length = texel(v.length, x, y);
-    const glm::vec2 z = texel(v.linearZ, x, y);
+    const glm::vec4 i0 = v.integrated0.at(x, y);
+    const glm::vec4 i1 = split ? v.integrated1.at(x, y) : glm::vec4(0.f);
+    const float length = v.length.at(x, y);
+    const glm::vec2 z = v.linearZ.at(x, y);
     if (!(z.x >= 0.f) || length >= kSpatialVarianceFrames) {
-        texel(v.estimate0, x, y) = i0;
-        if (split) texel(v.estimate1, x, y) = i1;
-        if (v.variance.data) texel(v.variance, x, y) = i0.a + i1.a;
+        v.estimate0.at(x, y) = i0;
+        if (split) v.estimate1.at(x, y) = i1;
+        if (v.variance.data) v.variance.at(x, y) = i0.a + i1.a;
         return;
     }
-    const glm::vec3 n = glm::vec3(texel(v.normW, x, y));
+    const glm::vec3 n = glm::vec3(v.normW.at(x, y));
     const float l0 = luminance(glm::vec3(i0)), l1 = luminance(glm::vec3(i1));
     const float phiDepth = maxf(z.y, 1e-8f) * 3.f;
     glm::vec3 sum0(0.f), sum1(0.f);
@@ -300,11 +292,11 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
         for (int i = -3; i <= 3; ++i) {
             const int qx = int(x) + i;
             if (qx < 0 || qx >= w) continue;
-            const glm::vec2 zq = texel(v.linearZ, uint32_t(qx), uint32_t(qy));
+            const glm::vec2 zq = v.linearZ.at(uint32_t(qx), uint32_t(qy));
             if (zq.x < 0.f) continue;
-            const glm::vec3 nq = glm::vec3(texel(v.normW, uint32_t(qx), uint32_t(qy)));
-            const glm::vec4 q0 = texel(v.integrated0, uint32_t(qx), uint32_t(qy));
-            const glm::vec4 mq = texel(v.moments, uint32_t(qx), uint32_t(qy));
+            const glm::vec3 nq = glm::vec3(v.normW.at(uint32_t(qx), uint32_t(qy)));
+            const glm::vec4 q0 = v.integrated0.at(uint32_t(qx), uint32_t(qy));
+            const glm::vec4 mq = v.moments.at(uint32_t(qx), uint32_t(qy));
             const float distance = sqrtf(float(i * i + j * j));
             const float w0 = varianceWeight(z.x, zq.x, phiDepth * distance, n, nq, p.phiNormal, l0,
                                             luminance(glm::vec3(q0)), p.phiColor);
@@ -313,7 +305,7 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
             sumMoments.y += w0 * mq.y;
             sumW0 += w0;
             if (split) {
-                const glm::vec4 q1 = texel(v.integrated1, uint32_t(qx), uint32_t(qy));
+                const glm::vec4 q1 = v.integrated1.at(uint32_t(qx), uint32_t(qy));
                 const float w1 = varianceWeight(z.x, zq.x, phiDepth * distance, n, nq, p.phiNormal, l1,
                                                 luminance(glm::vec3(q1)), p.phiColor);
                 sum1 += w1 * glm::vec3(q1);
@@ -336,9 +328,9 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
         const float m1 = sumMoments.z / sumW1, m2 = sumMoments.w / sumW1;
         e1 = glm::vec4(sum1, maxf(0.f, m2 - m1 * m1) * boost);
     }
-    texel(v.estimate0, x, y) = e0;
-    if (split) texel(v.estimate1, x, y) = e1;
-    if (v.variance.data) texel(v.variance, x, y) = e0.a + (split ? e1.a : 0.f);
+    v.estimate0.at(x, y) = e0;
+    if (split) v.estimate1.at(x, y) = e1;
+    if (v.variance.data) v.variance.at(x, y) = e0.a + (split ? e1.a : 0.f);
 }
 
 /// Views of the modulation stage.
@@ -351,16 +343,16 @@ struct ModulateViews {
 /// Stage 4 for pixel (x, y): albedo * (sum of the filtered signals) + emission; miss pixels copy the input colour
 /// (non-finite channels as 0). The alpha channel is the input colour's.
 LOOM_HD inline void modulatePixel(const ModulateViews& v, uint32_t x, uint32_t y, bool split) {
-    const glm::vec4 c = texel(v.color, x, y);
+    const glm::vec4 c = v.color.at(x, y);
     const float alpha = isFiniteBits(c.a) ? c.a : 1.f;
-    if (!(texel(v.linearZ, x, y).x >= 0.f)) {
-        texel(v.dst, x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), alpha);
+    if (!(v.linearZ.at(x, y).x >= 0.f)) {
+        v.dst.at(x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), alpha);
         return;
     }
-    glm::vec3 illum = glm::vec3(texel(v.filtered0, x, y));
-    if (split) illum += glm::vec3(texel(v.filtered1, x, y));
-    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(texel(v.emission, x, y))) : glm::vec3(0.f);
-    texel(v.dst, x, y) = glm::vec4(illum * guardedAlbedo(texel(v.albedo, x, y)) + emission, alpha);
+    glm::vec3 illum = glm::vec3(v.filtered0.at(x, y));
+    if (split) illum += glm::vec3(v.filtered1.at(x, y));
+    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(v.emission.at(x, y))) : glm::vec3(0.f);
+    v.dst.at(x, y) = glm::vec4(illum * guardedAlbedo(v.albedo.at(x, y)) + emission, alpha);
 }
 
 }  // namespace loom::svgf

@@ -156,16 +156,7 @@ std::unique_ptr<Texture> copyOf(const Texture& t) {
     return c;
 }
 
-/// A deterministic pseudo-random value in [0, 1) from three integers (PCG-style hash).
-float hash01(uint64_t a, uint32_t b, uint32_t c) {
-    uint64_t v = a * 0x9E3779B97F4A7C15ull ^ (uint64_t(b) << 32 | c);
-    v ^= v >> 33;
-    v *= 0xFF51AFD7ED558CCDull;
-    v ^= v >> 33;
-    v *= 0xC4CEB9FE1A85EC53ull;
-    v ^= v >> 33;
-    return float(v >> 40) / float(1u << 24);
-}
+using test::hash01;
 
 // ---------------------------------------------------------------------------------------------------------------
 // Exact means
@@ -550,13 +541,7 @@ TEST(AccumulatePass, HistoryFieldsCanBeObservedAndHoldTheState) {
 
 TEST(AccumulatePass, ReflectionAndAllocationDoNotDependOnParameters) {
     auto fieldsWith = [](const nlohmann::json& params) {
-        std::unique_ptr<RenderPass> pass = registry().create("AccumulatePass");
-        pass->params().setAll(params, "test");
-        Reflection r;
-        CompileInfo info;
-        info.frameWidth = info.frameHeight = 32;
-        pass->reflect(r, info);
-        return r.fields();
+        return test::reflectedFields(registry(), "AccumulatePass", params);
     };
     const auto reference = fieldsWith(nlohmann::json::object());
     EXPECT_EQ(fieldsWith({{"precision", "float"}}), reference);

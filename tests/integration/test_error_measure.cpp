@@ -80,16 +80,7 @@ struct Harness {
     uint64_t nextFrame = 0;
 };
 
-/// A deterministic pseudo-random value in [0, 1) from three integers.
-float hash01(uint64_t a, uint32_t b, uint32_t c) {
-    uint64_t v = a * 0x9E3779B97F4A7C15ull ^ (uint64_t(b) << 32 | c);
-    v ^= v >> 33;
-    v *= 0xFF51AFD7ED558CCDull;
-    v ^= v >> 33;
-    v *= 0xC4CEB9FE1A85EC53ull;
-    v ^= v >> 33;
-    return float(v >> 40) / float(1u << 24);
-}
+using test::hash01;
 
 glm::vec4 image(uint32_t x, uint32_t y) {
     return {hash01(1, x, y), hash01(2, x, y) * 2.f, 0.25f + 0.01f * x, 1.f};

@@ -465,13 +465,7 @@ TEST(TAAPass, HistoryIsAGraphFieldThatCanBeObserved) {
 
 TEST(TAAPass, ReflectionDoesNotDependOnParameters) {
     auto fieldsWith = [](const nlohmann::json& params) {
-        std::unique_ptr<RenderPass> pass = registry().create("TAAPass");
-        pass->params().setAll(params, "test");
-        Reflection r;
-        CompileInfo info;
-        info.frameWidth = info.frameHeight = 32;
-        pass->reflect(r, info);
-        return r.fields();
+        return test::reflectedFields(registry(), "TAAPass", params);
     };
     const auto reference = fieldsWith(nlohmann::json::object());
     EXPECT_EQ(fieldsWith({{"alpha", 0.5f}, {"sigma", 3.f}, {"antiFlicker", false}, {"reference", true}}), reference);

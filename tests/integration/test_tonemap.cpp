@@ -412,13 +412,7 @@ TEST(ToneMap, VectorPathEqualsTheReferenceKernel) {
 
 TEST(ToneMap, ReflectionDoesNotDependOnParameters) {
     auto fieldsWith = [](const nlohmann::json& params) {
-        std::unique_ptr<RenderPass> pass = registry().create("ToneMap");
-        pass->params().setAll(params, "test");
-        Reflection r;
-        CompileInfo info;
-        info.frameWidth = info.frameHeight = 32;
-        pass->reflect(r, info);
-        return r.fields();
+        return test::reflectedFields(registry(), "ToneMap", params);
     };
     const auto reference = fieldsWith(nlohmann::json::object());
     EXPECT_EQ(fieldsWith({{"operator", "hable"}, {"autoExposure", true}, {"exposure", -3.f}}), reference);
