@@ -97,20 +97,40 @@ LOOM_HD inline Frame makeFrame(glm::vec3 n) {
 // ---------------------------------------------------------------------------------------------------------------------
 // Hemisphere sampling
 
+/// cos(x) and sin(x) for |x| <= pi/4 from their Taylor series to x^10 and x^9: the first omitted terms are below
+/// 2e-9 there, so the result is as accurate as float arithmetic allows (a few ulp), with no range reduction and no
+/// libm call. Sampling calls it with angles already in that range.
+LOOM_HD inline glm::vec2 cosSinQuarter(float x) {
+    const float x2 = x * x;
+    const float c = 1.f + x2 * (-1.f / 2.f + x2 * (1.f / 24.f + x2 * (-1.f / 720.f + x2 * (1.f / 40320.f +
+                                                                                              x2 * (-1.f / 3628800.f)))));
+    const float s = x * (1.f + x2 * (-1.f / 6.f + x2 * (1.f / 120.f + x2 * (-1.f / 5040.f + x2 * (1.f / 362880.f)))));
+    return {c, s};
+}
+
+/// cos and sin of 2 pi u for u in [0, 1): the angle is split into the nearest multiple of pi/2 and a remainder in
+/// [-pi/4, pi/4] (cosSinQuarter()), then rotated by the quadrant.
+LOOM_HD inline glm::vec2 cosSinTurn(float u) {
+    const float t = 4.f * u;
+    const float q = std::floor(t + 0.5f);
+    const glm::vec2 cs = cosSinQuarter((t - q) * (0.5f * kPi));
+    switch (int(q) & 3) {
+        case 0: return cs;
+        case 1: return {-cs.y, cs.x};
+        case 2: return -cs;
+        default: return {cs.y, -cs.x};
+    }
+}
+
 /// Maps the unit square to the unit disk, preserving area and keeping strata compact (Shirley and Chiu 1997, "A Low
 /// Distortion Map Between Disk and Square").
 LOOM_HD inline glm::vec2 sampleConcentricDisk(glm::vec2 u) {
     const float a = 2.f * u.x - 1.f, b = 2.f * u.y - 1.f;
     if (a == 0.f && b == 0.f) return glm::vec2(0.f);
-    float r, phi;
-    if (std::fabs(a) > std::fabs(b)) {
-        r = a;
-        phi = 0.25f * kPi * (b / a);
-    } else {
-        r = b;
-        phi = 0.5f * kPi - 0.25f * kPi * (a / b);
-    }
-    return glm::vec2(r * std::cos(phi), r * std::sin(phi));
+    // phi = pi/4 (b / a), or pi/2 - pi/4 (a / b) whose cosine and sine are the sine and cosine of pi/4 (a / b).
+    if (std::fabs(a) > std::fabs(b)) return a * cosSinQuarter(0.25f * kPi * (b / a));
+    const glm::vec2 cs = cosSinQuarter(0.25f * kPi * (a / b));
+    return b * glm::vec2(cs.y, cs.x);
 }
 
 /// Cosine-weighted direction about +z: a uniform disk point lifted to the hemisphere (Malley's method, as in Pharr
@@ -186,10 +206,11 @@ LOOM_HD inline glm::vec3 sampleGgxVndf(glm::vec3 wo, float alpha, glm::vec2 u) {
     const glm::vec3 t2 = glm::cross(vh, t1);
     // Uniform point on the disk, then warp t2 so the density matches the hemisphere's projected area seen from the
     // view: the half of the disk beyond the horizon is foreshortened by (1 + vh.z) / 2.
-    const float r = std::sqrt(u.x), phi = 2.f * kPi * u.y;
-    const float p1 = r * std::cos(phi);
+    const float r = std::sqrt(u.x);
+    const glm::vec2 cs = cosSinTurn(u.y);  // phi = 2 pi u.y
+    const float p1 = r * cs.x;
     const float s = 0.5f * (1.f + vh.z);
-    const float p2 = (1.f - s) * std::sqrt(maxOr(1.f - p1 * p1, 0.f)) + s * r * std::sin(phi);
+    const float p2 = (1.f - s) * std::sqrt(maxOr(1.f - p1 * p1, 0.f)) + s * r * cs.y;
     const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(maxOr(1.f - p1 * p1 - p2 * p2, 0.f)) * vh;
     return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, maxOr(nh.z, 0.f)));
 }
@@ -378,7 +399,9 @@ struct BrdfVertex {
     bool valid = false;       ///< wo.z > 0
 };
 
-LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo) {
+/// withPdf = false leaves out what only the sampling pdf needs (the lobe probability and the specular pdf scale, left
+/// 0): for a vertex where only f is wanted, such as a path's last vertex, whose light sample needs no MIS weight.
+LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo, bool withPdf = true) {
     BrdfVertex v;
     v.frame = makeFrame(n);
     v.wo = v.frame.toLocal(wo);
@@ -389,12 +412,16 @@ LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm:
     v.metallic = in.metallic;
     v.alpha = alphaFromRoughness(in.roughness);
     v.a2 = v.alpha * v.alpha;
-    v.pSpec = specularLobeProbability(in, v.wo.z);
     v.transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(v.wo.z));
     v.smithWo = std::sqrt(v.a2 + (1.f - v.a2) * v.wo.z * v.wo.z);
     v.invA2 = 1.f / v.a2;
     v.invPiA2 = v.invA2 * kInvPi;
-    v.specPdfScale = v.pSpec / (2.f * (v.wo.z + v.smithWo));
+    if (withPdf) {
+        v.pSpec = specularLobeProbability(in, v.wo.z);
+        v.specPdfScale = v.pSpec / (2.f * (v.wo.z + v.smithWo));
+    } else {
+        v.pSpec = v.specPdfScale = 0.f;
+    }
     return v;
 }
 

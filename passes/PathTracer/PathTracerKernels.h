@@ -172,7 +172,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
                     f = lambertEval(s, n, ls.wi);
                     bsdfPdf = cosI * kInvPi;
                 } else {
-                    bv = makeBrdfVertex(brdfInputs(s), n, wo);
+                    bv = makeBrdfVertex(brdfInputs(s), n, wo, !lastVertex);  // no MIS weight at the last vertex
                     bvReady = true;
                     const BrdfEval e = evalBrdfVertex(bv, ls.wi);
                     f = e.f;

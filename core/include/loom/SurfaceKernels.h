@@ -48,7 +48,9 @@ LOOM_HD inline glm::vec3 specularAlbedo(glm::vec3 f0, float NdotV, float roughne
     const glm::vec4 c0(-1.f, -0.0275f, -0.572f, 0.022f);
     const glm::vec4 c1(1.f, 0.0425f, 1.04f, -0.04f);
     const glm::vec4 r = roughness * c0 + c1;
-    const float a004 = std::fmin(r.x * r.x, std::exp2(-9.28f * NdotV)) * r.x + r.y;
+    // min as a compare and select: std::fmin stays a libm call under GCC's default floating-point rules.
+    const float fall = std::exp2(-9.28f * NdotV), sq = r.x * r.x;
+    const float a004 = (fall < sq ? fall : sq) * r.x + r.y;
     const float a = -1.04f * a004 + r.z;
     const float b = 1.04f * a004 + r.w;
     return glm::clamp(f0 * a + b, 0.f, 1.f);
