@@ -36,6 +36,7 @@ private:
     bool mLambertOnly = false;
     Device mDevice = Device::Auto;
     int mSeed = 0;
+    bool mSimdShading = true;
 
     // Light data, rebuilt per frame (triangles) or per scene (environment).
     std::vector<pt::EmissiveTri> mTris;

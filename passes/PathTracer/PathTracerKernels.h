@@ -86,14 +86,13 @@ LOOM_HD inline void beginPath(PathState& st, glm::vec3 origin, glm::vec3 dir, co
     st.r = PathResult{};
 }
 
-/// Shades the hit (or miss) of st.rayOrigin + t st.rayDir: emission reached there, a light sample (the shadow ray
-/// from st.rayOrigin along st.shadowDir, on return) and the BRDF-sampled continuation (st.rayOrigin/rayDir, on
-/// return). Returns kShadowRay and/or kNextRay; without kNextRay the path has ended (after its shadow ray).
-LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const SceneView& scene, const LightsView& lights,
-                                    const PathTracerSettings& set) {
+/// The first part of shading a vertex: adds what the path sees at the hit (or miss) of st.rayOrigin + t st.rayDir
+/// (emission, MIS-weighted) and evaluates the surface into s. Returns false when the path ends there (a miss, or
+/// bounce == maxBounces); otherwise the caller scatters at s.
+LOOM_HD inline bool shadeEmission(PathState& st, const RayHit& hit, const SceneView& scene, const LightsView& lights,
+                                  const PathTracerSettings& set, SurfaceHit& s) {
     PathResult& r = st.r;
-    const uint32_t bounce = st.bounce;
-    const bool directSlot = bounce <= 1;  // emission reached here belongs to "direct"
+    const bool directSlot = st.bounce <= 1;  // emission reached here belongs to "direct"
     const glm::vec3 rayDir = st.rayDir;
     if (!hit.hit()) {
         const glm::vec3 Le = envRadiance(lights.env, rayDir);
@@ -107,9 +106,9 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
         const glm::vec3 c = st.throughput * Le * w;
         r.color += c;
         (directSlot ? r.direct : r.indirect) += c;
-        return 0u;
+        return false;
     }
-    const SurfaceHit s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir, SurfaceEval::Shading);
+    s = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, rayDir, SurfaceEval::Shading);
     const glm::vec3 Le = emittedRadiance(scene, s, rayDir);
     if (Le != glm::vec3(0.f)) {
         float w = 1.f;
@@ -129,19 +128,46 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
         r.color += c;
         (directSlot ? r.direct : r.indirect) += c;
     }
-    if (bounce >= set.maxBounces) return 0u;
+    return st.bounce < set.maxBounces;
+}
+
+/// Normals of a scattering vertex turned to the side the ray arrived from (wo = -rayDir), and the offset origin of
+/// the rays that leave it.
+struct ScatterFrame {
+    glm::vec3 n, fn, p;
+};
+LOOM_HD inline ScatterFrame scatterFrame(const SurfaceHit& s, glm::vec3 wo) {
+    ScatterFrame f{s.normalW, s.faceNormalW, glm::vec3(0.f)};
+    if (glm::dot(f.fn, wo) < 0.f) {
+        f.fn = -f.fn;
+        f.n = -f.n;
+    }
+    if (glm::dot(f.n, wo) <= 0.f) f.n = f.fn;  // shading normal beyond the silhouette: fall back to geometry
+    f.p = offsetOrigin(s.posW, f.fn);
+    return f;
+}
+
+/// Whether the vertex at `bounce` is a path's last scattering vertex: no BRDF-sampled ray follows it, so light
+/// sampling alone estimates direct light there (weight 1): unbiased, and it saves a closest-hit ray per path.
+/// BRDF-only mode still traces it.
+LOOM_HD inline bool isLastVertex(uint32_t bounce, const PathTracerSettings& set) {
+    return bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
+}
+
+/// Shades the hit (or miss) of st.rayOrigin + t st.rayDir: emission reached there, a light sample (the shadow ray
+/// from st.rayOrigin along st.shadowDir, on return) and the BRDF-sampled continuation (st.rayOrigin/rayDir, on
+/// return). Returns kShadowRay and/or kNextRay; without kNextRay the path has ended (after its shadow ray).
+LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const SceneView& scene, const LightsView& lights,
+                                    const PathTracerSettings& set) {
+    SurfaceHit s;
+    if (!shadeEmission(st, hit, scene, lights, set, s)) return 0u;
+    PathResult& r = st.r;
+    const uint32_t bounce = st.bounce;
     PathRng& rng = st.rng;
     rng.startBounce(bounce);
-
-    // Shade on the side the ray arrived from.
-    const glm::vec3 wo = -rayDir;
-    glm::vec3 fn = s.faceNormalW, n = s.normalW;
-    if (glm::dot(fn, wo) < 0.f) {
-        fn = -fn;
-        n = -n;
-    }
-    if (glm::dot(n, wo) <= 0.f) n = fn;  // shading normal beyond the silhouette: fall back to geometry
-    const glm::vec3 p = offsetOrigin(s.posW, fn);
+    const glm::vec3 wo = -st.rayDir;
+    const ScatterFrame sf = scatterFrame(s, wo);
+    const glm::vec3 n = sf.n, fn = sf.fn, p = sf.p;
     st.rayOrigin = p;
     uint32_t request = 0u;
     // Everything the BRDF needs from this vertex alone, computed once for NEE and the BRDF sample.
@@ -149,9 +175,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
     BrdfVertex bv;
     bool bvReady = false;
     const bool nearSurface = bounce == 0;
-    // At the last scattering vertex no BRDF-sampled ray follows, so light sampling alone estimates direct
-    // light there (weight 1): unbiased, and it saves a closest-hit ray per path. BRDF-only mode still traces it.
-    const bool lastVertex = bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
+    const bool lastVertex = isLastVertex(bounce, set);
 
     // Next-event estimation: the shadow ray is left to the caller, with the contribution it carries when clear.
     const glm::vec2 l01 = rng.next2(), l23 = rng.next2();
