@@ -122,9 +122,8 @@ struct VertexV {
     M valid;
 };
 
-HWY_INLINE VertexV makeVertex(D d, const V3& n, const V3& woW, const V3& base, V metallic, V roughness) {
+HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V metallic, V roughness, VertexV& v) {
     const V one = hn::Set(d, 1.f), zero = hn::Zero(d);
-    VertexV v;
     v.frame = makeFrame(d, n);
     v.wo = v.frame.toLocal(woW);
     v.valid = hn::Gt(v.wo.z, zero);
@@ -158,7 +157,6 @@ HWY_INLINE VertexV makeVertex(D d, const V3& n, const V3& woW, const V3& base, V
     v.invA2 = hn::Div(one, v.a2);
     v.invPiA2 = v.invA2 * hn::Set(d, kInvPi);
     v.specPdfScale = hn::Div(v.pSpec, hn::Set(d, 2.f) * (v.wo.z + v.smithWo));
-    return v;
 }
 
 /// evalBrdfVertexLocal() (BRDF.h): f and the mixture pdf for a local wi; both 0 where the vertex is invalid.
@@ -265,7 +263,8 @@ void shadeBatch(Batch& b) {
     const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
     const V3 n = load3(d, b.n), fn = load3(d, b.fn), wo = load3(d, b.wo), base = load3(d, b.base);
     const V3 tp = load3(d, b.throughput);
-    const VertexV v = makeVertex(d, n, wo, base, hn::Load(d, b.metallic), hn::Load(d, b.roughness));
+    VertexV v;  // filled in place: returned by value, its 25 vectors were copied through memory
+    makeVertex(d, n, wo, base, hn::Load(d, b.metallic), hn::Load(d, b.roughness), v);
 
     // Next-event estimation.
     const V3 wl = load3(d, b.lightDir), Li = load3(d, b.lightLi);
