@@ -122,7 +122,8 @@ struct VertexV {
     M valid;
 };
 
-HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V metallic, V roughness, VertexV& v) {
+HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V metallic, V roughness, bool withPdf,
+                           VertexV& v) {
     const V one = hn::Set(d, 1.f), zero = hn::Zero(d);
     v.frame = makeFrame(d, n);
     v.wo = v.frame.toLocal(woW);
@@ -134,6 +135,15 @@ HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V me
             hn::MulAdd(base.z - f0d, metallic, f0d)};
     v.alpha = hn::Max(roughness * roughness, hn::Set(d, kMinAlpha));
     v.a2 = v.alpha * v.alpha;
+    v.transmitOut =
+        one - hn::MulAdd(hn::Set(d, 1.f - kDielectricF0), schlickWeight(d, v.wo.z), hn::Set(d, kDielectricF0));
+    v.smithWo = hn::Sqrt(hn::MulAdd(one - v.a2, v.wo.z * v.wo.z, v.a2));
+    v.invA2 = hn::Div(one, v.a2);
+    v.invPiA2 = v.invA2 * hn::Set(d, kInvPi);
+    if (!withPdf) {  // makeBrdfVertex(withPdf = false): only f is wanted
+        v.pSpec = v.specPdfScale = zero;
+        return;
+    }
     // specularLobeProbability(): Karis' specular albedo against the coupled diffuse albedo.
     const V cosV = clamp01(d, v.wo.z);
     const V rx = hn::MulAdd(roughness, hn::Set(d, -1.f), one),
@@ -151,11 +161,6 @@ HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V me
                       hn::Set(d, 0.91f) * luminance(d, base);
     const V ratio = hn::Min(hn::Max(hn::Div(spec, spec + diffuse), hn::Set(d, 0.1f)), hn::Set(d, 0.9f));
     v.pSpec = hn::IfThenElse(hn::Gt(diffuse, zero), ratio, one);
-    v.transmitOut =
-        one - hn::MulAdd(hn::Set(d, 1.f - kDielectricF0), schlickWeight(d, v.wo.z), hn::Set(d, kDielectricF0));
-    v.smithWo = hn::Sqrt(hn::MulAdd(one - v.a2, v.wo.z * v.wo.z, v.a2));
-    v.invA2 = hn::Div(one, v.a2);
-    v.invPiA2 = v.invA2 * hn::Set(d, kInvPi);
     v.specPdfScale = hn::Div(v.pSpec, hn::Set(d, 2.f) * (v.wo.z + v.smithWo));
 }
 
@@ -263,8 +268,13 @@ void shadeBatch(Batch& b) {
     const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
     const V3 n = load3(d, b.n), fn = load3(d, b.fn), wo = load3(d, b.wo), base = load3(d, b.base);
     const V3 tp = load3(d, b.throughput);
+    // The sampling pdf is needed where a lane scatters or weights its light sample by MIS; neither happens at a
+    // last vertex (the lanes of a batch are at the same bounce: the wavefront advances every path by one vertex per
+    // round).
+    const bool scatters = !hn::AllFalse(d, flag(d, b.scatter));
+    const bool withPdf = scatters || !hn::AllFalse(d, flag(d, b.misWeighted));
     VertexV v;  // filled in place: returned by value, its 25 vectors were copied through memory
-    makeVertex(d, n, wo, base, hn::Load(d, b.metallic), hn::Load(d, b.roughness), v);
+    makeVertex(d, n, wo, base, hn::Load(d, b.metallic), hn::Load(d, b.roughness), withPdf, v);
 
     // Next-event estimation.
     const V3 wl = load3(d, b.lightDir), Li = load3(d, b.lightLi);
@@ -285,6 +295,10 @@ void shadeBatch(Batch& b) {
     store3(d, contrib, b.contrib);
 
     // The BRDF sample, for the lanes that scatter.
+    if (!scatters) {
+        hn::Store(zero, d, b.next);
+        return;
+    }
     const V3 local = sampleDirection(d, v, hn::Load(d, b.u[0]), hn::Load(d, b.u[1]), hn::Load(d, b.u[2]));
     const V3 wi = v.frame.toWorld(local);
     const V3 wiL = v.frame.toLocal(wi);  // as the light-sample evaluation sees a world direction
