@@ -203,6 +203,16 @@ HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm:
     std::memcpy(h, packed, sizeof(glm::vec4) * n);
 }
 
+/// How many region rows ahead the load asks for.
+constexpr uint32_t kPrefetchRows = 3;
+
+/// Prefetches the cache lines of [p, p + bytes).
+HWY_INLINE void prefetchRange(const void* p, size_t bytes) {
+    const auto* b = reinterpret_cast<const unsigned char*>(uintptr_t(p) & ~uintptr_t(63));
+    const auto* e = reinterpret_cast<const unsigned char*>(p) + bytes;
+    for (; b < e; b += 64) hwy::Prefetch(b);
+}
+
 /// The tiled path. The 3x3 statistics and the motion dilation are separable: each current pixel is converted to
 /// YCoCg once (not nine times), sums, minima, maxima and the longest vector are formed over rows, then over
 /// columns, and the rest runs on vectors of 8 pixels (Highway, AVX2). The bicubic history is fetched per pixel as
@@ -231,6 +241,13 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
         const uint32_t sy = clampIndex(int(t.y0 + ry) - 1, H);
         const glm::vec4* colorRow = &in.color.at(0, int(sy));
         const glm::vec2* mvecRow = &in.mvec.at(0, int(sy));
+        if (ry + kPrefetchRows < rh) {
+            // Each region row is a short run the hardware prefetchers barely get going on: ask for a later one.
+            const uint32_t ay = clampIndex(int(t.y0 + ry + kPrefetchRows) - 1, H);
+            const uint32_t ax = clampIndex(int(t.x0) - 1, W);
+            prefetchRange(&in.color.at(int(ax), int(ay)), sizeof(glm::vec4) * rw);
+            prefetchRange(&in.mvec.at(int(ax), int(ay)), sizeof(glm::vec2) * rw);
+        }
         uint32_t rx = 0;
         if (interiorX) {
             FloatMask ok = hn::FirstN(d, N);
@@ -365,6 +382,14 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             for (int k = 0; k < 4; ++k) {
                 hn::Store(wxv[k], d, wx[k]);
                 hn::Store(wyv[k], d, wy[k]);
+            }
+            if (kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < int32_t(H) && y + 1 < h) {
+                // The next tile row reads one history row more (iy + 3 here): ask for it now, a tile row ahead.
+                const auto* first =
+                    historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[0] - 1);
+                const auto* last =
+                    historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[N - 1] + 3);
+                if (last > first && last - first < 512) prefetchRange(first, size_t(last - first));
             }
             const auto sample = [&](uint32_t i) -> Float4 {
                 if (kinds[i] == kInterior)
