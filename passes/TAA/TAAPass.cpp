@@ -170,9 +170,9 @@ HWY_INLINE void transpose8(const Float4 (&s)[kLanes], FloatVec& r, FloatVec& g, 
     a = hn::BitCast(d, hn::InterleaveUpper(dd, t1, t3));
 }
 
-/// Writes 8 pixels from structure of arrays to out (the first n of them) and to history (streaming stores when all
-/// 8 go to an aligned place: the history is read again only next frame, long after it has left the caches, and
-/// streaming skips the read-for-ownership of its lines).
+/// Writes 8 pixels from structure of arrays to out and to history (the first n of them); to history with streaming
+/// stores when all 8 go to an aligned place: it is read again only next frame, long after it has left the caches, and
+/// streaming skips the read-for-ownership of its lines. (Streaming the output too measured no gain.)
 HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm::vec4* out, glm::vec4* history,
                             uint32_t n) {
     const FloatTag d;
@@ -446,7 +446,9 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 const FloatMask outside = hn::Gt(a, extent);
                 // A flat channel (extent 0) gives an infinite unit, which pulls the point exactly onto the centre.
                 const FloatVec ratio =
-                    hn::IfThenElse(hn::Gt(extent, zero), hn::Mul(a, reciprocal(d, extent)), infinity);
+                    ch == 3 && alphaConstant
+                        ? infinity
+                        : hn::IfThenElse(hn::Gt(extent, zero), hn::Mul(a, reciprocal(d, extent)), infinity);
                 unit = hn::IfThenElse(outside, hn::Max(unit, ratio), unit);
             }
             const FloatMask clipped = hn::And(useHistory, hn::Gt(unit, zero));
