@@ -134,12 +134,12 @@ HWY_INLINE void catmullRomVec(FloatTag d, FloatVec t, FloatVec w[4]) {
 /// differences from texel (1, 1), which is added last (as sampleHistory does: constant history stays exact):
 /// vertical first on pairs of texels in 256-bit vectors (columns 0 | 1 and 2 | 3), then the horizontal weights,
 /// with FMA. An integer position (weights 0, 1, 0, 0 both ways) gives its texel exactly.
-HWY_INLINE Float4 bicubicBlock(const unsigned char* block, size_t pitch, const float (&wx)[4][kLanes],
-                               const float (&wy)[4][kLanes], uint32_t i) {
+HWY_INLINE Float4 bicubicBlock(const unsigned char* block, size_t pitch, const float* wx, const float (&wy)[4][kLanes],
+                               uint32_t i) {
     const FloatTag d;
     const Float4Tag d4;
-    const Float4 ref4 = hn::LoadU(d4, reinterpret_cast<const float*>(block + pitch) + 4);
-    const FloatVec ref = hn::Combine(d, ref4, ref4);
+    const float* refPtr = reinterpret_cast<const float*>(block + pitch) + 4;
+    const FloatVec ref = hn::LoadDup128(d, refPtr);
     const float* row = reinterpret_cast<const float*>(block);
     FloatVec c01 = hn::Mul(hn::Set(d, wy[0][i]), hn::Sub(hn::LoadU(d, row), ref));
     FloatVec c23 = hn::Mul(hn::Set(d, wy[0][i]), hn::Sub(hn::LoadU(d, row + 8), ref));
@@ -149,10 +149,32 @@ HWY_INLINE Float4 bicubicBlock(const unsigned char* block, size_t pitch, const f
         c01 = hn::MulAdd(w, hn::Sub(hn::LoadU(d, row), ref), c01);
         c23 = hn::MulAdd(w, hn::Sub(hn::LoadU(d, row + 8), ref), c23);
     }
-    const FloatVec w01 = hn::Combine(d, hn::Set(d4, wx[1][i]), hn::Set(d4, wx[0][i]));
-    const FloatVec w23 = hn::Combine(d, hn::Set(d4, wx[3][i]), hn::Set(d4, wx[2][i]));
+    // wx: this lane's four horizontal weights; (w0 x4 | w1 x4) and (w2 x4 | w3 x4) by one permutation each.
+    alignas(32) static constexpr int32_t k01[kLanes] = {0, 0, 0, 0, 1, 1, 1, 1}, k23[kLanes] = {2, 2, 2, 2, 3, 3, 3, 3};
+    const FloatVec weights = hn::LoadDup128(d, wx);
+    const FloatVec w01 = hn::TableLookupLanes(weights, hn::SetTableIndices(d, k01));
+    const FloatVec w23 = hn::TableLookupLanes(weights, hn::SetTableIndices(d, k23));
     const FloatVec sum = hn::MulAdd(w23, c23, hn::Mul(w01, c01));
-    return hn::Add(ref4, hn::Add(hn::LowerHalf(d4, sum), hn::UpperHalf(d4, sum)));
+    return hn::Add(hn::LoadU(d4, refPtr), hn::Add(hn::LowerHalf(d4, sum), hn::UpperHalf(d4, sum)));
+}
+
+/// Four vectors of 8 lanes to 8 records of 4 (record i at out + 8 (i % 4) + 4 (i / 4)).
+HWY_INLINE void transposeWeights(const FloatVec (&w)[4], float* out) {
+    const FloatTag d;
+    const hn::Repartition<double, FloatTag> dd;
+    const auto a = hn::BitCast(dd, hn::InterleaveLower(w[0], w[1])),
+               b = hn::BitCast(dd, hn::InterleaveLower(w[2], w[3]));
+    const auto c = hn::BitCast(dd, hn::InterleaveUpper(d, w[0], w[1]));
+    const auto e = hn::BitCast(dd, hn::InterleaveUpper(d, w[2], w[3]));
+    hn::Store(hn::BitCast(d, hn::InterleaveLower(a, b)), d, out);
+    hn::Store(hn::BitCast(d, hn::InterleaveUpper(dd, a, b)), d, out + kLanes);
+    hn::Store(hn::BitCast(d, hn::InterleaveLower(c, e)), d, out + 2 * kLanes);
+    hn::Store(hn::BitCast(d, hn::InterleaveUpper(dd, c, e)), d, out + 3 * kLanes);
+}
+
+/// Where transposeWeights puts lane i's record.
+constexpr uint32_t weightRecord(uint32_t i) {
+    return kLanes * (i % 4) + 4 * (i / 4);
 }
 
 /// Eight RGBA texels (one 128-bit vector each) to structure of arrays.
@@ -252,7 +274,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
         if (interiorX) {
             FloatMask ok = hn::FirstN(d, N);
             const FloatVec a0 = hn::Set(d, alpha0);
-            for (; rx + N <= rw; rx += N) {
+            for (; rx < rw; rx += N) {
+                rx = std::min(rx, rw - N);  // the last vector overlaps the one before: every column by vectors
                 FloatVec r, g, b, a, mx, my, y, co, cg;
                 hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorRow + t.x0 - 1 + rx), r, g, b, a);
                 hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecRow + t.x0 - 1 + rx), mx, my);
@@ -336,7 +359,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     const hn::RebindToSigned<FloatTag> di;
     const size_t historyPitch = in.history.rowPitch;
     const auto* historyData = reinterpret_cast<const unsigned char*>(in.history.data);
-    alignas(64) float wx[4][kLanes], wy[4][kLanes];
+    alignas(64) float wx[4 * kLanes], wy[4][kLanes];
     alignas(64) int32_t kinds[kLanes], ixs[kLanes], iys[kLanes];
     alignas(64) glm::vec4 current[kLanes];
     enum : int32_t { kUnused = 0, kInterior = 1, kEdge = 2 };
@@ -379,10 +402,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             hn::Store(kind, di, kinds);
             hn::Store(ixv, di, ixs);
             hn::Store(iyv, di, iys);
-            for (int k = 0; k < 4; ++k) {
-                hn::Store(wxv[k], d, wx[k]);
-                hn::Store(wyv[k], d, wy[k]);
-            }
+            transposeWeights(wxv, wx);
+            for (int k = 0; k < 4; ++k) hn::Store(wyv[k], d, wy[k]);
             if (kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < int32_t(H) && y + 1 < h) {
                 // The next tile row reads one history row more (iy + 3 here): ask for it now, a tile row ahead.
                 const auto* first =
@@ -395,13 +416,14 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 if (kinds[i] == kInterior)
                     return bicubicBlock(
                         historyData + historyPitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1),
-                        historyPitch, wx, wy, i);
+                        historyPitch, wx + weightRecord(i), wy, i);
                 if (kinds[i] == kUnused) return hn::Zero(Float4Tag());
                 // Near the frame's edge: the clamped taps, then the same arithmetic.
                 alignas(64) glm::vec4 block[4][4];
                 for (int j = 0; j < 4; ++j)
                     for (int k = 0; k < 4; ++k) block[j][k] = in.history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
-                return bicubicBlock(reinterpret_cast<const unsigned char*>(block), sizeof(block[0]), wx, wy, i);
+                return bicubicBlock(reinterpret_cast<const unsigned char*>(block), sizeof(block[0]),
+                                    wx + weightRecord(i), wy, i);
             };
             const Float4 sampled[kLanes] = {sample(0), sample(1), sample(2), sample(3),
                                             sample(4), sample(5), sample(6), sample(7)};
