@@ -256,7 +256,10 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
 
     // Load the region (edges repeated), converting to YCoCg; note whether alpha is one constant over it.
     bool finite = true;
-    const bool interiorX = t.x0 >= 1 && t.x0 - 1 + rw <= W;
+    // Region columns [vx0, vx1) read columns inside the frame: by vectors; the repeated edge columns beyond the frame
+    // (and the padding of a partial tile) by scalar code.
+    const uint32_t vx0 = t.x0 == 0 ? 1 : 0, vx1 = std::min(rw, W + 1 - t.x0);
+    const bool byVectors = vx1 >= vx0 + N;
     const float alpha0 = in.color.at(int(t.x0), int(t.y0)).w;
     bool alphaConstant = true;
     for (uint32_t ry = 0; ry < rh; ++ry) {
@@ -270,37 +273,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             prefetchRange(&in.color.at(int(ax), int(ay)), sizeof(glm::vec4) * rw);
             prefetchRange(&in.mvec.at(int(ax), int(ay)), sizeof(glm::vec2) * rw);
         }
-        uint32_t rx = 0;
-        if (interiorX) {
-            FloatMask ok = hn::FirstN(d, N);
-            const FloatVec a0 = hn::Set(d, alpha0);
-            for (; rx < rw; rx += N) {
-                rx = std::min(rx, rw - N);  // the last vector overlaps the one before: every column by vectors
-                FloatVec r, g, b, a, mx, my, y, co, cg;
-                hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorRow + t.x0 - 1 + rx), r, g, b, a);
-                hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecRow + t.x0 - 1 + rx), mx, my);
-                ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
-                                         hn::And(hn::And(finiteVec(d, b), hn::Eq(a, a0)),
-                                                 hn::And(finiteVec(d, mx), finiteVec(d, my)))));
-                toYCoCgVec(d, r, g, b, y, co, cg);
-                hn::StoreU(y, d, &s.v[0][ry][rx]);
-                hn::StoreU(co, d, &s.v[1][ry][rx]);
-                hn::StoreU(cg, d, &s.v[2][ry][rx]);
-                hn::StoreU(a, d, &s.v[3][ry][rx]);
-                hn::StoreU(mx, d, &s.mvx[ry][rx]);
-                hn::StoreU(my, d, &s.mvy[ry][rx]);
-                hn::StoreU(hn::Add(hn::Mul(mx, mx), hn::Mul(my, my)), d, &s.mvLen[ry][rx]);
-            }
-            if (!hn::AllTrue(d, ok)) {
-                // Not all finite, or alpha varies: tell the two apart.
-                for (uint32_t k = 0; k < rx; ++k) {
-                    const glm::vec4 c = colorRow[t.x0 - 1 + k];
-                    finite &= taa::isFinite(c) & taa::isFinite(mvecRow[t.x0 - 1 + k]);
-                    alphaConstant &= c.w == alpha0;
-                }
-            }
-        }
-        for (; rx < rw; ++rx) {
+        const auto scalarColumn = [&](uint32_t rx) {
             const uint32_t sx = clampIndex(int(t.x0 + rx) - 1, W);
             const glm::vec4 c = colorRow[sx];
             const glm::vec2 m = mvecRow[sx];
@@ -311,6 +284,41 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             s.mvx[ry][rx] = m.x;
             s.mvy[ry][rx] = m.y;
             s.mvLen[ry][rx] = m.x * m.x + m.y * m.y;
+        };
+        if (!byVectors) {
+            for (uint32_t rx = 0; rx < rw; ++rx) scalarColumn(rx);
+            continue;
+        }
+        for (uint32_t rx = 0; rx < vx0; ++rx) scalarColumn(rx);
+        for (uint32_t rx = vx1; rx < rw; ++rx) scalarColumn(rx);
+        FloatMask ok = hn::FirstN(d, N);
+        const FloatVec a0 = hn::Set(d, alpha0);
+        const glm::vec4* colorBase = colorRow + t.x0 - 1;
+        const glm::vec2* mvecBase = mvecRow + t.x0 - 1;
+        for (uint32_t rx = vx0; rx < vx1; rx += N) {
+            rx = std::min(rx, vx1 - N);  // the last vector overlaps the one before
+            FloatVec r, g, b, a, mx, my, y, co, cg;
+            hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorBase + rx), r, g, b, a);
+            hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecBase + rx), mx, my);
+            ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
+                                     hn::And(hn::And(finiteVec(d, b), hn::Eq(a, a0)),
+                                             hn::And(finiteVec(d, mx), finiteVec(d, my)))));
+            toYCoCgVec(d, r, g, b, y, co, cg);
+            hn::StoreU(y, d, &s.v[0][ry][rx]);
+            hn::StoreU(co, d, &s.v[1][ry][rx]);
+            hn::StoreU(cg, d, &s.v[2][ry][rx]);
+            hn::StoreU(a, d, &s.v[3][ry][rx]);
+            hn::StoreU(mx, d, &s.mvx[ry][rx]);
+            hn::StoreU(my, d, &s.mvy[ry][rx]);
+            hn::StoreU(hn::Add(hn::Mul(mx, mx), hn::Mul(my, my)), d, &s.mvLen[ry][rx]);
+        }
+        if (!hn::AllTrue(d, ok)) {
+            // Not all finite, or alpha varies: tell the two apart.
+            for (uint32_t rx = vx0; rx < vx1; ++rx) {
+                const glm::vec4 c = colorBase[rx];
+                finite &= taa::isFinite(c) & taa::isFinite(mvecBase[rx]);
+                alphaConstant &= c.w == alpha0;
+            }
         }
     }
     if (!finite) {
