@@ -370,7 +370,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     alignas(64) float wx[4 * kLanes], wy[4][kLanes];
     alignas(64) int32_t kinds[kLanes], ixs[kLanes], iys[kLanes];
     alignas(64) glm::vec4 current[kLanes];
-    enum : int32_t { kUnused = 0, kInterior = 1, kEdge = 2 };
+    enum : int32_t { kUnused = 0, kInterior = 1, kEdge = 2, kInteger = 3 };
     for (uint32_t y = 0; y < h; ++y) {
         const uint32_t py = t.y0 + y;
         glm::vec4* outRow = out.row(py);
@@ -406,6 +406,9 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 hn::And(hn::And(hn::Gt(ixv, hn::Zero(di)), hn::Gt(iyv, hn::Zero(di))),
                         hn::And(hn::Lt(ixv, hn::Set(di, int32_t(W) - 2)), hn::Lt(iyv, hn::Set(di, int32_t(H) - 2))));
             auto kind = hn::IfThenElse(interior, hn::Set(di, kInterior), hn::Set(di, kEdge));
+            // An integer position (a static camera): the bicubic sum would give its texel exactly; read just that.
+            const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(pyv, fy0));
+            kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, kInteger), kind);
             kind = hn::IfThenElseZero(hn::RebindMask(di, useHistory), kind);
             hn::Store(kind, di, kinds);
             hn::Store(ixv, di, ixs);
@@ -425,6 +428,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                     return bicubicBlock(
                         historyData + historyPitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1),
                         historyPitch, wx + weightRecord(i), wy, i);
+                if (kinds[i] == kInteger)
+                    return hn::LoadU(Float4Tag(), reinterpret_cast<const float*>(&in.history.at(ixs[i], iys[i])));
                 if (kinds[i] == kUnused) return hn::Zero(Float4Tag());
                 // Near the frame's edge: the clamped taps, then the same arithmetic.
                 alignas(64) glm::vec4 block[4][4];
