@@ -18,7 +18,8 @@
 //   3. History: Catmull-Rom (bicubic, B = 0, C = 1/2) sampling of last frame's
 //      output at uvPrev = uvCur + mvec, 4x4 texels, edge texels repeated. The
 //      current colour is used instead when history is invalid or uvPrev lies
-//      outside [0, 1]^2.
+//      outside [0, 1]^2. The taps are weighted as differences from the
+//      nearest-lower texel, so constant history gives exactly that constant.
 //   4. Clipping: the history in YCoCg + alpha is moved towards the box centre
 //      along the line to it until it lies in the box (Salvi 2016; clipping
 //      rather than per-channel clamping keeps the hue). History inside the box
@@ -172,24 +173,28 @@ LOOM_HD inline bool previousPosition(uint32_t x, uint32_t y, uint32_t width, uin
     return pos.x >= -0.5f && pos.x <= float(width) - 0.5f && pos.y >= -0.5f && pos.y <= float(height) - 0.5f;
 }
 
-/// Bicubic (Catmull-Rom) history at a texel-centre position. Integer
-/// positions read one texel. The 4x4 sum is formed as (even taps) + (odd
-/// taps) of each row, weighted by row, with the even and odd halves added
-/// last: the order in which the CPU path adds pairs of texels with 256-bit
-/// vectors, so the two give the same bits.
+/// Bicubic (Catmull-Rom) history at a texel-centre position, edge texels
+/// repeated. Integer positions read one texel. The taps are summed as
+/// differences from the texel at (floor x, floor y), which is added last:
+/// the weights sum to one, so this is the same filter, but a region where a
+/// channel is constant (typically alpha) gives exactly that constant, not a
+/// value a rounding error away from it, which a box that is flat in that
+/// channel would reject outright (see clipToBox). The 4x4 sum is formed as
+/// (even taps) + (odd taps) of each row, weighted by row.
 LOOM_HD inline glm::vec4 sampleHistory(const ClampedImage<glm::vec4>& history, const glm::vec2& pos) {
     const float fx0 = glm::floor(pos.x), fy0 = glm::floor(pos.y);
     const int ix = int(fx0), iy = int(fy0);
     const float fx = pos.x - fx0, fy = pos.y - fy0;
-    if (fx == 0.f && fy == 0.f) return history.at(ix, iy);
+    const glm::vec4 ref = history.at(ix, iy);
+    if (fx == 0.f && fy == 0.f) return ref;
     const glm::vec4 wx = catmullRomWeights(fx), wy = catmullRomWeights(fy);
     glm::vec4 even(0.f), odd(0.f);
     for (int j = 0; j < 4; ++j) {
         const int ty = iy - 1 + j;
-        even += wy[j] * (wx[0] * history.at(ix - 1, ty) + wx[2] * history.at(ix + 1, ty));
-        odd += wy[j] * (wx[1] * history.at(ix, ty) + wx[3] * history.at(ix + 2, ty));
+        even += wy[j] * (wx[0] * (history.at(ix - 1, ty) - ref) + wx[2] * (history.at(ix + 1, ty) - ref));
+        odd += wy[j] * (wx[1] * (history.at(ix, ty) - ref) + wx[3] * (history.at(ix + 2, ty) - ref));
     }
-    return even + odd;
+    return ref + (even + odd);
 }
 
 /// The history point moved along the line to the box centre into the box

@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstring>
+#include <limits>
 #include <memory>
 
 #include "loom/Parallel.h"
@@ -44,6 +46,9 @@ struct Counts {
 /// Scratch of the tiled path for one tile: the tile plus a one-pixel border of
 /// the current colour in YCoCg + alpha (structure of arrays, so the loops over
 /// a row vectorize), the horizontal 3-tap statistics, and the motion vectors.
+/// Rows are padded to whole vectors: every pixel, those of a partial tile too,
+/// takes the same vector arithmetic (so a pixel's result never depends on where
+/// its tile ends).
 struct TileScratch {
     static constexpr uint32_t kW = kTileW, kR = kTileH + 2, kRW = kTileW + 2 + 8;  // + 8: whole vectors at the end
     float v[4][kR][kRW];
@@ -80,6 +85,7 @@ using FloatVec = hn::Vec<FloatTag>;
 using FloatMask = hn::Mask<FloatTag>;
 using Float4Tag = hn::FixedTag<float, 4>;
 using Float4 = hn::Vec<Float4Tag>;
+constexpr uint32_t kLanes = 8;  // AVX2: 8 floats (static dispatch to the build's -march target)
 
 /// YCoCg + alpha of structure-of-arrays RGBA (toYCoCg, lane-wise).
 HWY_INLINE void toYCoCgVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, FloatVec& y, FloatVec& co, FloatVec& cg) {
@@ -95,87 +101,224 @@ HWY_INLINE FloatMask finiteVec(FloatTag d, FloatVec v) {
     return hn::RebindMask(d, hn::Ne(hn::And(hn::BitCast(di, v), exponent), exponent));
 }
 
-/// sampleHistory for an interior position (all 16 taps inside the frame) from precomputed weights, with 256-bit
-/// vectors holding two texels: the same products and order of additions as the reference.
-HWY_INLINE glm::vec4 sampleInterior(const taa::ClampedImage<glm::vec4>& history, int ix, int iy, const float* wx,
-                                    const float* wy) {
-    const FloatTag d;  // 8 lanes = two texels
-    const Float4Tag d4;
-    const FloatVec w01 = hn::Combine(d, hn::Set(d4, wx[1]), hn::Set(d4, wx[0]));
-    const FloatVec w23 = hn::Combine(d, hn::Set(d4, wx[3]), hn::Set(d4, wx[2]));
-    FloatVec acc = hn::Zero(d);
-    for (int j = 0; j < 4; ++j) {
-        const float* row = reinterpret_cast<const float*>(&history.at(ix - 1, iy - 1 + j));
-        // (w0 h0 | w1 h1) + (w2 h2 | w3 h3) = (even | odd) of this row.
-        const FloatVec pair = hn::Add(hn::Mul(w01, hn::LoadU(d, row)), hn::Mul(w23, hn::LoadU(d, row + 8)));
-        acc = hn::Add(acc, hn::Mul(hn::Set(d, wy[j]), pair));
-    }
-    glm::vec4 out;
-    hn::StoreU(hn::Add(hn::LowerHalf(d4, acc), hn::UpperHalf(d4, acc)), d4, &out.x);
-    return out;
+/// 1 / x for finite x > 0: the hardware estimate (relative error < 1.5 2^-12) refined by one Newton step
+/// (relative error below 1e-6).
+HWY_INLINE FloatVec reciprocal(FloatTag d, FloatVec x) {
+    const FloatVec r = hn::ApproximateReciprocal(x);
+    return hn::MulAdd(r, hn::NegMulAdd(x, r, hn::Set(d, 1.f)), r);
 }
 
-/// catmullRomWeights, lane-wise.
+/// sqrt(x) for finite x >= 0: x rsqrt(x) with the estimate refined by one Newton step (relative error below
+/// 1e-6); exactly 0 at 0.
+HWY_INLINE FloatVec squareRoot(FloatTag d, FloatVec x) {
+    const FloatVec r = hn::ApproximateReciprocalSqrt(x);
+    const FloatVec s = hn::Mul(x, r);
+    // r' = r (3/2 - x r^2 / 2), so sqrt = x r' = s (3/2 - s r / 2).
+    const FloatVec root = hn::Mul(s, hn::MulAdd(hn::Set(d, -0.5f), hn::Mul(s, r), hn::Set(d, 1.5f)));
+    return hn::IfThenElseZero(hn::Gt(x, hn::Zero(d)), root);
+}
+
+/// catmullRomWeights, lane-wise, in Horner form with FMA. At t = 0 the weights are exactly (0, 1, 0, 0), so an
+/// integer position reads its texel exactly.
 HWY_INLINE void catmullRomVec(FloatTag d, FloatVec t, FloatVec w[4]) {
-    const FloatVec t2 = hn::Mul(t, t), t3 = hn::Mul(t2, t), half = hn::Set(d, 0.5f);
-    w[0] = hn::Mul(half, hn::Sub(hn::Add(hn::Neg(t3), hn::Mul(hn::Set(d, 2.f), t2)), t));
-    w[1] = hn::Add(hn::Mul(half, hn::Sub(hn::Mul(hn::Set(d, 3.f), t3), hn::Mul(hn::Set(d, 5.f), t2))), hn::Set(d, 1.f));
-    w[2] = hn::Mul(half, hn::Add(hn::Add(hn::Mul(hn::Set(d, -3.f), t3), hn::Mul(hn::Set(d, 4.f), t2)), t));
-    w[3] = hn::Mul(half, hn::Sub(t3, t2));
+    const auto horner = [&](float a, float b, float c, float e) {
+        return hn::MulAdd(hn::MulAdd(hn::MulAdd(hn::Set(d, a), t, hn::Set(d, b)), t, hn::Set(d, c)), t, hn::Set(d, e));
+    };
+    w[0] = horner(-0.5f, 1.f, -0.5f, 0.f);
+    w[1] = horner(1.5f, -2.5f, 0.f, 1.f);
+    w[2] = horner(-1.5f, 2.f, 0.5f, 0.f);
+    w[3] = horner(0.5f, -0.5f, 0.f, 0.f);
+}
+
+/// Catmull-Rom sum of a 4 x 4 block of RGBA32F texels (row j at block + j pitch) with the weights of lane i, as
+/// differences from texel (1, 1), which is added last (as sampleHistory does: constant history stays exact):
+/// vertical first on pairs of texels in 256-bit vectors (columns 0 | 1 and 2 | 3), then the horizontal weights,
+/// with FMA. An integer position (weights 0, 1, 0, 0 both ways) gives its texel exactly.
+HWY_INLINE Float4 bicubicBlock(const unsigned char* block, size_t pitch, const float* wx, const float (&wy)[4][kLanes],
+                               uint32_t i) {
+    const FloatTag d;
+    const Float4Tag d4;
+    const float* refPtr = reinterpret_cast<const float*>(block + pitch) + 4;
+    const FloatVec ref = hn::LoadDup128(d, refPtr);
+    const float* row = reinterpret_cast<const float*>(block);
+    FloatVec c01 = hn::Mul(hn::Set(d, wy[0][i]), hn::Sub(hn::LoadU(d, row), ref));
+    FloatVec c23 = hn::Mul(hn::Set(d, wy[0][i]), hn::Sub(hn::LoadU(d, row + 8), ref));
+    for (int j = 1; j < 4; ++j) {
+        row = reinterpret_cast<const float*>(block + pitch * size_t(j));
+        const FloatVec w = hn::Set(d, wy[j][i]);
+        c01 = hn::MulAdd(w, hn::Sub(hn::LoadU(d, row), ref), c01);
+        c23 = hn::MulAdd(w, hn::Sub(hn::LoadU(d, row + 8), ref), c23);
+    }
+    // wx: this lane's four horizontal weights; (w0 x4 | w1 x4) and (w2 x4 | w3 x4) by one permutation each.
+    alignas(32) static constexpr int32_t k01[kLanes] = {0, 0, 0, 0, 1, 1, 1, 1}, k23[kLanes] = {2, 2, 2, 2, 3, 3, 3, 3};
+    const FloatVec weights = hn::LoadDup128(d, wx);
+    const FloatVec w01 = hn::TableLookupLanes(weights, hn::SetTableIndices(d, k01));
+    const FloatVec w23 = hn::TableLookupLanes(weights, hn::SetTableIndices(d, k23));
+    const FloatVec sum = hn::MulAdd(w23, c23, hn::Mul(w01, c01));
+    return hn::Add(hn::LoadU(d4, refPtr), hn::Add(hn::LowerHalf(d4, sum), hn::UpperHalf(d4, sum)));
+}
+
+/// Four vectors of 8 lanes to 8 records of 4 (record i at out + 8 (i % 4) + 4 (i / 4)).
+HWY_INLINE void transposeWeights(const FloatVec (&w)[4], float* out) {
+    const FloatTag d;
+    const hn::Repartition<double, FloatTag> dd;
+    const auto a = hn::BitCast(dd, hn::InterleaveLower(w[0], w[1])),
+               b = hn::BitCast(dd, hn::InterleaveLower(w[2], w[3]));
+    const auto c = hn::BitCast(dd, hn::InterleaveUpper(d, w[0], w[1]));
+    const auto e = hn::BitCast(dd, hn::InterleaveUpper(d, w[2], w[3]));
+    hn::Store(hn::BitCast(d, hn::InterleaveLower(a, b)), d, out);
+    hn::Store(hn::BitCast(d, hn::InterleaveUpper(dd, a, b)), d, out + kLanes);
+    hn::Store(hn::BitCast(d, hn::InterleaveLower(c, e)), d, out + 2 * kLanes);
+    hn::Store(hn::BitCast(d, hn::InterleaveUpper(dd, c, e)), d, out + 3 * kLanes);
+}
+
+/// Where transposeWeights puts lane i's record.
+constexpr uint32_t weightRecord(uint32_t i) {
+    return kLanes * (i % 4) + 4 * (i / 4);
+}
+
+/// Eight RGBA texels (one 128-bit vector each) to structure of arrays.
+HWY_INLINE void transpose8(const Float4 (&s)[kLanes], FloatVec& r, FloatVec& g, FloatVec& b, FloatVec& a) {
+    const FloatTag d;
+    const hn::Repartition<double, FloatTag> dd;
+    const FloatVec q0 = hn::Combine(d, s[4], s[0]), q1 = hn::Combine(d, s[5], s[1]);
+    const FloatVec q2 = hn::Combine(d, s[6], s[2]), q3 = hn::Combine(d, s[7], s[3]);
+    // Per 128-bit half: t0 = (r0 r1 g0 g1), t1 = (b0 b1 a0 a1), t2 = (r2 r3 g2 g3), t3 = (b2 b3 a2 a3).
+    const auto t0 = hn::BitCast(dd, hn::InterleaveLower(q0, q1)), t1 = hn::BitCast(dd, hn::InterleaveUpper(d, q0, q1));
+    const auto t2 = hn::BitCast(dd, hn::InterleaveLower(q2, q3)), t3 = hn::BitCast(dd, hn::InterleaveUpper(d, q2, q3));
+    r = hn::BitCast(d, hn::InterleaveLower(t0, t2));
+    g = hn::BitCast(d, hn::InterleaveUpper(dd, t0, t2));
+    b = hn::BitCast(d, hn::InterleaveLower(t1, t3));
+    a = hn::BitCast(d, hn::InterleaveUpper(dd, t1, t3));
+}
+
+/// Writes 8 pixels from structure of arrays to out and to history (the first n of them); to history with streaming
+/// stores when all 8 go to an aligned place: it is read again only next frame, long after it has left the caches, and
+/// streaming skips the read-for-ownership of its lines. (Streaming the output too measured no gain.)
+HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm::vec4* out, glm::vec4* history,
+                            uint32_t n) {
+    const FloatTag d;
+    const hn::Repartition<double, FloatTag> dd;
+    // The inverse of transpose8: (r g b a) per pixel, pixels (0 1), (2 3), (4 5), (6 7) per vector.
+    const auto t0 = hn::BitCast(dd, hn::InterleaveLower(r, g)), t1 = hn::BitCast(dd, hn::InterleaveLower(b, a));
+    const auto t2 = hn::BitCast(dd, hn::InterleaveUpper(d, r, g)), t3 = hn::BitCast(dd, hn::InterleaveUpper(d, b, a));
+    const FloatVec u0 = hn::BitCast(d, hn::InterleaveLower(t0, t1)),
+                   u1 = hn::BitCast(d, hn::InterleaveUpper(dd, t0, t1));
+    const FloatVec u2 = hn::BitCast(d, hn::InterleaveLower(t2, t3)),
+                   u3 = hn::BitCast(d, hn::InterleaveUpper(dd, t2, t3));
+    const FloatVec v[4] = {hn::ConcatLowerLower(d, u1, u0), hn::ConcatLowerLower(d, u3, u2),
+                           hn::ConcatUpperUpper(d, u1, u0), hn::ConcatUpperUpper(d, u3, u2)};
+    float* o = reinterpret_cast<float*>(out);
+    float* h = reinterpret_cast<float*>(history);
+    if (n == kLanes) {
+        for (uint32_t k = 0; k < 4; ++k) hn::StoreU(v[k], d, o + k * kLanes);
+        if (reinterpret_cast<uintptr_t>(h) % 64 == 0) {
+            for (uint32_t k = 0; k < 4; ++k) hn::Stream(v[k], d, h + k * kLanes);
+        } else {
+            for (uint32_t k = 0; k < 4; ++k) hn::StoreU(v[k], d, h + k * kLanes);
+        }
+        return;
+    }
+    alignas(64) float packed[4 * kLanes];
+    for (uint32_t k = 0; k < 4; ++k) hn::Store(v[k], d, packed + k * kLanes);
+    std::memcpy(o, packed, sizeof(glm::vec4) * n);
+    std::memcpy(h, packed, sizeof(glm::vec4) * n);
+}
+
+/// How many region rows ahead the load asks for.
+constexpr uint32_t kPrefetchRows = 3;
+
+/// Prefetches the cache lines of [p, p + bytes).
+HWY_INLINE void prefetchRange(const void* p, size_t bytes) {
+    const auto* b = reinterpret_cast<const unsigned char*>(uintptr_t(p) & ~uintptr_t(63));
+    const auto* e = reinterpret_cast<const unsigned char*>(p) + bytes;
+    for (; b < e; b += 64) hwy::Prefetch(b);
 }
 
 /// The tiled path. The 3x3 statistics and the motion dilation are separable: each current pixel is converted to
 /// YCoCg once (not nine times), sums, minima, maxima and the longest vector are formed over rows, then over
-/// columns, and the rest runs on vectors of 8 pixels (Highway, AVX2), with the bicubic history fetched per pixel
-/// as pairs of texels in 256-bit vectors. Every step does the reference kernel's operations in its order (the plugin is
-/// built without FMA contraction), so the output is bit-identical to it; a test checks that. A tile with a non-finite
-/// colour or motion vector in reach runs the reference kernel instead (it skips those samples).
+/// columns, and the rest runs on vectors of 8 pixels (Highway, AVX2). The bicubic history is fetched per pixel as
+/// pairs of texels in 256-bit vectors (vertical weights first) and transposed in registers. It computes what the
+/// reference kernel computes with FMA and with refined hardware estimates of sqrt and of the divisions, so it agrees
+/// with it to a tolerance (a test checks it) rather than to the bit; minima, maxima, comparisons, the clipping
+/// decision and the motion dilation are exact, and every pixel runs the same arithmetic wherever it lies, so a
+/// constant image passes through exactly and integer motion reprojects exactly. A tile with a non-finite colour or
+/// motion vector in reach runs the reference kernel instead (it skips those samples).
 void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, const ImageView<glm::vec4>& out,
                  const ImageView<glm::vec4>& history, Counts& counts) {
     TileScratch& s = scratch();
     const FloatTag d;
-    const uint32_t N = uint32_t(hn::Lanes(d));
-    const uint32_t w = t.x1 - t.x0, h = t.y1 - t.y0, rw = w + 2, rh = h + 2;
+    const uint32_t N = kLanes;
+    const uint32_t w = t.x1 - t.x0, h = t.y1 - t.y0;
+    const uint32_t wv = (w + N - 1) / N * N;  // whole vectors
+    const uint32_t rw = wv + 2, rh = h + 2;
     const uint32_t W = in.color.width, H = in.color.height;
 
-    // Load the region (edges repeated), converting to YCoCg.
+    // Load the region (edges repeated), converting to YCoCg; note whether alpha is one constant over it.
     bool finite = true;
-    const bool interiorX = t.x0 >= 1 && t.x1 + 1 <= W;
+    // Region columns [vx0, vx1) read columns inside the frame: by vectors; the repeated edge columns beyond the frame
+    // (and the padding of a partial tile) by scalar code.
+    const uint32_t vx0 = t.x0 == 0 ? 1 : 0, vx1 = std::min(rw, W + 1 - t.x0);
+    const bool byVectors = vx1 >= vx0 + N;
+    const float alpha0 = in.color.at(int(t.x0), int(t.y0)).w;
+    bool alphaConstant = true;
     for (uint32_t ry = 0; ry < rh; ++ry) {
         const uint32_t sy = clampIndex(int(t.y0 + ry) - 1, H);
         const glm::vec4* colorRow = &in.color.at(0, int(sy));
         const glm::vec2* mvecRow = &in.mvec.at(0, int(sy));
-        uint32_t rx = 0;
-        if (interiorX) {
-            FloatMask ok = hn::FirstN(d, N);
-            for (; rx + N <= rw; rx += N) {
-                FloatVec r, g, b, a, mx, my, y, co, cg;
-                hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorRow + t.x0 - 1 + rx), r, g, b, a);
-                hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecRow + t.x0 - 1 + rx), mx, my);
-                ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
-                                         hn::And(hn::And(finiteVec(d, b), finiteVec(d, a)),
-                                                 hn::And(finiteVec(d, mx), finiteVec(d, my)))));
-                toYCoCgVec(d, r, g, b, y, co, cg);
-                hn::StoreU(y, d, &s.v[0][ry][rx]);
-                hn::StoreU(co, d, &s.v[1][ry][rx]);
-                hn::StoreU(cg, d, &s.v[2][ry][rx]);
-                hn::StoreU(a, d, &s.v[3][ry][rx]);
-                hn::StoreU(mx, d, &s.mvx[ry][rx]);
-                hn::StoreU(my, d, &s.mvy[ry][rx]);
-                hn::StoreU(hn::Add(hn::Mul(mx, mx), hn::Mul(my, my)), d, &s.mvLen[ry][rx]);
-            }
-            finite &= hn::AllTrue(d, ok);
+        if (ry + kPrefetchRows < rh) {
+            // Each region row is a short run the hardware prefetchers barely get going on: ask for a later one.
+            const uint32_t ay = clampIndex(int(t.y0 + ry + kPrefetchRows) - 1, H);
+            const uint32_t ax = clampIndex(int(t.x0) - 1, W);
+            prefetchRange(&in.color.at(int(ax), int(ay)), sizeof(glm::vec4) * rw);
+            prefetchRange(&in.mvec.at(int(ax), int(ay)), sizeof(glm::vec2) * rw);
         }
-        for (; rx < rw; ++rx) {
+        const auto scalarColumn = [&](uint32_t rx) {
             const uint32_t sx = clampIndex(int(t.x0 + rx) - 1, W);
             const glm::vec4 c = colorRow[sx];
             const glm::vec2 m = mvecRow[sx];
             finite &= taa::isFinite(c) & taa::isFinite(m);
+            alphaConstant &= c.w == alpha0;
             const glm::vec4 v = taa::toYCoCg(c);
             for (int ch = 0; ch < 4; ++ch) s.v[ch][ry][rx] = v[ch];
             s.mvx[ry][rx] = m.x;
             s.mvy[ry][rx] = m.y;
             s.mvLen[ry][rx] = m.x * m.x + m.y * m.y;
+        };
+        if (!byVectors) {
+            for (uint32_t rx = 0; rx < rw; ++rx) scalarColumn(rx);
+            continue;
+        }
+        for (uint32_t rx = 0; rx < vx0; ++rx) scalarColumn(rx);
+        for (uint32_t rx = vx1; rx < rw; ++rx) scalarColumn(rx);
+        FloatMask ok = hn::FirstN(d, N);
+        const FloatVec a0 = hn::Set(d, alpha0);
+        const glm::vec4* colorBase = colorRow + t.x0 - 1;
+        const glm::vec2* mvecBase = mvecRow + t.x0 - 1;
+        for (uint32_t rx = vx0; rx < vx1; rx += N) {
+            rx = std::min(rx, vx1 - N);  // the last vector overlaps the one before
+            FloatVec r, g, b, a, mx, my, y, co, cg;
+            hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorBase + rx), r, g, b, a);
+            hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecBase + rx), mx, my);
+            ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
+                                     hn::And(hn::And(finiteVec(d, b), hn::Eq(a, a0)),
+                                             hn::And(finiteVec(d, mx), finiteVec(d, my)))));
+            toYCoCgVec(d, r, g, b, y, co, cg);
+            hn::StoreU(y, d, &s.v[0][ry][rx]);
+            hn::StoreU(co, d, &s.v[1][ry][rx]);
+            hn::StoreU(cg, d, &s.v[2][ry][rx]);
+            hn::StoreU(a, d, &s.v[3][ry][rx]);
+            hn::StoreU(mx, d, &s.mvx[ry][rx]);
+            hn::StoreU(my, d, &s.mvy[ry][rx]);
+            hn::StoreU(hn::Add(hn::Mul(mx, mx), hn::Mul(my, my)), d, &s.mvLen[ry][rx]);
+        }
+        if (!hn::AllTrue(d, ok)) {
+            // Not all finite, or alpha varies: tell the two apart.
+            for (uint32_t rx = vx0; rx < vx1; ++rx) {
+                const glm::vec4 c = colorBase[rx];
+                finite &= taa::isFinite(c) & taa::isFinite(mvecBase[rx]);
+                alphaConstant &= c.w == alpha0;
+            }
         }
     }
     if (!finite) {
@@ -183,42 +326,26 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
         return;
     }
 
-    // Horizontal 3-tap statistics and longest vector, per region row (vectors over x; rw >= w + 2 so the taps at
-    // x + 1 and x + 2 of the last full vector stay in the region).
-    const FloatVec zero = hn::Zero(d), huge = hn::Set(d, taa::kHuge), negHuge = hn::Set(d, -taa::kHuge);
+    // Horizontal 3-tap statistics and longest vector, per region row (vectors over x; rw = wv + 2 so the taps at
+    // x + 1 and x + 2 of the last vector stay in the region). A constant alpha needs no statistics: its box is
+    // [alpha0, alpha0] (what the general formulas give too: the clamp to min / max).
+    const FloatVec huge = hn::Set(d, taa::kHuge), negHuge = hn::Set(d, -taa::kHuge);
+    const int channels = alphaConstant ? 3 : 4;  // of the horizontal statistics
     for (uint32_t ry = 0; ry < rh; ++ry) {
-        for (int ch = 0; ch < 4; ++ch) {
+        for (int ch = 0; ch < channels; ++ch) {
             const float* v = s.v[ch][ry];
-            uint32_t x = 0;
-            for (; x + N <= w; x += N) {
+            for (uint32_t x = 0; x < wv; x += N) {
                 const FloatVec a = hn::LoadU(d, v + x), b = hn::LoadU(d, v + x + 1), c = hn::LoadU(d, v + x + 2);
-                hn::StoreU(hn::Add(hn::Add(hn::Add(zero, a), b), c), d, &s.rowSum[ch][ry][x]);
-                hn::StoreU(hn::Add(hn::Add(hn::Add(zero, hn::Mul(a, a)), hn::Mul(b, b)), hn::Mul(c, c)), d,
-                           &s.rowSumSq[ch][ry][x]);
-                // glm::min(m, v) is (v < m) ? v : m: the same as x86 min(v, m) for these (never NaN) values.
+                hn::StoreU(hn::Add(hn::Add(a, b), c), d, &s.rowSum[ch][ry][x]);
+                hn::StoreU(hn::MulAdd(c, c, hn::MulAdd(b, b, hn::Mul(a, a))), d, &s.rowSumSq[ch][ry][x]);
                 hn::StoreU(hn::Min(c, hn::Min(b, hn::Min(a, huge))), d, &s.rowMin[ch][ry][x]);
                 hn::StoreU(hn::Max(c, hn::Max(b, hn::Max(a, negHuge))), d, &s.rowMax[ch][ry][x]);
-            }
-            for (; x < w; ++x) {
-                const float a = v[x], b = v[x + 1], c = v[x + 2];
-                s.rowSum[ch][ry][x] = ((0.f + a) + b) + c;
-                s.rowSumSq[ch][ry][x] = ((0.f + a * a) + b * b) + c * c;
-                float lo = taa::kHuge, hi = -taa::kHuge;
-                lo = a < lo ? a : lo;
-                lo = b < lo ? b : lo;
-                lo = c < lo ? c : lo;
-                hi = a > hi ? a : hi;
-                hi = b > hi ? b : hi;
-                hi = c > hi ? c : hi;
-                s.rowMin[ch][ry][x] = lo;
-                s.rowMax[ch][ry][x] = hi;
             }
         }
         const float* mvx = s.mvx[ry];
         const float* mvy = s.mvy[ry];
         const float* len = s.mvLen[ry];
-        uint32_t x = 0;
-        for (; x + N <= w; x += N) {
+        for (uint32_t x = 0; x < wv; x += N) {
             // Strictly longer wins: the first of equals, as in the reference.
             FloatVec best = hn::LoadU(d, len + x), bx = hn::LoadU(d, mvx + x), by = hn::LoadU(d, mvy + x);
             for (uint32_t k = 1; k < 3; ++k) {
@@ -232,47 +359,26 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             hn::StoreU(bx, d, &s.rowMvx[ry][x]);
             hn::StoreU(by, d, &s.rowMvy[ry][x]);
         }
-        for (; x < w; ++x) {
-            float best = len[x], bx = mvx[x], by = mvy[x];
-            for (uint32_t k = 1; k < 3; ++k) {
-                const bool longer = len[x + k] > best;
-                best = longer ? len[x + k] : best;
-                bx = longer ? mvx[x + k] : bx;
-                by = longer ? mvy[x + k] : by;
-            }
-            s.rowMvLen[ry][x] = best;
-            s.rowMvx[ry][x] = bx;
-            s.rowMvy[ry][x] = by;
-        }
     }
 
-    const float sigma = p.sigma;
-    alignas(64) glm::vec4 sampled[16];
-    alignas(64) float posX[16], posY[16];
+    const FloatVec zero = hn::Zero(d), one = hn::Set(d, 1.f), half = hn::Set(d, 0.5f);
+    const FloatVec infinity = hn::Set(d, std::numeric_limits<float>::infinity());
+    const FloatVec sigma = hn::Set(d, p.sigma), ninth = hn::Set(d, 1.f / 9.f);
+    const hn::RebindToSigned<FloatTag> di;
+    const size_t historyPitch = in.history.rowPitch;
+    const auto* historyData = reinterpret_cast<const unsigned char*>(in.history.data);
+    alignas(64) float wx[4 * kLanes], wy[4][kLanes];
+    alignas(64) int32_t kinds[kLanes], ixs[kLanes], iys[kLanes];
+    alignas(64) glm::vec4 current[kLanes];
+    enum : int32_t { kUnused = 0, kInterior = 1, kEdge = 2, kInteger = 3 };
     for (uint32_t y = 0; y < h; ++y) {
         const uint32_t py = t.y0 + y;
         glm::vec4* outRow = out.row(py);
         glm::vec4* historyRow = history.row(py);
         const glm::vec4* colorRow = &in.color.at(0, int(py));
-        uint32_t x = 0;
-        for (; x + N <= w; x += N) {
-            // Box (makeClipBox with n = 9).
-            FloatVec lo[4], hi[4];
-            for (int ch = 0; ch < 4; ++ch) {
-                FloatVec sum = zero, sumSq = zero, mn = huge, mx = negHuge;
-                for (uint32_t r = y; r < y + 3; ++r) {
-                    sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
-                    sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
-                    mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);
-                    mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
-                }
-                const FloatVec inv = hn::Set(d, 1.f / 9.f);
-                const FloatVec mean = hn::Mul(sum, inv);
-                const FloatVec var = hn::Max(hn::Sub(hn::Mul(sumSq, inv), hn::Mul(mean, mean)), zero);
-                const FloatVec dev = hn::Mul(hn::Set(d, sigma), hn::Sqrt(var));
-                lo[ch] = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
-                hi[ch] = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
-            }
+        for (uint32_t x = 0; x < wv; x += N) {
+            const uint32_t n = std::min(N, w - x);
+            const FloatMask valid = hn::FirstN(d, n);
             // Dilated motion: the longest of the three row winners, the first of equals.
             FloatVec best = hn::LoadU(d, &s.rowMvLen[y][x]);
             FloatVec mvx = hn::LoadU(d, &s.rowMvx[y][x]), mvy = hn::LoadU(d, &s.rowMvy[y][x]);
@@ -283,147 +389,136 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 mvx = hn::IfThenElse(longer, hn::LoadU(d, &s.rowMvx[r][x]), mvx);
                 mvy = hn::IfThenElse(longer, hn::LoadU(d, &s.rowMvy[r][x]), mvy);
             }
-            // previousPosition.
+            // previousPosition (the same operations as the reference: the off-frame decision is exact).
             const FloatVec px = hn::Add(hn::Iota(d, float(t.x0 + x)), hn::Mul(mvx, hn::Set(d, float(W))));
             const FloatVec pyv = hn::Add(hn::Set(d, float(py)), hn::Mul(mvy, hn::Set(d, float(H))));
             FloatMask useHistory =
                 hn::And(hn::And(hn::Ge(px, hn::Set(d, -0.5f)), hn::Le(px, hn::Set(d, float(W) - 0.5f))),
                         hn::And(hn::Ge(pyv, hn::Set(d, -0.5f)), hn::Le(pyv, hn::Set(d, float(H) - 0.5f))));
-            if (!in.historyValid) useHistory = hn::And(useHistory, hn::Not(useHistory));
+            useHistory = in.historyValid ? hn::And(useHistory, valid) : hn::Not(hn::FirstN(d, N));
             // Bicubic history: floor, fractions and weights on vectors, the taps per pixel.
             const FloatVec fx0 = hn::Floor(px), fy0 = hn::Floor(pyv);
             FloatVec wxv[4], wyv[4];
             catmullRomVec(d, hn::Sub(px, fx0), wxv);
             catmullRomVec(d, hn::Sub(pyv, fy0), wyv);
-            const auto di = hn::RebindToSigned<FloatTag>();
             const auto ixv = hn::ConvertTo(di, fx0), iyv = hn::ConvertTo(di, fy0);
-            // Kinds: 0 unused, 1 one texel (integer position), 2 interior bicubic, 3 near the edge (reference).
-            const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(pyv, fy0));
             const auto interior =
                 hn::And(hn::And(hn::Gt(ixv, hn::Zero(di)), hn::Gt(iyv, hn::Zero(di))),
                         hn::And(hn::Lt(ixv, hn::Set(di, int32_t(W) - 2)), hn::Lt(iyv, hn::Set(di, int32_t(H) - 2))));
-            auto kind = hn::IfThenElse(hn::RebindMask(di, interior), hn::Set(di, 2), hn::Set(di, 3));
-            kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, 1), kind);
+            auto kind = hn::IfThenElse(interior, hn::Set(di, kInterior), hn::Set(di, kEdge));
+            // An integer position (a static camera): the bicubic sum would give its texel exactly; read just that.
+            const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(pyv, fy0));
+            kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, kInteger), kind);
             kind = hn::IfThenElseZero(hn::RebindMask(di, useHistory), kind);
-            alignas(64) int32_t kinds[16], ixs[16], iys[16];
-            alignas(64) float wx[4][16], wy[4][16];
             hn::Store(kind, di, kinds);
             hn::Store(ixv, di, ixs);
             hn::Store(iyv, di, iys);
-            for (int k = 0; k < 4; ++k) {
-                hn::Store(wxv[k], d, wx[k]);
-                hn::Store(wyv[k], d, wy[k]);
+            transposeWeights(wxv, wx);
+            for (int k = 0; k < 4; ++k) hn::Store(wyv[k], d, wy[k]);
+            if (kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < int32_t(H) && y + 1 < h) {
+                // The next tile row reads one history row more (iy + 3 here): ask for it now, a tile row ahead.
+                const auto* first =
+                    historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[0] - 1);
+                const auto* last =
+                    historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[N - 1] + 3);
+                if (last > first && last - first < 512) prefetchRange(first, size_t(last - first));
             }
-            hn::StoreU(px, d, posX);
-            hn::StoreU(pyv, d, posY);
-            for (uint32_t i = 0; i < N; ++i) {
-                switch (kinds[i]) {
-                    case 0:
-                        sampled[i] = glm::vec4(0.f);
-                        break;
-                    case 1:
-                        sampled[i] = in.history.at(ixs[i], iys[i]);
-                        break;
-                    case 2: {
-                        const float wxi[4] = {wx[0][i], wx[1][i], wx[2][i], wx[3][i]};
-                        const float wyi[4] = {wy[0][i], wy[1][i], wy[2][i], wy[3][i]};
-                        sampled[i] = sampleInterior(in.history, ixs[i], iys[i], wxi, wyi);
-                        break;
-                    }
-                    default:
-                        sampled[i] = taa::sampleHistory(in.history, glm::vec2(posX[i], posY[i]));
-                }
-            }
+            const auto sample = [&](uint32_t i) -> Float4 {
+                if (kinds[i] == kInterior)
+                    return bicubicBlock(
+                        historyData + historyPitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1),
+                        historyPitch, wx + weightRecord(i), wy, i);
+                if (kinds[i] == kInteger)
+                    return hn::LoadU(Float4Tag(), reinterpret_cast<const float*>(&in.history.at(ixs[i], iys[i])));
+                if (kinds[i] == kUnused) return hn::Zero(Float4Tag());
+                // Near the frame's edge: the clamped taps, then the same arithmetic.
+                alignas(64) glm::vec4 block[4][4];
+                for (int j = 0; j < 4; ++j)
+                    for (int k = 0; k < 4; ++k) block[j][k] = in.history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
+                return bicubicBlock(reinterpret_cast<const unsigned char*>(block), sizeof(block[0]),
+                                    wx + weightRecord(i), wy, i);
+            };
+            const Float4 sampled[kLanes] = {sample(0), sample(1), sample(2), sample(3),
+                                            sample(4), sample(5), sample(6), sample(7)};
             FloatVec hr, hg, hb, ha, cr, cgr, cb, ca;
-            hn::LoadInterleaved4(d, reinterpret_cast<const float*>(sampled), hr, hg, hb, ha);
-            hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorRow + t.x0 + x), cr, cgr, cb, ca);
-            // Clip the history (clipToBox).
+            transpose8(sampled, hr, hg, hb, ha);
+            const glm::vec4* currentPixels = colorRow + t.x0 + x;
+            if (n < N) {  // the end of a partial tile: do not read past the row
+                for (uint32_t i = 0; i < N; ++i) current[i] = currentPixels[std::min(i, n - 1)];
+                currentPixels = current;
+            }
+            hn::LoadInterleaved4(d, reinterpret_cast<const float*>(currentPixels), cr, cgr, cb, ca);
+            // The box (makeClipBox with n = 9) channel by channel, each clipped at once (clipToBox): the exact test
+            // "outside", the ratio by the refined reciprocal. Formed after the sampling, so that few vectors are live
+            // across it.
             FloatVec hv[4];
             toYCoCgVec(d, hr, hg, hb, hv[0], hv[1], hv[2]);
             hv[3] = ha;
             FloatVec unit = zero, delta[4], center[4];
             for (int ch = 0; ch < 4; ++ch) {
-                center[ch] = hn::Mul(hn::Set(d, 0.5f), hn::Add(lo[ch], hi[ch]));
-                const FloatVec extent = hn::Mul(hn::Set(d, 0.5f), hn::Sub(hi[ch], lo[ch]));
+                FloatVec lo, hi;
+                if (ch == 3 && alphaConstant) {
+                    lo = hi = hn::Set(d, alpha0);
+                } else {
+                    FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
+                    FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
+                    for (uint32_t r = y + 1; r < y + 3; ++r) {
+                        sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
+                        sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
+                        mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);
+                        mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
+                    }
+                    const FloatVec mean = hn::Mul(sum, ninth);
+                    const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
+                    const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
+                    lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
+                    hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
+                }
+                center[ch] = hn::Mul(half, hn::Add(lo, hi));
+                const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
                 delta[ch] = hn::Sub(hv[ch], center[ch]);
                 const FloatVec a = hn::Abs(delta[ch]);
                 const FloatMask outside = hn::Gt(a, extent);
-                unit = hn::IfThenElse(outside, hn::Max(unit, hn::Div(a, extent)), unit);
+                // A flat channel (extent 0) gives an infinite unit, which pulls the point exactly onto the centre.
+                const FloatVec ratio =
+                    ch == 3 && alphaConstant
+                        ? infinity
+                        : hn::IfThenElse(hn::Gt(extent, zero), hn::Mul(a, reciprocal(d, extent)), infinity);
+                unit = hn::IfThenElse(outside, hn::Max(unit, ratio), unit);
             }
             const FloatMask clipped = hn::And(useHistory, hn::Gt(unit, zero));
+            const FloatVec inv = hn::IfThenElseZero(hn::Lt(unit, infinity), reciprocal(d, unit));
             FloatVec cv[4];
-            const FloatVec inv = hn::Div(hn::Set(d, 1.f), unit);
             for (int ch = 0; ch < 4; ++ch)
-                cv[ch] = hn::IfThenElse(clipped, hn::Add(center[ch], hn::Mul(delta[ch], inv)), hv[ch]);
+                cv[ch] = hn::IfThenElse(clipped, hn::MulAdd(delta[ch], inv, center[ch]), hv[ch]);
             // fromYCoCg where clipped; the sampled RGB elsewhere.
             hr = hn::IfThenElse(clipped, hn::Sub(hn::Add(cv[0], cv[1]), cv[2]), hr);
             hg = hn::IfThenElse(clipped, hn::Add(cv[0], cv[2]), hg);
             hb = hn::IfThenElse(clipped, hn::Sub(hn::Sub(cv[0], cv[1]), cv[2]), hb);
             ha = hn::IfThenElse(clipped, cv[3], ha);
-            // Blend with anti-flicker.
+            // Blend with anti-flicker: c + k (h - c), so h == c gives exactly c.
             FloatVec wc = hn::Set(d, p.alpha), wh = hn::Set(d, 1.f - p.alpha);
             if (p.antiFlicker) {
                 FloatVec yc, coc, cgc;
                 toYCoCgVec(d, cr, cgr, cb, yc, coc, cgc);
-                wc = hn::Mul(wc, hn::Add(hn::Set(d, 1.f), hn::Max(cv[0], zero)));
-                wh = hn::Mul(wh, hn::Add(hn::Set(d, 1.f), hn::Max(yc, zero)));
+                wc = hn::Mul(wc, hn::Add(one, hn::Max(cv[0], zero)));
+                wh = hn::Mul(wh, hn::Add(one, hn::Max(yc, zero)));
             }
             const FloatVec wsum = hn::Add(wc, wh);
-            const FloatVec k = hn::IfThenElseZero(hn::Gt(wsum, zero), hn::Div(wh, wsum));
-            FloatVec orr = hn::Add(cr, hn::Mul(k, hn::Sub(hr, cr)));
-            FloatVec og = hn::Add(cgr, hn::Mul(k, hn::Sub(hg, cgr)));
-            FloatVec ob = hn::Add(cb, hn::Mul(k, hn::Sub(hb, cb)));
-            FloatVec oa = hn::Add(ca, hn::Mul(k, hn::Sub(ha, ca)));
+            const FloatVec k = hn::IfThenElseZero(hn::Gt(wsum, zero), hn::Mul(wh, reciprocal(d, wsum)));
+            FloatVec orr = hn::MulAdd(k, hn::Sub(hr, cr), cr);
+            FloatVec og = hn::MulAdd(k, hn::Sub(hg, cgr), cgr);
+            FloatVec ob = hn::MulAdd(k, hn::Sub(hb, cb), cb);
+            FloatVec oa = hn::MulAdd(k, hn::Sub(ha, ca), ca);
             const FloatMask keep = hn::And(useHistory, hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)),
                                                                hn::And(finiteVec(d, ob), finiteVec(d, oa))));
             orr = hn::IfThenElse(keep, orr, cr);
             og = hn::IfThenElse(keep, og, cgr);
             ob = hn::IfThenElse(keep, ob, cb);
             oa = hn::IfThenElse(keep, oa, ca);
-            hn::StoreInterleaved4(orr, og, ob, oa, d, reinterpret_cast<float*>(outRow + t.x0 + x));
-            // The history is read again only next frame, long after it has left the caches: streaming stores skip
-            // the read-for-ownership of its lines (rows are 64-byte aligned and x is a multiple of 8 pixels).
-            {
-                alignas(64) float packed[4 * 16];
-                hn::StoreInterleaved4(orr, og, ob, oa, d, packed);
-                float* dst = reinterpret_cast<float*>(historyRow + t.x0 + x);
-                if (reinterpret_cast<uintptr_t>(dst) % 64 == 0) {
-                    for (uint32_t k = 0; k < 4; ++k) hn::Stream(hn::Load(d, packed + k * N), d, dst + k * N);
-                } else {
-                    for (uint32_t k = 0; k < 4; ++k) hn::StoreU(hn::Load(d, packed + k * N), d, dst + k * N);
-                }
-            }
-            counts.noHistory += N - hn::CountTrue(d, useHistory);
+            storePixels(orr, og, ob, oa, outRow + t.x0 + x, historyRow + t.x0 + x, n);
+            counts.noHistory += n - hn::CountTrue(d, useHistory);
             counts.clipped += hn::CountTrue(d, clipped);
-        }
-        // The rest of the row (partial tiles): scalar, the reference's per-pixel steps on the same statistics.
-        for (; x < w; ++x) {
-            glm::vec4 sum, sumSq, mn, mx;
-            for (int ch = 0; ch < 4; ++ch) {
-                sum[ch] = ((0.f + s.rowSum[ch][y][x]) + s.rowSum[ch][y + 1][x]) + s.rowSum[ch][y + 2][x];
-                sumSq[ch] = ((0.f + s.rowSumSq[ch][y][x]) + s.rowSumSq[ch][y + 1][x]) + s.rowSumSq[ch][y + 2][x];
-                float lo = taa::kHuge, hi = -taa::kHuge;
-                for (uint32_t r = y; r < y + 3; ++r) {
-                    lo = s.rowMin[ch][r][x] < lo ? s.rowMin[ch][r][x] : lo;
-                    hi = s.rowMax[ch][r][x] > hi ? s.rowMax[ch][r][x] : hi;
-                }
-                mn[ch] = lo;
-                mx[ch] = hi;
-            }
-            const ClipBox box = taa::makeClipBox(sum, sumSq, mn, mx, 9, p.sigma);
-            float best = s.rowMvLen[y][x];
-            glm::vec2 motion(s.rowMvx[y][x], s.rowMvy[y][x]);
-            for (uint32_t r = y + 1; r < y + 3; ++r)
-                if (s.rowMvLen[r][x] > best) {
-                    best = s.rowMvLen[r][x];
-                    motion = glm::vec2(s.rowMvx[r][x], s.rowMvy[r][x]);
-                }
-            const uint32_t px = t.x0 + x;
-            uint32_t flags = 0;
-            const glm::vec4 c = taa::resolveWithBox(in, p, px, py, colorRow[px], box, true, motion, flags);
-            outRow[px] = c;
-            historyRow[px] = c;
-            counts.add(flags);
         }
     }
     hwy::FlushStream();  // order the streaming stores before the frame's end
@@ -454,7 +549,7 @@ void TAAPass::declareParams(ParamList& p) {
     p.add("antiFlicker", &mParams.antiFlicker, true)
         .doc("weight current and history by 1 / (1 + luma) (Karis 2014) so bright outliers do not flicker");
     p.add("reference", &mReference, false)
-        .doc("run the plain per-pixel reference kernel instead of the tiled CPU path (same result, slower)");
+        .doc("run the plain per-pixel reference kernel instead of the tiled CPU path (agrees to 1e-4, slower)");
 }
 
 void TAAPass::execute(PassContext& ctx) {

@@ -26,7 +26,8 @@ public:
     void declareParams(ParamList& p) override;
     void execute(PassContext& ctx) override;
 
-    /// Runs the per-pixel reference kernel instead of the tiled CPU path (for tests comparing the two).
+    /// Runs the per-pixel reference kernel instead of the tiled CPU path (for tests comparing the two; they agree to
+    /// 1e-4 of max(1, |value|), not to the bit).
     void useReferenceKernel(bool on) { mReference = on; }
 
 private:

@@ -16,12 +16,13 @@
 //
 // Auto exposure, frame by frame: with valid history and adaptationTime > 0 a
 // frame is exposed by the luminance adapted up to the previous frame, and its
-// own log-average is measured while it is mapped (one read of src, the pass is
-// memory bound); the adapted luminance then moves towards it,
+// own log-average is measured while it is mapped (one read of src); the
+// adapted luminance then moves towards it,
 //   L(t + dt) = Lmeasured + (L(t) - Lmeasured) exp(-dt / adaptationTime).
 // On the first frame, after a reset, with adaptationTime 0 or when time runs
 // backwards, src is measured first and the frame is exposed by its own
-// log-average (immediate adaptation). The scale is 2^EV * key / L.
+// log-average (immediate adaptation). The scale is 2^EV * key / L. The
+// log-average is measured on every 4th row (y % 4 == 0; see ToneMapKernels.h).
 //
 // The CPU path (ToneMap.cpp) runs 8 pixels per AVX2 vector (Google Highway)
 // and gives the same bits as the per-pixel kernels (`reference` runs those).
@@ -42,7 +43,8 @@ public:
     void execute(PassContext& ctx) override;
 
 private:
-    /// Log-average luminance of src over its finite pixels (deterministic: per-tile sums added in tile order);
+    /// Log-average luminance of src over the finite pixels of its measured rows (deterministic: per-band sums added
+    /// in band order);
     /// returns false when no pixel is finite.
     bool measureLogAverage(const Texture& src, double& logAverage) const;
 

@@ -16,7 +16,9 @@
 // Auto exposure uses the log-average luminance of Reinhard et al. 2002,
 // "Photographic Tone Reproduction for Digital Images", eq. 1:
 //   Lavg = exp2( mean over finite pixels of log2(kLogEpsilon + Y) ),
-// Y the Rec. 709 luminance of the (sanitized, unexposed) pixel.
+// Y the Rec. 709 luminance of the (sanitized, unexposed) pixel. The pass takes
+// the mean over the pixels of every 4th row (y % 4 == 0): a quarter of the
+// frame, for a quarter of the logarithms.
 #include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>

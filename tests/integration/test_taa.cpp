@@ -1,7 +1,7 @@
 // TAAPass: exact pass-through of a constant image, convergence to the supersampled image of a jittered G-buffer,
 // reprojection that follows motion (integer and fractional), clipping that bounds ghosting, history invalid and
-// off-frame cases, non-finite input, the tiled path against the reference kernel, determinism across thread
-// counts, and parameter-independent reflection.
+// off-frame cases, non-finite input, the tiled path against the reference kernel (to a tolerance), determinism across
+// thread counts, and parameter-independent reflection.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -411,24 +411,45 @@ TEST(TAAPass, HugeInputsStayFinite) {
 // ---------------------------------------------------------------------------------------------------------------
 // Implementation checks
 
-TEST(TAAPass, TiledPathEqualsTheReferenceKernel) {
+// The vector path uses FMA and refined hardware estimates of sqrt and 1/x where the reference divides, so the two
+// agree to a tolerance, not to the bit: within 1e-4 of max(1, |value|) per channel after 8 frames of feedback
+// (values up to 3, partial tiles, frame edges, clipping, dilation at a motion edge, a NaN tile).
+TEST(TAAPass, TiledPathAgreesWithTheReferenceKernel) {
     const float nan = std::numeric_limits<float>::quiet_NaN();
-    std::unique_ptr<Texture> results[2];
-    for (int run = 0; run < 2; ++run) {
-        Harness h(nlohmann::json{{"reference", run == 1}, {"sigma", 1.25f}}, 100, 70);  // partial tiles
-        h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
-            if (f == 3 && x == 50 && y == 9) return glm::vec4(nan);
-            return noisyPattern(f, x, y) * 3.f;
-        };
-        h.source->motion = [](uint64_t f, uint32_t x, uint32_t y) {
-            // Varying, fractional motion: an edge where the dilation matters.
-            return x > 40 && x < 60 ? glm::vec2(-1.37f / 100.f, 0.61f / 70.f)
-                                    : glm::vec2(0.11f / 100.f, float(f % 2) / 70.f);
-        };
-        h.run(8);
-        results[run] = copyOf(h.field("colorOut"));
+    for (bool antiFlicker : {true, false}) {
+        SCOPED_TRACE(antiFlicker ? "anti-flicker" : "plain blend");
+        std::unique_ptr<Texture> results[2];
+        double clipped[2];
+        for (int run = 0; run < 2; ++run) {
+            Harness h(nlohmann::json{{"reference", run == 1}, {"sigma", 1.25f}, {"antiFlicker", antiFlicker}}, 100,
+                      70);  // partial tiles
+            h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+                if (f == 3 && x == 50 && y == 9) return glm::vec4(nan);
+                return noisyPattern(f, x, y) * 3.f;
+            };
+            h.source->motion = [](uint64_t f, uint32_t x, uint32_t y) {
+                // Varying, fractional motion: an edge where the dilation matters.
+                return x > 40 && x < 60 ? glm::vec2(-1.37f / 100.f, 0.61f / 70.f)
+                                        : glm::vec2(0.11f / 100.f, float(f % 2) / 70.f);
+            };
+            h.run(8);
+            results[run] = copyOf(h.field("colorOut"));
+            clipped[run] = h.stat("clipped");
+        }
+        const auto fast = results[0]->view<glm::vec4>(), reference = results[1]->view<glm::vec4>();
+        double maxError = 0.0;
+        for (uint32_t y = 0; y < 70; ++y)
+            for (uint32_t x = 0; x < 100; ++x)
+                for (int c = 0; c < 4; ++c) {
+                    const double r = reference.at(x, y)[c];
+                    const double e = std::fabs(double(fast.at(x, y)[c]) - r) / std::max(1.0, std::fabs(r));
+                    ASSERT_LE(e, 1e-4) << x << "," << y << " channel " << c;
+                    maxError = std::max(maxError, e);
+                }
+        std::printf("tiled path against the reference kernel: max error %.3g\n", maxError);
+        EXPECT_GT(clipped[1], 1000) << "clipping should be exercised";
+        EXPECT_NEAR(clipped[0], clipped[1], 0.01 * clipped[1]) << "the same pixels are clipped, but for ties";
     }
-    EXPECT_TRUE(results[0]->samePixels(*results[1]));
 }
 
 TEST(TAAPass, IdenticalResultsForAnyThreadCount) {
@@ -464,9 +485,7 @@ TEST(TAAPass, HistoryIsAGraphFieldThatCanBeObserved) {
 }
 
 TEST(TAAPass, ReflectionDoesNotDependOnParameters) {
-    auto fieldsWith = [](const nlohmann::json& params) {
-        return test::reflectedFields(registry(), "TAAPass", params);
-    };
+    auto fieldsWith = [](const nlohmann::json& params) { return test::reflectedFields(registry(), "TAAPass", params); };
     const auto reference = fieldsWith(nlohmann::json::object());
     EXPECT_EQ(fieldsWith({{"alpha", 0.5f}, {"sigma", 3.f}, {"antiFlicker", false}, {"reference", true}}), reference);
 }

@@ -4,8 +4,6 @@
 // reflection.
 #include <gtest/gtest.h>
 
-#include "TestUtil.h"
-
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -17,6 +15,7 @@
 #include <vector>
 
 #include "../../passes/ToneMap/ToneMapKernels.h"
+#include "TestUtil.h"
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
@@ -31,7 +30,9 @@ using ImageFn = std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)>
 
 using ImageSource = test::FunctionSource;
 
-PluginRegistry& registry() { return test::registryWithFunctionSource(); }
+PluginRegistry& registry() {
+    return test::registryWithFunctionSource();
+}
 
 // Closed forms, in double, independent of the kernel header.
 double srgbExact(double v) {
@@ -254,6 +255,19 @@ TEST(ToneMap, AutoExposureIgnoresNonFinitePixels) {
     EXPECT_EQ(h.code(0, 0), glm::uvec4(0u));
 }
 
+// The log-average is measured on every 4th row (y % 4 == 0), the first frame's measurement and the one made
+// while adapting alike.
+TEST(ToneMap, AutoExposureMeasuresEveryFourthRow) {
+    Harness h(nlohmann::json{{"autoExposure", true}, {"adaptationTime", 1.f}}, true, 16, 18);
+    h.source->fn = [](uint64_t, uint32_t, uint32_t y) {
+        return y % 4 == 0 ? glm::vec4(0.5f, 0.5f, 0.5f, 1.f) : glm::vec4(8.f, 8.f, 8.f, 1.f);
+    };
+    for (int frame = 0; frame < 3; ++frame) {
+        h.run();
+        EXPECT_NEAR(h.stat("measuredLuminance"), 0.5 + 1e-4, 2e-6) << "frame " << frame;
+    }
+}
+
 // ---------------------------------------------------------------------------------------------------------------
 // sRGB encoding
 
@@ -411,9 +425,7 @@ TEST(ToneMap, VectorPathEqualsTheReferenceKernel) {
 }
 
 TEST(ToneMap, ReflectionDoesNotDependOnParameters) {
-    auto fieldsWith = [](const nlohmann::json& params) {
-        return test::reflectedFields(registry(), "ToneMap", params);
-    };
+    auto fieldsWith = [](const nlohmann::json& params) { return test::reflectedFields(registry(), "ToneMap", params); };
     const auto reference = fieldsWith(nlohmann::json::object());
     EXPECT_EQ(fieldsWith({{"operator", "hable"}, {"autoExposure", true}, {"exposure", -3.f}}), reference);
     EXPECT_EQ(fieldsWith({{"operator", "linear"}, {"key", 0.5f}, {"whitePoint", 9.f}}), reference);
