@@ -212,8 +212,8 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     hn::Stream(hn::BitCast(d, mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
     streamInterleaved4(d, ir, ig, ib, ia, &j.out.estimate.at(x, y).x);
     const size_t o = j.out.layout->offset(x, y);
-    storeSignal(d, j.out.signal, o, ir, ig, ib, ia);
-    storeGuide(d, j.out.guide, o, z, dz, nx, ny, nz);
+    storeSignal<true>(d, j.out.signal, o, ir, ig, ib, ia);
+    storeGuide<true>(d, j.out.guide, o, z, dz, nx, ny, nz);
     if (j.out.variance.data) hn::StoreU(hn::Add(ia, zero), d, &j.out.variance.at(x, y));
     return true;
 }
