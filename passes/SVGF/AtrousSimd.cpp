@@ -55,6 +55,7 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
 // clang-format off
 #include <hwy/foreach_target.h>  // must come first: it includes this file once per target
 #include <hwy/highway.h>
+#include <hwy/cache_control.h>
 #include <hwy/contrib/math/math-inl.h>
 #include "SimdCommon-inl.h"
 // clang-format on
@@ -157,6 +158,16 @@ HWY_INLINE void accumulateRow(D d, const TapContext& t, const Centre& k, Sums& s
     accumulateTap<kSeries, kVariance, 2, J>(d, t, row, k, s);
 }
 
+/// Prefetches pixels x0 .. x1 - 1 of row y of the remodulation's inputs.
+HWY_INLINE void prefetchRemodulation(const Remodulation& m, uint32_t x0, uint32_t x1, uint32_t y) {
+    for (uint32_t x = x0; x < x1; x += 4) {  // 4 RGBA32F pixels to a cache line
+        hwy::Prefetch(&m.color.at(x, y));
+        hwy::Prefetch(&m.albedo.at(x, y));
+        if (m.emission.data) hwy::Prefetch(&m.emission.at(x, y));
+        if ((x & 7) == 0) hwy::Prefetch(&m.linearZ.at(x, y));
+    }
+}
+
 /// The remodulated result of pixels x0 .. x0 + count - 1 of row y from the level's rgb.
 HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_t y, uint32_t count, V r, V g, V b) {
     const size_t N = hn::Lanes(d);
@@ -203,6 +214,9 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
     const float blurKernel[2][2] = {{1.f / 4.f, 1.f / 8.f}, {1.f / 8.f, 1.f / 16.f}};
 
     for (uint32_t y = t.y0; y < t.y1; ++y) {
+        // The remodulation's inputs are read once, in short row segments of a tile: prefetch the next row's while
+        // this one is filtered (the hardware prefetchers do not follow tiles across rows).
+        if (out.modulate.dst.data && y + 1 < t.y1) prefetchRemodulation(out.modulate, t.x0, t.x1, y + 1);
         for (uint32_t x0 = t.x0; x0 < t.x1; x0 += uint32_t(N)) {
             const size_t o = L.offset(x0, y);
             const V zc = hn::LoadU(d, G.z + o);
