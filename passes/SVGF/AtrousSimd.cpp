@@ -217,6 +217,13 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
         // The remodulation's inputs are read once, in short row segments of a tile: prefetch the next row's while
         // this one is filtered (the hardware prefetchers do not follow tiles across rows).
         if (out.modulate.dst.data && y + 1 < t.y1) prefetchRemodulation(out.modulate, t.x0, t.x1, y + 1);
+        // Likewise the one tap row the next output row reads first (y + 1 + 2 step), margins included.
+        if (y + 1 < t.y1 && int(y) + 1 + 2 * c.step < H) {
+            const size_t row = L.offset(0, y + 1 + 2 * uint32_t(c.step));
+            const ptrdiff_t from = ptrdiff_t(t.x0) - 2 * c.step, to = ptrdiff_t(t.x1) + 2 * c.step;
+            for (const float* plane : {G.z, G.nx, G.ny, G.nz, in.r, in.g, in.b, in.v, in.l})
+                for (ptrdiff_t x = from; x < to; x += 16) hwy::Prefetch(plane + ptrdiff_t(row) + x);
+        }
         for (uint32_t x0 = t.x0; x0 < t.x1; x0 += uint32_t(N)) {
             const size_t o = L.offset(x0, y);
             const V zc = hn::LoadU(d, G.z + o);
