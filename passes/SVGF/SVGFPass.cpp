@@ -54,6 +54,8 @@ const char kStatModulate[] = "ms.modulate";
 // Tiles of the streaming stages: wider than the default so each row of a tile is a long contiguous run in each of
 // the ~20 textures the temporal stage touches (hardware prefetch, fewer pages per tile).
 constexpr uint32_t kStreamTileSize = 128;
+// The fused temporal stage goes further: bands of whole rows (see TemporalSimd.cpp).
+constexpr uint32_t kTemporalBandRows = 8;
 
 using Clock = std::chrono::steady_clock;
 
@@ -216,7 +218,7 @@ void SVGFPass::execute(PassContext& ctx) {
         to.signal = planes.signal;
         to.estimate = ctx.internal(kEstimate)->view<glm::vec4>();
         to.variance = outputView<float>(ctx, kVariance);
-        const simd::TemporalCounts counts = simd::temporalCombined(tv, tp, to, kStreamTileSize);
+        const simd::TemporalCounts counts = simd::temporalCombined(tv, tp, to, kTemporalBandRows);
         nonFinite = counts.rejected;
         referencePixels = counts.reference;
     } else {

@@ -235,17 +235,20 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
 }
 
 TemporalCounts TemporalCombinedTarget(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
-                                      uint32_t tileSize) {
+                                      uint32_t rows) {
     const RowJob job{v, p, out};
     std::atomic<uint64_t> rejected{0}, reference{0};
+    // Bands of whole rows rather than square tiles: each of the some twenty streams is then one long run per row,
+    // which the hardware prefetchers follow (with 128-pixel tiles they restart at every row).
+    const uint32_t width = v.color.width;
     parallelFor2D(
-        v.color.width, v.color.height,
-        [j = &job, r = &rejected, s = &reference](const Tile& t) {
-            const TemporalCounts c = temporalTile(*j, t);
+        1, v.color.height,
+        [j = &job, r = &rejected, s = &reference, width](const Tile& band) {
+            const TemporalCounts c = temporalTile(*j, Tile{0, band.y0, width, band.y1});
             *r += c.rejected;
             *s += c.reference;
         },
-        tileSize);
+        rows);
     return {rejected.load(), reference.load()};
 }
 
@@ -258,8 +261,8 @@ namespace loom::svgf::simd {
 HWY_EXPORT(TemporalCombinedTarget);
 
 TemporalCounts temporalCombined(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
-                                uint32_t tileSize) {
-    return HWY_DYNAMIC_DISPATCH(TemporalCombinedTarget)(v, p, out, tileSize);
+                                uint32_t rows) {
+    return HWY_DYNAMIC_DISPATCH(TemporalCombinedTarget)(v, p, out, rows);
 }
 
 }  // namespace loom::svgf::simd

@@ -36,8 +36,8 @@ struct TemporalCounts {
     uint64_t reference = 0;  ///< pixels that ran temporalPixel rather than the vector path
 };
 
-/// Stage 1 for the combined signal (p.split false) over the whole frame, tiles of tileSize.
+/// Stage 1 for the combined signal (p.split false) over the whole frame, in bands of `rows` whole rows.
 TemporalCounts temporalCombined(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
-                                uint32_t tileSize);
+                                uint32_t rows);
 
 }  // namespace loom::svgf::simd
