@@ -251,15 +251,19 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
     if (fused) {
-        // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate.
-        parallelForPixels(
-            w, h,
-            [&](uint32_t x, uint32_t y) {
-                if (vv.length.at(x, y) >= kSpatialVarianceFrames || !(vv.linearZ.at(x, y).x >= 0.f)) return;
-                varianceEstimatePixel(vv, x, y, ap, false);
-                simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
+        // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate. Bands of
+        // whole rows, as stage 1: the scan of the lengths is a plain stream.
+        parallelFor2D(
+            1, h,
+            [&](const Tile& band) {
+                for (uint32_t y = band.y0; y < band.y1; ++y)
+                    for (uint32_t x = 0; x < w; ++x) {
+                        if (vv.length.at(x, y) >= kSpatialVarianceFrames || !(vv.linearZ.at(x, y).x >= 0.f)) continue;
+                        varianceEstimatePixel(vv, x, y, ap, false);
+                        simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
+                    }
             },
-            kStreamTileSize);
+            kTemporalBandRows);
     } else {
         parallelForPixels(
             w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, ap, split); }, kStreamTileSize);
