@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <utility>
 
 #include "loom/Parallel.h"
 
@@ -65,12 +66,27 @@ void AtrousFilter::setGuide(ImageView<const glm::vec2> linearZ, ImageView<const 
     mHeight = linearZ.height;
     ensureLayout(std::max(kDefaultMaxStep, mLayout.margin > 0 ? int(mLayout.margin / 2) : 0));
     packGuide();
+    mSignalPacked = false;
+}
+
+AtrousFilter::FramePlanes AtrousFilter::preparePlanes(ImageView<const glm::vec2> linearZ,
+                                                      ImageView<const glm::vec4> normal, int iterations) {
+    mLinearZ = linearZ;
+    mNormal = normal;
+    mWidth = linearZ.width;
+    mHeight = linearZ.height;
+    const int maxStep = 1 << std::clamp(iterations - 1, 0, 30);
+    ensureLayout(std::max({kDefaultMaxStep, maxStep, mLayout.margin > 0 ? int(mLayout.margin / 2) : 0}));
+    mGuideMs = 0.0;
+    mSignalPacked = true;
+    return {&mLayout, mGuide, mSignal[0]};
 }
 
 void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations,
                        const AtrousParams& params, int feedbackTap, ImageView<glm::vec4> feedback, bool reference,
-                       AtrousTimings* timings) {
+                       AtrousTimings* timings, const simd::Remodulation* modulate) {
     const bool wantsFeedback = feedback.data != nullptr;
+    bool packed = std::exchange(mSignalPacked, false);
     if (timings) *timings = AtrousTimings{};
     if (iterations <= 0) {
         copyImage(src, dst);
@@ -110,8 +126,9 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
     if (ensureLayout(maxStep)) {
         packGuide();
         guideMs += mGuideMs;
+        packed = false;
     }
-    simd::packSignal(mLayout, src, mSignal[0]);
+    if (!packed) simd::packSignal(mLayout, src, mSignal[0]);
     if (timings) timings->prepareMs = guideMs + msSince(t0);
 
     for (int level = 0; level < iterations; ++level) {
@@ -119,8 +136,14 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
         const bool last = level == iterations - 1;
         simd::LevelOutputs out;
         if (!last) out.planes = mSignal[(level + 1) % 2];
-        if (last) out.image[0] = dst;
-        if (wantsFeedback && level == tap) out.image[1] = feedback;
+        const bool feedbackHere = wantsFeedback && level == tap;
+        if (last && modulate) {
+            out.modulate = *modulate;
+            out.variance = feedbackHere;
+        } else if (last) {
+            out.image[0] = dst;
+        }
+        if (feedbackHere) out.image[1] = feedback;
         simd::filterLevel(mLayout, mGuide, mSignal[level % 2], out, 1 << std::min(level, 30), params);
         if (timings && level < 16) timings->levelMs[level] = msSince(t1);
     }

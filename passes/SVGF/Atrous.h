@@ -24,13 +24,26 @@ public:
     /// Packs this frame's guides. Memory is reallocated only when the size changes.
     void setGuide(ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal);
 
+    /// The planes a caller fills itself instead of setGuide: this frame's guide planes and the input signal of the
+    /// next run() (whose src must then hold the same pixels: the reference path and feedback tap -1 read it).
+    struct FramePlanes {
+        const simd::PlaneLayout* layout;
+        simd::GuidePlanes guide;
+        simd::SignalPlanes signal;
+    };
+    /// Lays out the planes for `iterations` levels and returns them for the caller to fill (interior only).
+    FramePlanes preparePlanes(ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal, int iterations);
+
     /// Runs `iterations` levels with steps 1, 2, 4, ... on src (rgb illumination, a variance) into dst.
     /// When `feedback` is non-null it receives the output of level `feedbackTap` (0-based; clamped to the last
     /// level; a negative tap copies src, the unfiltered signal). iterations == 0 copies src to dst.
     /// src, dst and feedback have the guide's size; dst and feedback may not alias src.
+    /// With `modulate` (fast path only), the last level writes the remodulated result to modulate->dst instead of
+    /// its rgb + variance to dst (dst is not written, and the last level's variance is not propagated unless it is
+    /// the feedback tap).
     void run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations, const AtrousParams& params,
              int feedbackTap = -1, ImageView<glm::vec4> feedback = {}, bool reference = false,
-             AtrousTimings* timings = nullptr);
+             AtrousTimings* timings = nullptr, const simd::Remodulation* modulate = nullptr);
 
 private:
     /// (Re)allocates the planes for steps up to maxStep; true when the layout changed (guides need packing).
@@ -48,6 +61,7 @@ private:
     simd::GuidePlanes mGuide;
     simd::SignalPlanes mSignal[2];
     double mGuideMs = 0.0;
+    bool mSignalPacked = false;  // preparePlanes was called: the next run's input is in mSignal[0]
 };
 
 }  // namespace loom::svgf

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <string>
 
+#include "SVGFKernels.h"
 #include "loom/Parallel.h"
 
 #ifndef LOOM_ATROUS_SIMD_SHARED
@@ -27,11 +28,6 @@ constexpr float kB3Exponent[3] = {1.4150374992788438f, 2.f, 4.f};
 // Screen distances of the taps |(i, j)| for |i|, |j| in 0..2, as indices into the five distinct non-zero ones.
 constexpr float kTapDistance[5] = {1.f, 1.41421356237f, 2.f, 2.2360679775f, 2.82842712475f};
 constexpr int kDistanceIndex[3][3] = {{-1, 0, 2}, {0, 1, 3}, {2, 3, 4}};
-constexpr float kMagnitudeLimit = 1e30f;
-
-inline float sanitiseScalar(float v) {
-    return std::isfinite(v) ? std::clamp(v, -kMagnitudeLimit, kMagnitudeLimit) : 0.f;
-}
 
 /// Constants of one level shared by all its pixels.
 struct LevelConstants {
@@ -59,7 +55,9 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
 // clang-format off
 #include <hwy/foreach_target.h>  // must come first: it includes this file once per target
 #include <hwy/highway.h>
+#include <hwy/cache_control.h>
 #include <hwy/contrib/math/math-inl.h>
+#include "SimdCommon-inl.h"
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
@@ -87,15 +85,6 @@ HWY_INLINE V exp2Neg(D d, V t) {
     // The low bits of r hold round(t); shifting by 23 drops everything else and lands it on the exponent field.
     const auto e = hn::ShiftLeft<23>(hn::BitCast(di, r));
     return hn::BitCast(d, hn::Sub(hn::BitCast(di, p), e));
-}
-
-HWY_INLINE V sanitise(D d, V v) {
-    const V limit = hn::Set(d, kMagnitudeLimit);
-    return hn::IfThenElseZero(hn::IsFinite(v), hn::Min(hn::Max(v, hn::Neg(limit)), limit));
-}
-
-HWY_INLINE V luminanceOf(D d, V r, V g, V b) {
-    return hn::MulAdd(hn::Set(d, 0.0722f), b, hn::MulAdd(hn::Set(d, 0.7152f), g, hn::Mul(hn::Set(d, 0.2126f), r)));
 }
 
 /// e plus the normal weight's exponent (in powers of two, >= 0) for the centre and tap normals.
@@ -134,7 +123,7 @@ struct TapContext {
     ptrdiff_t o, stride;
 };
 
-template <bool kSeries, int I, int J>
+template <bool kSeries, bool kVariance, int I, int J>
 HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Centre& k, Sums& s) {
     constexpr int ai = I < 0 ? -I : I, aj = J < 0 ? -J : J;
     if constexpr (I == 0 && J == 0) {
@@ -152,24 +141,69 @@ HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Cen
         s.r = hn::MulAdd(w, hn::LoadU(d, t.in.r + q), s.r);
         s.g = hn::MulAdd(w, hn::LoadU(d, t.in.g + q), s.g);
         s.b = hn::MulAdd(w, hn::LoadU(d, t.in.b + q), s.b);
-        s.v = hn::MulAdd(hn::Mul(w, w), hn::LoadU(d, t.in.v + q), s.v);
+        if constexpr (kVariance) s.v = hn::MulAdd(hn::Mul(w, w), hn::LoadU(d, t.in.v + q), s.v);
         s.w = hn::Add(s.w, w);
     }
 }
 
-template <bool kSeries, int J>
+template <bool kSeries, bool kVariance, int J>
 HWY_INLINE void accumulateRow(D d, const TapContext& t, const Centre& k, Sums& s) {
     const int qy = t.y + J * t.c.step;
     if (qy < 0 || qy >= t.H) return;  // off-frame rows: uniform for the whole vector
     const ptrdiff_t row = t.o + ptrdiff_t(J) * t.c.step * t.stride;
-    accumulateTap<kSeries, -2, J>(d, t, row, k, s);
-    accumulateTap<kSeries, -1, J>(d, t, row, k, s);
-    accumulateTap<kSeries, 0, J>(d, t, row, k, s);
-    accumulateTap<kSeries, 1, J>(d, t, row, k, s);
-    accumulateTap<kSeries, 2, J>(d, t, row, k, s);
+    accumulateTap<kSeries, kVariance, -2, J>(d, t, row, k, s);
+    accumulateTap<kSeries, kVariance, -1, J>(d, t, row, k, s);
+    accumulateTap<kSeries, kVariance, 0, J>(d, t, row, k, s);
+    accumulateTap<kSeries, kVariance, 1, J>(d, t, row, k, s);
+    accumulateTap<kSeries, kVariance, 2, J>(d, t, row, k, s);
 }
 
-template <bool kSeries>
+/// Prefetches pixels x0 .. x1 - 1 of row y of the remodulation's inputs.
+HWY_INLINE void prefetchRemodulation(const Remodulation& m, uint32_t x0, uint32_t x1, uint32_t y) {
+    for (uint32_t x = x0; x < x1; x += 4) {  // 4 RGBA32F pixels to a cache line
+        hwy::Prefetch(&m.color.at(x, y));
+        hwy::Prefetch(&m.albedo.at(x, y));
+        if (m.emission.data) hwy::Prefetch(&m.emission.at(x, y));
+        if ((x & 7) == 0) hwy::Prefetch(&m.linearZ.at(x, y));
+    }
+}
+
+/// The remodulated result of pixels x0 .. x0 + count - 1 of row y from the level's rgb.
+HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_t y, uint32_t count, V r, V g, V b) {
+    const size_t N = hn::Lanes(d);
+    if (count < N) {
+        HWY_ALIGN float lanes[3][kMaxLanes];
+        hn::Store(r, d, lanes[0]);
+        hn::Store(g, d, lanes[1]);
+        hn::Store(b, d, lanes[2]);
+        for (uint32_t k = 0; k < count; ++k) {
+            const uint32_t x = x0 + k;
+            const glm::vec3 emission = m.emission.data ? glm::vec3(m.emission.at(x, y)) : glm::vec3(0.f);
+            m.dst.at(x, y) = remodulate(glm::vec3(lanes[0][k], lanes[1][k], lanes[2][k]), m.color.at(x, y),
+                                        m.albedo.at(x, y), emission, m.linearZ.at(x, y).x);
+        }
+        return;
+    }
+    const V zero = hn::Zero(d), one = hn::Set(d, 1.f), minAlbedo = hn::Set(d, kMinAlbedo);
+    V cr, cg, cb, ca, ar, ag, ab, aa, er = zero, eg = zero, eb = zero, ea, z, dz;
+    hn::LoadInterleaved4(d, &m.color.at(x0, y).x, cr, cg, cb, ca);
+    hn::LoadInterleaved4(d, &m.albedo.at(x0, y).x, ar, ag, ab, aa);
+    if (m.emission.data) hn::LoadInterleaved4(d, &m.emission.at(x0, y).x, er, eg, eb, ea);
+    hn::LoadInterleaved2(d, &m.linearZ.at(x0, y).x, z, dz);
+    const auto hit = hn::Ge(z, zero);
+    // As remodulate(): illum * max(finiteOrZero(albedo), kMinAlbedo) + finiteOrZero(emission) on hits, the colour
+    // with non-finite channels as 0 on misses; alpha is the colour's (1 if not finite).
+    auto channel = [&](V illum, V c, V a, V e) HWY_ATTR {
+        a = hn::IfThenElseZero(hn::IsFinite(a), a);
+        a = hn::IfThenElse(hn::Gt(a, minAlbedo), a, minAlbedo);
+        const V lit = hn::Add(hn::Mul(illum, a), hn::IfThenElseZero(hn::IsFinite(e), e));
+        return hn::IfThenElse(hit, lit, hn::IfThenElseZero(hn::IsFinite(c), c));
+    };
+    hn::StoreInterleaved4(channel(r, cr, ar, er), channel(g, cg, ag, eg), channel(b, cb, ab, eb),
+                          hn::IfThenElse(hn::IsFinite(ca), ca, one), d, &m.dst.at(x0, y).x);
+}
+
+template <bool kSeries, bool kVariance>
 void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out,
                 const LevelConstants& c, const Tile& t) {
     const D d;
@@ -180,6 +214,16 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
     const float blurKernel[2][2] = {{1.f / 4.f, 1.f / 8.f}, {1.f / 8.f, 1.f / 16.f}};
 
     for (uint32_t y = t.y0; y < t.y1; ++y) {
+        // The remodulation's inputs are read once, in short row segments of a tile: prefetch the next row's while
+        // this one is filtered (the hardware prefetchers do not follow tiles across rows).
+        if (out.modulate.dst.data && y + 1 < t.y1) prefetchRemodulation(out.modulate, t.x0, t.x1, y + 1);
+        // Likewise the one tap row the next output row reads first (y + 1 + 2 step), margins included.
+        if (y + 1 < t.y1 && int(y) + 1 + 2 * c.step < H) {
+            const size_t row = L.offset(0, y + 1 + 2 * uint32_t(c.step));
+            const ptrdiff_t from = ptrdiff_t(t.x0) - 2 * c.step, to = ptrdiff_t(t.x1) + 2 * c.step;
+            for (const float* plane : {G.z, G.nx, G.ny, G.nz, in.r, in.g, in.b, in.v, in.l})
+                for (ptrdiff_t x = from; x < to; x += 16) hwy::Prefetch(plane + ptrdiff_t(row) + x);
+        }
         for (uint32_t x0 = t.x0; x0 < t.x1; x0 += uint32_t(N)) {
             const size_t o = L.offset(x0, y);
             const V zc = hn::LoadU(d, G.z + o);
@@ -226,11 +270,11 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
                 zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
             Sums sums{sumR, sumG, sumB, sumV, sumW};
             const TapContext ctx{G, in, c, W, H, int(y), ptrdiff_t(o), stride};
-            accumulateRow<kSeries, -2>(d, ctx, centre, sums);
-            accumulateRow<kSeries, -1>(d, ctx, centre, sums);
-            accumulateRow<kSeries, 0>(d, ctx, centre, sums);
-            accumulateRow<kSeries, 1>(d, ctx, centre, sums);
-            accumulateRow<kSeries, 2>(d, ctx, centre, sums);
+            accumulateRow<kSeries, kVariance, -2>(d, ctx, centre, sums);
+            accumulateRow<kSeries, kVariance, -1>(d, ctx, centre, sums);
+            accumulateRow<kSeries, kVariance, 0>(d, ctx, centre, sums);
+            accumulateRow<kSeries, kVariance, 1>(d, ctx, centre, sums);
+            accumulateRow<kSeries, kVariance, 2>(d, ctx, centre, sums);
             sumR = sums.r;
             sumG = sums.g;
             sumB = sums.b;
@@ -243,7 +287,7 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             const V r = hn::IfThenElse(keep, rc, hn::Mul(sumR, inv));
             const V g = hn::IfThenElse(keep, gc, hn::Mul(sumG, inv));
             const V b = hn::IfThenElse(keep, bc, hn::Mul(sumB, inv));
-            const V v = hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sumV, inv), inv));
+            const V v = kVariance ? hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sumV, inv), inv)) : zero;
 
             if (out.planes.r) {
                 // Lanes past the frame's right edge have miss centres: they store the margin's zeros back.
@@ -254,6 +298,7 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
                 hn::StoreU(luminanceOf(d, r, g, b), d, out.planes.l + o);
             }
             const uint32_t count = std::min<uint32_t>(uint32_t(N), t.x1 - x0);
+            if (out.modulate.dst.data) remodulateStore(d, out.modulate, x0, y, count, r, g, b);
             for (const ImageView<glm::vec4>& image : out.image) {
                 if (!image.data) continue;
                 float* px = &image.at(x0, y).x;
@@ -287,7 +332,6 @@ void PackGuideTarget(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, I
             const auto& [L, linearZ, normal, G] = *j;
             const D d;
             const uint32_t N = uint32_t(hn::Lanes(d));
-            const V zero = hn::Zero(d), miss = hn::Set(d, -1.f);
             for (uint32_t y = t.y0; y < t.y1; ++y) {
                 const glm::vec2* zRow = linearZ.row(y);
                 const glm::vec4* nRow = normal.row(y);
@@ -296,23 +340,9 @@ void PackGuideTarget(const PlaneLayout& L, ImageView<const glm::vec2> linearZ, I
                     V z, dz, nx, ny, nz, nw;
                     hn::LoadInterleaved2(d, &zRow[x].x, z, dz);
                     hn::LoadInterleaved4(d, &nRow[x].x, nx, ny, nz, nw);
-                    const size_t o = L.offset(x, y);
-                    hn::StoreU(hn::IfThenElse(hn::And(hn::IsFinite(z), hn::Ge(z, zero)), z, miss), d, G.z + o);
-                    hn::StoreU(hn::IfThenElseZero(hn::And(hn::IsFinite(dz), hn::Gt(dz, zero)), dz), d, G.dz + o);
-                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(nx), nx), d, G.nx + o);
-                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(ny), ny), d, G.ny + o);
-                    hn::StoreU(hn::IfThenElseZero(hn::IsFinite(nz), nz), d, G.nz + o);
+                    storeGuide(d, G, L.offset(x, y), z, dz, nx, ny, nz);
                 }
-                for (; x < t.x1; ++x) {
-                    const size_t o = L.offset(x, y);
-                    const glm::vec2 z = zRow[x];
-                    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
-                    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
-                    const glm::vec4 n = nRow[x];
-                    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
-                    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
-                    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
-                }
+                for (; x < t.x1; ++x) packGuidePixel(L, G, x, y, zRow[x], nRow[x]);
             }
         },
         kTileSize);
@@ -336,27 +366,9 @@ void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, cons
                 for (; x + N <= t.x1; x += N) {
                     V r, g, b, v;
                     hn::LoadInterleaved4(d, &row[x].x, r, g, b, v);
-                    r = sanitise(d, r);
-                    g = sanitise(d, g);
-                    b = sanitise(d, b);
-                    v = sanitise(d, v);
-                    const size_t o = L.offset(x, y);
-                    hn::StoreU(r, d, S.r + o);
-                    hn::StoreU(g, d, S.g + o);
-                    hn::StoreU(b, d, S.b + o);
-                    hn::StoreU(v, d, S.v + o);
-                    hn::StoreU(luminanceOf(d, r, g, b), d, S.l + o);
+                    storeSignal(d, S, L.offset(x, y), r, g, b, v);
                 }
-                for (; x < t.x1; ++x) {
-                    const size_t o = L.offset(x, y);
-                    const glm::vec4 p = row[x];
-                    S.r[o] = sanitiseScalar(p.r);
-                    S.g[o] = sanitiseScalar(p.g);
-                    S.b[o] = sanitiseScalar(p.b);
-                    S.v[o] = sanitiseScalar(p.a);
-                    // The same operations as luminanceOf, so the scalar tail matches the vector lanes.
-                    S.l[o] = std::fma(0.0722f, S.b[o], std::fma(0.7152f, S.g[o], 0.2126f * S.r[o]));
-                }
+                for (; x < t.x1; ++x) packSignalPixel(L, S, x, y, row[x]);
             }
         },
         kTileSize);
@@ -378,10 +390,14 @@ void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalP
     parallelFor2D(
         L.width, L.height,
         [j = &job](const Tile& t) {
-            if (j->series)
-                filterRows<true>(j->L, j->G, j->in, j->out, j->c, t);
+            if (j->series && j->out.variance)
+                filterRows<true, true>(j->L, j->G, j->in, j->out, j->c, t);
+            else if (j->series)
+                filterRows<true, false>(j->L, j->G, j->in, j->out, j->c, t);
+            else if (j->out.variance)
+                filterRows<false, true>(j->L, j->G, j->in, j->out, j->c, t);
             else
-                filterRows<false>(j->L, j->G, j->in, j->out, j->c, t);
+                filterRows<false, false>(j->L, j->G, j->in, j->out, j->c, t);
         },
         kTileSize);
 }

@@ -22,6 +22,8 @@
 //
 // Bad input: non-finite illumination values become 0 and magnitudes are clamped to 1e30 (no sums overflow);
 // non-finite depth counts as a miss; non-finite or negative depth derivatives and non-finite normals become 0.
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <glm/glm.hpp>
@@ -70,6 +72,35 @@ struct SignalPlanes {
     float* l = nullptr;
 };
 
+/// Illumination magnitudes are clamped to this in the planes (no weighted sum overflows).
+inline constexpr float kMagnitudeLimit = 1e30f;
+
+inline float sanitiseScalar(float v) {
+    return std::isfinite(v) ? std::clamp(v, -kMagnitudeLimit, kMagnitudeLimit) : 0.f;
+}
+
+/// One pixel of packGuide: depth (-1 unless finite and >= 0), derivative (0 unless finite and > 0), normal
+/// (non-finite components 0). The vector loops compute the same values.
+inline void packGuidePixel(const PlaneLayout& L, const GuidePlanes& G, uint32_t x, uint32_t y, glm::vec2 z,
+                           const glm::vec4& n) {
+    const size_t o = L.offset(x, y);
+    G.z[o] = std::isfinite(z.x) && z.x >= 0.f ? z.x : -1.f;
+    G.dz[o] = std::isfinite(z.y) && z.y > 0.f ? z.y : 0.f;
+    G.nx[o] = std::isfinite(n.x) ? n.x : 0.f;
+    G.ny[o] = std::isfinite(n.y) ? n.y : 0.f;
+    G.nz[o] = std::isfinite(n.z) ? n.z : 0.f;
+}
+
+/// One pixel of packSignal: sanitised rgb and variance, and the luminance with the vector loops' operations.
+inline void packSignalPixel(const PlaneLayout& L, const SignalPlanes& S, uint32_t x, uint32_t y, const glm::vec4& p) {
+    const size_t o = L.offset(x, y);
+    S.r[o] = sanitiseScalar(p.r);
+    S.g[o] = sanitiseScalar(p.g);
+    S.b[o] = sanitiseScalar(p.b);
+    S.v[o] = sanitiseScalar(p.a);
+    S.l[o] = std::fma(0.0722f, S.b[o], std::fma(0.7152f, S.g[o], 0.2126f * S.r[o]));
+}
+
 /// Writes the guide planes' interior from linearZ (x: depth, y: derivative) and normal (xyz).
 void packGuide(const PlaneLayout& layout, ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal,
                const GuidePlanes& guide);
@@ -77,10 +108,22 @@ void packGuide(const PlaneLayout& layout, ImageView<const glm::vec2> linearZ, Im
 /// Writes a signal's interior planes from rgb + variance pixels (sanitised, luminance computed).
 void packSignal(const PlaneLayout& layout, ImageView<const glm::vec4> src, const SignalPlanes& dst);
 
-/// Where one level writes: its planes (skipped when planes.r is null) and up to two rgb + variance images.
+/// Remodulation fused into a level's output: dst = remodulate() of SVGFKernels.h (albedo times the level's rgb plus
+/// emission; miss pixels, by linearZ, pass color through). emission is optional.
+struct Remodulation {
+    ImageView<const glm::vec4> color, albedo, emission;
+    ImageView<const glm::vec2> linearZ;
+    ImageView<glm::vec4> dst;
+};
+
+/// Where one level writes: its planes (skipped when planes.r is null), up to two rgb + variance images, and the
+/// remodulated result (skipped when modulate.dst is null). variance = false: nobody reads the level's variance, so it
+/// is not propagated (planes and images then receive 0 in its place).
 struct LevelOutputs {
     SignalPlanes planes;
     ImageView<glm::vec4> image[2];
+    Remodulation modulate;
+    bool variance = true;
 };
 
 /// One à-trous level with tap spacing `step` from `in` to `out`.

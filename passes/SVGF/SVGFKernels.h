@@ -342,17 +342,18 @@ struct ModulateViews {
 
 /// Stage 4 for pixel (x, y): albedo * (sum of the filtered signals) + emission; miss pixels copy the input colour
 /// (non-finite channels as 0). The alpha channel is the input colour's.
+LOOM_HD inline glm::vec4 remodulate(const glm::vec3& illum, const glm::vec4& color, const glm::vec4& albedo,
+                                    const glm::vec3& emission, float z) {
+    const float alpha = isFiniteBits(color.a) ? color.a : 1.f;
+    if (!(z >= 0.f)) return glm::vec4(finiteOrZero(glm::vec3(color)), alpha);
+    return glm::vec4(illum * guardedAlbedo(albedo) + finiteOrZero(emission), alpha);
+}
+
 LOOM_HD inline void modulatePixel(const ModulateViews& v, uint32_t x, uint32_t y, bool split) {
-    const glm::vec4 c = v.color.at(x, y);
-    const float alpha = isFiniteBits(c.a) ? c.a : 1.f;
-    if (!(v.linearZ.at(x, y).x >= 0.f)) {
-        v.dst.at(x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), alpha);
-        return;
-    }
     glm::vec3 illum = glm::vec3(v.filtered0.at(x, y));
     if (split) illum += glm::vec3(v.filtered1.at(x, y));
-    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(v.emission.at(x, y))) : glm::vec3(0.f);
-    v.dst.at(x, y) = glm::vec4(illum * guardedAlbedo(v.albedo.at(x, y)) + emission, alpha);
+    const glm::vec3 emission = v.emission.data ? glm::vec3(v.emission.at(x, y)) : glm::vec3(0.f);
+    v.dst.at(x, y) = remodulate(illum, v.color.at(x, y), v.albedo.at(x, y), emission, v.linearZ.at(x, y).x);
 }
 
 }  // namespace loom::svgf

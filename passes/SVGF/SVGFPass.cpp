@@ -44,6 +44,7 @@ const char kEstimateIndirect[] = "estimateIndirect";
 // Frame stats.
 const char kStatNonFinite[] = "nonFinite";
 const char kStatSplit[] = "split";
+const char kStatReferencePixels[] = "temporal.referenceShare";
 const char kStatReproject[] = "ms.reproject";
 const char kStatVariance[] = "ms.variance";
 const char kStatAtrousPrepare[] = "ms.atrous.prepare";
@@ -53,6 +54,8 @@ const char kStatModulate[] = "ms.modulate";
 // Tiles of the streaming stages: wider than the default so each row of a tile is a long contiguous run in each of
 // the ~20 textures the temporal stage touches (hardware prefetch, fewer pages per tile).
 constexpr uint32_t kStreamTileSize = 128;
+// The fused temporal stage goes further: bands of whole rows (see TemporalSimd.cpp).
+constexpr uint32_t kTemporalBandRows = 8;
 
 using Clock = std::chrono::steady_clock;
 
@@ -136,6 +139,10 @@ void SVGFPass::declareParams(ParamList& p) {
     p.add("maxHistory", &mMaxHistory, 32).range(1, 1024).doc("cap of the history length in frames");
     p.add("referenceAtrous", &mReferenceAtrous, false)
         .doc("run the scalar reference a-trous kernel instead of the fast path (validation)");
+    p.add("referenceStages", &mReferenceStages, false)
+        .doc(
+            "run the scalar reference temporal, variance and remodulation stages one after the other instead of the "
+            "fused fast path (validation: the history is bit-identical, the output within rounding)");
 }
 
 void SVGFPass::passThrough(PassContext& ctx) const {
@@ -197,16 +204,34 @@ void SVGFPass::execute(PassContext& ctx) {
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();
     tp.split = split;
+    // The fused fast path (combined signal, fast à-trous): stage 1 also packs the à-trous guides and input planes
+    // and the estimate of every pixel; stage 2 then revisits only the short histories.
+    const bool fused = !split && !mReferenceStages && !mReferenceAtrous;
     std::atomic<uint64_t> nonFinite{0};
-    parallelFor2D(
-        w, h,
-        [&](const Tile& t) {
-            uint64_t count = 0;
-            for (uint32_t y = t.y0; y < t.y1; ++y)
-                for (uint32_t x = t.x0; x < t.x1; ++x) count += temporalPixel(tv, x, y, tp) ? 1 : 0;
-            nonFinite += count;
-        },
-        kStreamTileSize);
+    uint64_t referencePixels = uint64_t(w) * h;
+    AtrousFilter::FramePlanes planes{};
+    if (fused) {
+        planes = mAtrous.preparePlanes(tv.linearZ, tv.normW, mIterations);
+        simd::TemporalOutputs to;
+        to.layout = planes.layout;
+        to.guide = planes.guide;
+        to.signal = planes.signal;
+        to.estimate = ctx.internal(kEstimate)->view<glm::vec4>();
+        to.variance = outputView<float>(ctx, kVariance);
+        const simd::TemporalCounts counts = simd::temporalCombined(tv, tp, to, kTemporalBandRows);
+        nonFinite = counts.rejected;
+        referencePixels = counts.reference;
+    } else {
+        parallelFor2D(
+            w, h,
+            [&](const Tile& t) {
+                uint64_t count = 0;
+                for (uint32_t y = t.y0; y < t.y1; ++y)
+                    for (uint32_t x = t.x0; x < t.x1; ++x) count += temporalPixel(tv, x, y, tp) ? 1 : 0;
+                nonFinite += count;
+            },
+            kStreamTileSize);
+    }
     stats.set(kStatReproject, msSince(t0));
 
     // Stage 2: variance estimate (spatial where history is short).
@@ -225,20 +250,48 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
     vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
-    parallelForPixels(
-        w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, ap, split); }, kStreamTileSize);
+    if (fused) {
+        // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate. Bands of
+        // whole rows, as stage 1: the scan of the lengths is a plain stream.
+        parallelFor2D(
+            1, h,
+            [&](const Tile& band) {
+                for (uint32_t y = band.y0; y < band.y1; ++y)
+                    for (uint32_t x = 0; x < w; ++x) {
+                        if (vv.length.at(x, y) >= kSpatialVarianceFrames || !(vv.linearZ.at(x, y).x >= 0.f)) continue;
+                        varianceEstimatePixel(vv, x, y, ap, false);
+                        simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
+                    }
+            },
+            kTemporalBandRows);
+    } else {
+        parallelForPixels(
+            w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, ap, split); }, kStreamTileSize);
+    }
     stats.set(kStatVariance, msSince(t0));
 
     // Stage 3: à-trous levels; the integrated fields are free now and take the filtered signals.
     t0 = Clock::now();
-    mAtrous.setGuide(tv.linearZ, tv.normW);
+    if (!fused) mAtrous.setGuide(tv.linearZ, tv.normW);
     stats.set(kStatAtrousPrepare, msSince(t0));
     const int levels = mIterations;
     double levelMs[16] = {};
     double prepareMs = 0.0;
+    // The combined signal's remodulation is fused into the last fast level's output.
+    ModulateViews mv;
+    mv.filtered0 = asConst(tv.integrated0);
+    mv.filtered1 = asConst(tv.integrated1);
+    mv.color = tv.color;
+    mv.albedo = tv.albedo;
+    mv.emission = tv.emission;
+    mv.linearZ = tv.linearZ;
+    mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
+    const bool fusedModulation = fused && levels > 0;
+    const simd::Remodulation remodulation{mv.color, mv.albedo, mv.emission, mv.linearZ, mv.dst};
     auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback) {
         AtrousTimings timings;
-        mAtrous.run(asConst(src), dst, levels, ap, mFeedbackTap, feedback, mReferenceAtrous, &timings);
+        mAtrous.run(asConst(src), dst, levels, ap, mFeedbackTap, feedback, mReferenceAtrous, &timings,
+                    fusedModulation ? &remodulation : nullptr);
         prepareMs += timings.prepareMs;
         for (int level = 0; level < levels && level < 16; ++level) levelMs[level] += timings.levelMs[level];
     };
@@ -252,29 +305,24 @@ void SVGFPass::execute(PassContext& ctx) {
     }
     stats.set(kStatAtrous, atrousMs);
 
-    // Stage 4: remodulation (and the debug history length).
+    // Stage 4: remodulation unless fused above (and the debug history length).
     t0 = Clock::now();
-    ModulateViews mv;
-    mv.filtered0 = asConst(tv.integrated0);
-    mv.filtered1 = asConst(tv.integrated1);
-    mv.color = tv.color;
-    mv.albedo = tv.albedo;
-    mv.emission = tv.emission;
-    mv.linearZ = tv.linearZ;
-    mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
     const auto lengthOut = outputView<float>(ctx, kHistoryLength);
-    parallelFor2D(
-        w, h,
-        [&](const Tile& t) {
-            for (uint32_t y = t.y0; y < t.y1; ++y)
-                for (uint32_t x = t.x0; x < t.x1; ++x) {
-                    modulatePixel(mv, x, y, split);
-                    if (lengthOut.data) lengthOut.at(x, y) = tv.curLength.at(x, y);
-                }
-        },
-        kStreamTileSize);
+    if (!fusedModulation || lengthOut.data) {
+        parallelFor2D(
+            w, h,
+            [&](const Tile& t) {
+                for (uint32_t y = t.y0; y < t.y1; ++y)
+                    for (uint32_t x = t.x0; x < t.x1; ++x) {
+                        if (!fusedModulation) modulatePixel(mv, x, y, split);
+                        if (lengthOut.data) lengthOut.at(x, y) = tv.curLength.at(x, y);
+                    }
+            },
+            kStreamTileSize);
+    }
     stats.set(kStatModulate, msSince(t0));
     stats.set(kStatNonFinite, double(nonFinite.load()));
+    stats.set(kStatReferencePixels, double(referencePixels) / (double(w) * h));
     stats.set(kStatSplit, split ? 1 : 0);
 }
 
@@ -286,6 +334,9 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "Spatiotemporal variance-guided filtering (Schied et al. 2017) with Falcor's defaults: demodulation, "
         "reprojection with disocclusion tests, moments, spatial variance while history is short, a-trous levels "
         "with feedback, remodulation; direct and indirect filtered separately when both are connected. History in "
-        "graph fields. Stats: nonFinite (colour samples rejected), split, ms.reproject, ms.variance, "
+        "graph fields. Stats: nonFinite (colour samples rejected), split, temporal.referenceShare (fraction of pixels "
+        "the "
+        "temporal stage ran through the scalar reference kernel rather than the vector path), ms.reproject, "
+        "ms.variance, "
         "ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate.");
 }

@@ -15,6 +15,7 @@
 // The pass object holds only parameters and the à-trous scratch.
 #include "Atrous.h"
 #include "SVGFKernels.h"
+#include "TemporalSimd.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
@@ -40,6 +41,7 @@ private:
     float mPhiDepth = 1.f;
     int mMaxHistory = 32;
     bool mReferenceAtrous = false;
+    bool mReferenceStages = false;
 
     // Scratch of the à-trous levels (no state across frames).
     svgf::AtrousFilter mAtrous;

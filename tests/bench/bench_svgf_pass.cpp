@@ -4,11 +4,13 @@
 // filter, Dammertz et al. 2010, with spatial variance every frame).
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "loom/Parallel.h"
 #include "loom/RenderGraph.h"
@@ -76,43 +78,87 @@ PluginRegistry& registry() {
     return r;
 }
 
-/// Arg 0: temporal (1) or the a-trous-only baseline (0); arg 1: threads (0 = all); arg 2: width (height = 9/16 of it).
-void BM_SVGF(benchmark::State& state) {
-    const bool temporal = state.range(0) != 0;
-    ThreadLimit limit(unsigned(state.range(1)));
-    const uint32_t W = uint32_t(state.range(2)), H = W * 9 / 16;
-    const std::string graphText = R"({"loom_graph": 1, "passes": [{"name": "Inputs", "type": "SyntheticInputs"},
-        {"name": "SVGF", "type": "SVGFPass", "params": {"iterations": 4, "temporal": )" +
-                                  std::string(temporal ? "true" : "false") + R"(}}], "outputs": ["SVGF.filtered"]})";
-    RenderGraph graph(parseGraph(graphText), registry());
-    CompileOptions o;
-    o.width = W;
-    o.height = H;
-    graph.compile(o);
-    // Warm-up: past the first frames every pixel outside the moving square has history of 4 frames or more, so the
-    // spatial variance runs only where the square uncovers the background (the steady state of a real sequence).
+/// SVGF (4 iterations) over the synthetic inputs at W x 9/16 W, warmed up: past the first frames every pixel outside
+/// the moving square has history of 4 frames or more, so the spatial variance runs only where the square uncovers
+/// the background (the steady state of a real sequence).
+struct SvgfRun {
+    RenderGraph graph;
     uint64_t frame = 0;
-    for (; frame < 5; ++frame) graph.execute(FrameInfo{frame, 0.0, nullptr, nullptr});
-    const uint64_t firstTimed = frame;
-    std::map<std::string, double> sums;
-    for (auto _ : state) {
-        graph.execute(FrameInfo{frame++, 0.0, nullptr, nullptr});
-        const auto stats = graph.lastStats();
-        for (const auto& [name, value] : stats.at("SVGF"))
-            if (name.rfind("ms.", 0) == 0) sums[name] += value;
-        for (const auto& t : graph.timings())
-            if (t.name == "SVGF") sums["ms.pass"] += t.lastMs;
+    std::map<std::string, double> sums, mins;
+    int timed = 0;
+
+    SvgfRun(uint32_t W, bool temporal, bool referenceStages)
+        : graph(parseGraph(R"({"loom_graph": 1, "passes": [{"name": "Inputs", "type": "SyntheticInputs"},
+              {"name": "SVGF", "type": "SVGFPass", "params": {"iterations": 4, "temporal": )" +
+                           std::string(temporal ? "true" : "false") + R"(, "referenceStages": )" +
+                           std::string(referenceStages ? "true" : "false") + R"(}}], "outputs": ["SVGF.filtered"]})"),
+                registry()) {
+        CompileOptions o;
+        o.width = W;
+        o.height = W * 9 / 16;
+        graph.compile(o);
+        for (; frame < 5; ++frame) graph.execute(FrameInfo{frame, 0.0, nullptr, nullptr});
     }
-    const double timed = double(frame - firstTimed);
-    for (const auto& [name, sum] : sums) state.counters[name] = sum / timed;
-    state.counters["ms/MP"] = sums["ms.pass"] / timed / (double(W) * H * 1e-6);
+    /// One timed frame: the pass's stage stats ("ms.*") and its whole time (ms.pass), summed and minimised.
+    void step() {
+        graph.execute(FrameInfo{frame++, 0.0, nullptr, nullptr});
+        std::map<std::string, double> now;
+        const auto stats = graph.lastStats();  // by value: keep it alive over the loop
+        for (const auto& [name, value] : stats.at("SVGF"))
+            if (name.rfind("ms.", 0) == 0) now[name] = value;
+        for (const auto& t : graph.timings())
+            if (t.name == "SVGF") now["ms.pass"] = t.lastMs;
+        for (const auto& [name, value] : now) {
+            sums[name] += value;
+            mins[name] = timed == 0 ? value : std::min(mins[name], value);
+        }
+        ++timed;
+    }
+};
+
+/// Arg 0: temporal (1) or the a-trous-only baseline (0); arg 1: threads (0 = all); arg 2: width (height = 9/16 of it);
+/// arg 3: 1 runs the scalar reference stages one after the other (referenceStages), the baseline of the fused path.
+void BM_SVGF(benchmark::State& state) {
+    ThreadLimit limit(unsigned(state.range(1)));
+    const uint32_t W = uint32_t(state.range(2));
+    SvgfRun run(W, state.range(0) != 0, state.range(3) != 0);
+    for (auto _ : state) run.step();
+    for (const auto& [name, sum] : run.sums) state.counters[name] = sum / run.timed;
+    state.counters["ms/MP"] = run.sums["ms.pass"] / run.timed / (double(W) * (W * 9 / 16) * 1e-6);
 }
 BENCHMARK(BM_SVGF)
-    ->ArgNames({"temporal", "threads", "width"})
-    ->Args({1, 0, 1280})
-    ->Args({0, 0, 1280})
-    ->Args({1, 1, 1280})
-    ->Args({1, 0, 320})
+    ->ArgNames({"temporal", "threads", "width", "referenceStages"})
+    ->Args({1, 0, 1280, 0})
+    ->Args({0, 0, 1280, 0})
+    ->Args({1, 1, 1280, 0})
+    ->Args({1, 0, 320, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+/// The fused path against the reference stages (referenceStages) on a loaded machine: the two graphs alternate frame
+/// by frame, so both see the same load. Counters: ref.* and fused.* (means), min.ref.* and min.fused.* (minima, the
+/// least disturbed frames), and ratio = fused / ref of the mean whole-pass time. Arg 0: threads (0 = all).
+void BM_SVGF_FusedVsReference(benchmark::State& state) {
+    ThreadLimit limit(unsigned(state.range(0)));
+    SvgfRun ref(1280, true, true), fused(1280, true, false);
+    for (auto _ : state) {
+        ref.step();
+        fused.step();
+    }
+    auto report = [&](SvgfRun& run, const std::string& prefix) {
+        for (const auto& [name, sum] : run.sums) {
+            state.counters[prefix + name] = sum / run.timed;
+            state.counters["min." + prefix + name] = run.mins[name];
+        }
+    };
+    report(ref, "ref.");
+    report(fused, "fused.");
+    state.counters["ratio"] = fused.sums["ms.pass"] / ref.sums["ms.pass"];
+}
+BENCHMARK(BM_SVGF_FusedVsReference)
+    ->ArgNames({"threads"})
+    ->Arg(0)
+    ->Arg(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -1,0 +1,269 @@
+// Compiled once per Highway target (foreach_target) and dispatched at run time, as AtrousSimd.cpp.
+#include "TemporalSimd.h"
+
+#include <atomic>
+
+#include "loom/Parallel.h"
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "TemporalSimd.cpp"
+// clang-format off
+#include <hwy/foreach_target.h>  // must come first: it includes this file once per target
+#include <hwy/highway.h>
+#include <hwy/cache_control.h>
+#include "SimdCommon-inl.h"
+// clang-format on
+
+HWY_BEFORE_NAMESPACE();
+namespace loom::svgf::simd::HWY_NAMESPACE {
+
+namespace hn = hwy::HWY_NAMESPACE;
+
+using D = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<D>;
+using DU = hn::RebindToUnsigned<D>;
+using V = hn::Vec<D>;
+using M = hn::Mask<D>;
+
+/// maxf / minf of SVGFKernels.h: a > b ? a : b, a < b ? a : b (the same lanes win for NaN).
+HWY_INLINE V maxOf(V a, V b) {
+    return hn::IfThenElse(hn::Gt(a, b), a, b);
+}
+HWY_INLINE V minOf(V a, V b) {
+    return hn::IfThenElse(hn::Lt(a, b), a, b);
+}
+
+/// a * (1 - t) + b * t, as glm::mix.
+HWY_INLINE V mixOf(D d, V a, V b, V t) {
+    return hn::Add(hn::Mul(a, hn::Sub(hn::Set(d, 1.f), t)), hn::Mul(b, t));
+}
+
+/// Non-temporal stores of whole cache lines that this frame does not read again soon (history for the next frame,
+/// the integrated and estimate images): no read-for-ownership of the destination, which halves their memory traffic.
+/// dst is 32-byte aligned (the x of a vector group is a multiple of N, rows are 64-byte aligned).
+HWY_INLINE void streamInterleaved4(D d, V a, V b, V c, V e, float* dst) {
+    const size_t N = hn::Lanes(d);
+    HWY_ALIGN float lanes[4 * kMaxLanes];
+    hn::StoreInterleaved4(a, b, c, e, d, lanes);
+    for (size_t i = 0; i < 4; ++i) hn::Stream(hn::Load(d, lanes + i * N), d, dst + i * N);
+}
+
+/// Streams n floats (a multiple of N) from src to dst (as streamInterleaved4).
+HWY_INLINE void streamCopy(D d, const float* src, float* dst, size_t n) {
+    for (size_t i = 0; i < n; i += hn::Lanes(d)) hn::Stream(hn::LoadU(d, src + i), d, dst + i);
+}
+
+struct RowJob {
+    const TemporalViews& v;
+    const TemporalParams& p;
+    const TemporalOutputs& out;
+};
+
+/// The reference for one pixel, plus the fused stage's extra outputs.
+bool scalarPixel(const RowJob& j, uint32_t x, uint32_t y) {
+    const bool rejected = temporalPixel(j.v, x, y, j.p);
+    const glm::vec4 i0 = j.v.integrated0.at(x, y);
+    j.out.estimate.at(x, y) = i0;
+    packSignalPixel(*j.out.layout, j.out.signal, x, y, i0);
+    packGuidePixel(*j.out.layout, j.out.guide, x, y, j.v.linearZ.at(x, y), j.v.normW.at(x, y));
+    if (j.out.variance.data) j.out.variance.at(x, y) = i0.a + 0.f;  // the variance stage's i0.a + i1.a, i1 = 0
+    return rejected;
+}
+
+/// N pixels from x on row y in the vector path; false (nothing written) when they need the reference.
+bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
+    const TemporalViews& v = j.v;
+    const TemporalParams& p = j.p;
+    const D d;
+    const DI di;
+    const DU du;
+    const size_t N = hn::Lanes(d);
+    const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
+
+    V cr, cg, cb, ca;
+    hn::LoadInterleaved4(d, &v.color.at(x, y).x, cr, cg, cb, ca);
+    if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(cr), hn::IsFinite(cg)), hn::IsFinite(cb)))) return false;
+    V z, dz;
+    hn::LoadInterleaved2(d, &v.linearZ.at(x, y).x, z, dz);
+    const M hit = hn::Ge(z, zero);
+    V nx, ny, nz, nw;
+    hn::LoadInterleaved4(d, &v.normW.at(x, y).x, nx, ny, nz, nw);
+    const auto mesh = v.meshId.data ? hn::LoadU(du, &v.meshId.at(x, y)) : hn::Zero(du);
+
+    // Reprojection (reproject() of SVGFKernels.h) for footprints with one integer offset, all inside the frame.
+    M valid = hn::FirstN(d, 0);
+    V rr = zero, rg = zero, rb = zero, rm[4] = {zero, zero, zero, zero}, rl = zero;
+    if (p.temporal && !hn::AllFalse(d, hit)) {
+        V mx, my;
+        hn::LoadInterleaved2(d, &v.mvec.at(x, y).x, mx, my);
+        if (!hn::AllTrue(d, hn::And(hn::IsFinite(mx), hn::IsFinite(my)))) return false;
+        const float W = float(v.color.width), H = float(v.color.height);
+        const V xf = hn::ConvertTo(d, hn::Iota(di, int32_t(x))), yf = hn::Set(d, float(y));
+        const V px = hn::Add(xf, hn::Mul(mx, hn::Set(d, W))), py = hn::Add(yf, hn::Mul(my, hn::Set(d, H)));
+        const V fx0 = hn::Floor(px), fy0 = hn::Floor(py);
+        const V ox = hn::Sub(fx0, xf), oy = hn::Sub(fy0, yf);
+        const float ox0 = hn::GetLane(ox), oy0 = hn::GetLane(oy);
+        if (!hn::AllTrue(d, hn::And(hn::Eq(ox, hn::Set(d, ox0)), hn::Eq(oy, hn::Set(d, oy0))))) return false;
+        // Columns x + ox0 .. x + ox0 + N (both taps of every lane) and rows y + oy0, y + oy0 + 1 inside the frame.
+        const float col = float(x) + ox0, row = float(y) + oy0;
+        if (!(col >= 0.f && col + float(N) < W && row >= 0.f && row + 1.f < H)) return false;
+        const uint32_t c0 = uint32_t(col), r0 = uint32_t(row);
+        const V fx = hn::Sub(px, fx0), fy = hn::Sub(py, fy0);
+        const V bw[4] = {hn::Mul(hn::Sub(one, fx), hn::Sub(one, fy)), hn::Mul(fx, hn::Sub(one, fy)),
+                         hn::Mul(hn::Sub(one, fx), fy), hn::Mul(fx, fy)};
+        // reprojectionTapValid, with the reference's comparisons (NaN guides pass the tests it lets them pass).
+        const V depthTolerance =
+            hn::Mul(hn::Set(d, kDepthThreshold), hn::Add(dz, hn::Mul(hn::Set(d, kDepthEpsilon), z)));
+        M tapValid[4];
+        V sumW = zero;
+        for (int k = 0; k < 4; ++k) {
+            const uint32_t qx = c0 + uint32_t(k & 1), qy = r0 + uint32_t(k >> 1);
+            V zp, dzp, pnx, pny, pnz, pnw;
+            hn::LoadInterleaved2(d, &v.prevLinearZ.at(qx, qy).x, zp, dzp);
+            hn::LoadInterleaved4(d, &v.prevNormW.at(qx, qy).x, pnx, pny, pnz, pnw);
+            const V dot = hn::Add(hn::Add(hn::Mul(nx, pnx), hn::Mul(ny, pny)), hn::Mul(nz, pnz));
+            M m = hn::And(hit, hn::Gt(bw[k], zero));
+            m = hn::And(m, hn::Gt(hn::LoadU(d, &v.prevLength.at(qx, qy)), zero));
+            m = hn::AndNot(hn::Lt(zp, zero), m);
+            if (v.meshId.data) m = hn::And(m, hn::RebindMask(d, hn::Eq(hn::LoadU(du, &v.prevMeshId.at(qx, qy)), mesh)));
+            m = hn::AndNot(hn::Gt(hn::Abs(hn::Sub(z, zp)), depthTolerance), m);
+            m = hn::AndNot(hn::Lt(dot, hn::Set(d, kNormalThreshold)), m);
+            tapValid[k] = m;
+            sumW = hn::Add(sumW, hn::IfThenElseZero(m, bw[k]));
+        }
+        const M bilinear = hn::Ge(sumW, hn::Set(d, kMinBilinearWeight));
+        // A hit whose footprint carries too little weight needs the 3x3 fallback: the reference does it.
+        if (!hn::AllTrue(d, hn::Or(hn::Not(hit), bilinear))) return false;
+        V ra = zero;
+        for (int k = 0; k < 4; ++k) {
+            if (hn::AllFalse(d, tapValid[k])) continue;
+            const uint32_t qx = c0 + uint32_t(k & 1), qy = r0 + uint32_t(k >> 1);
+            const M m = tapValid[k];
+            V ir, ig, ib, ia, m0, m1, m2, m3;
+            hn::LoadInterleaved4(d, &v.prevIllum0.at(qx, qy).x, ir, ig, ib, ia);
+            hn::LoadInterleaved4(d, &v.prevMoments.at(qx, qy).x, m0, m1, m2, m3);
+            const V w = bw[k];
+            rr = hn::Add(rr, hn::IfThenElseZero(m, hn::Mul(w, ir)));
+            rg = hn::Add(rg, hn::IfThenElseZero(m, hn::Mul(w, ig)));
+            rb = hn::Add(rb, hn::IfThenElseZero(m, hn::Mul(w, ib)));
+            ra = hn::Add(ra, hn::IfThenElseZero(m, hn::Mul(w, ia)));
+            rm[0] = hn::Add(rm[0], hn::IfThenElseZero(m, hn::Mul(w, m0)));
+            rm[1] = hn::Add(rm[1], hn::IfThenElseZero(m, hn::Mul(w, m1)));
+            rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, m2)));
+            rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, m3)));
+            rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, hn::LoadU(d, &v.prevLength.at(qx, qy)))));
+        }
+        const V inv = hn::Div(one, sumW);
+        rr = hn::Mul(rr, inv);
+        rg = hn::Mul(rg, inv);
+        rb = hn::Mul(rb, inv);
+        ra = hn::Mul(ra, inv);
+        for (V& c : rm) c = hn::Mul(c, inv);
+        rl = hn::Mul(rl, inv);
+        // History that is not finite counts as disoccluded (reference: r.valid).
+        M finite = hn::And(hn::And(hn::IsFinite(rr), hn::IsFinite(rg)), hn::And(hn::IsFinite(rb), hn::IsFinite(ra)));
+        finite = hn::And(finite, hn::And(hn::And(hn::IsFinite(rm[0]), hn::IsFinite(rm[1])),
+                                         hn::And(hn::IsFinite(rm[2]), hn::IsFinite(rm[3]))));
+        valid = hn::And(hn::And(hit, bilinear), hn::And(finite, hn::IsFinite(rl)));
+    }
+
+    // Demodulation (temporalPixel): emission out, divided by the guarded albedo, clamped.
+    V ar, ag, ab, aa, er = zero, eg = zero, eb = zero, ea;
+    hn::LoadInterleaved4(d, &v.albedo.at(x, y).x, ar, ag, ab, aa);
+    if (v.emission.data) {
+        hn::LoadInterleaved4(d, &v.emission.at(x, y).x, er, eg, eb, ea);
+        er = hn::IfThenElseZero(hn::IsFinite(er), er);
+        eg = hn::IfThenElseZero(hn::IsFinite(eg), eg);
+        eb = hn::IfThenElseZero(hn::IsFinite(eb), eb);
+    }
+    const V minAlbedo = hn::Set(d, kMinAlbedo), maxIllum = hn::Set(d, kMaxIllumination);
+    auto demodulate = [&](V c, V e, V a) HWY_ATTR {
+        a = maxOf(hn::IfThenElseZero(hn::IsFinite(a), a), minAlbedo);
+        return minOf(maxOf(hn::Div(hn::Sub(c, e), a), zero), maxIllum);
+    };
+    const V lr = demodulate(cr, er, ar), lg = demodulate(cg, eg, ag), lb = demodulate(cb, eb, ab);
+    const V lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), lr), hn::Mul(hn::Set(d, 0.7152f), lg)),
+                          hn::Mul(hn::Set(d, 0.0722f), lb));
+    const V moments[4] = {lum, hn::Mul(lum, lum), zero, zero};
+
+    // Temporal accumulation (paper eq. 1 with Falcor's max(alpha, 1 / n)).
+    const V length = hn::IfThenElse(valid, minOf(hn::Add(rl, one), hn::Set(d, p.maxHistory)), one);
+    const V invLength = hn::Div(one, length);
+    const V a = maxOf(hn::Set(d, p.alpha), invLength), am = maxOf(hn::Set(d, p.momentsAlpha), invLength);
+    V ir = hn::IfThenElse(valid, mixOf(d, rr, lr, a), lr);
+    V ig = hn::IfThenElse(valid, mixOf(d, rg, lg, a), lg);
+    V ib = hn::IfThenElse(valid, mixOf(d, rb, lb, a), lb);
+    V m[4];
+    for (int c = 0; c < 4; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], moments[c], am), moments[c]);
+    V ia = maxOf(zero, hn::Sub(m[1], hn::Mul(m[0], m[0])));
+    // Misses: no history, zero signal.
+    ir = hn::IfThenElseZero(hit, ir);
+    ig = hn::IfThenElseZero(hit, ig);
+    ib = hn::IfThenElseZero(hit, ib);
+    ia = hn::IfThenElseZero(hit, ia);
+    for (V& c : m) c = hn::IfThenElseZero(hit, c);
+
+    // Everything is decided: write.
+    streamInterleaved4(d, ir, ig, ib, ia, &v.integrated0.at(x, y).x);
+    streamInterleaved4(d, m[0], m[1], m[2], m[3], &v.curMoments.at(x, y).x);
+    hn::StoreU(hn::IfThenElseZero(hit, length), d, &v.curLength.at(x, y));  // read again by the variance stage
+    streamCopy(d, &v.linearZ.at(x, y).x, &v.curLinearZ.at(x, y).x, 2 * N);
+    streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
+    hn::Stream(hn::BitCast(d, mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
+    streamInterleaved4(d, ir, ig, ib, ia, &j.out.estimate.at(x, y).x);
+    const size_t o = j.out.layout->offset(x, y);
+    storeSignal<true>(d, j.out.signal, o, ir, ig, ib, ia);
+    storeGuide<true>(d, j.out.guide, o, z, dz, nx, ny, nz);
+    if (j.out.variance.data) hn::StoreU(hn::Add(ia, zero), d, &j.out.variance.at(x, y));
+    return true;
+}
+
+TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
+    const uint32_t N = uint32_t(hn::Lanes(D()));
+    TemporalCounts counts;
+    for (uint32_t y = t.y0; y < t.y1; ++y) {
+        uint32_t x = t.x0;
+        for (; x + N <= t.x1; x += N) {
+            if (vectorPixels(j, x, y)) continue;
+            for (uint32_t k = 0; k < N; ++k) counts.rejected += scalarPixel(j, x + k, y) ? 1 : 0;
+            counts.reference += N;
+        }
+        for (; x < t.x1; ++x, ++counts.reference) counts.rejected += scalarPixel(j, x, y) ? 1 : 0;
+    }
+    hwy::FlushStream();  // the streamed stores are visible before the tile is reported done
+    return counts;
+}
+
+TemporalCounts TemporalCombinedTarget(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
+                                      uint32_t rows) {
+    const RowJob job{v, p, out};
+    std::atomic<uint64_t> rejected{0}, reference{0};
+    // Bands of whole rows rather than square tiles: each of the some twenty streams is then one long run per row,
+    // which the hardware prefetchers follow (with 128-pixel tiles they restart at every row).
+    const uint32_t width = v.color.width;
+    parallelFor2D(
+        1, v.color.height,
+        [j = &job, r = &rejected, s = &reference, width](const Tile& band) {
+            const TemporalCounts c = temporalTile(*j, Tile{0, band.y0, width, band.y1});
+            *r += c.rejected;
+            *s += c.reference;
+        },
+        rows);
+    return {rejected.load(), reference.load()};
+}
+
+}  // namespace loom::svgf::simd::HWY_NAMESPACE
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace loom::svgf::simd {
+
+HWY_EXPORT(TemporalCombinedTarget);
+
+TemporalCounts temporalCombined(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
+                                uint32_t rows) {
+    return HWY_DYNAMIC_DISPATCH(TemporalCombinedTarget)(v, p, out, rows);
+}
+
+}  // namespace loom::svgf::simd
+#endif  // HWY_ONCE

@@ -1,0 +1,43 @@
+#pragma once
+// The vectorised temporal stage of SVGF (Google Highway, dispatched at run time) for the combined signal: one pass
+// over the frame that does what temporalPixel (SVGFKernels.h) does, and in the same loop packs the à-trous guide
+// planes and the à-trous input (the integrated colour with its temporal variance) into its planes, so the à-trous
+// stage reads no image of its own. The variance stage then only revisits pixels whose history is short.
+//
+// The common case is vectorised: N pixels of a row (N = 8 on AVX2) whose colour samples and motion vectors are
+// finite, whose 2x2 bilinear footprints all have the same integer offset from the pixels (a camera pan or a static
+// view; the footprint then is two contiguous runs of each history row) and lie inside the frame, and whose valid
+// taps carry at least kMinBilinearWeight. Every other group of N pixels (and the row's tail) runs temporalPixel
+// itself, pixel by pixel: disocclusion that needs the 3x3 fallback, non-finite samples, footprints across the
+// frame's border or moving objects' edges.
+//
+// The vector path performs the reference's float operations in the reference's order (the build does not contract
+// a * b + c into FMAs, and max / min follow maxf / minf), so its results are bit-identical to temporalPixel's;
+// tests/integration/test_svgf.cpp checks that on a moving scene against the reference stage (`referenceTemporal`).
+#include <cstdint>
+
+#include "AtrousSimd.h"
+#include "SVGFKernels.h"
+
+namespace loom::svgf::simd {
+
+/// What the fused temporal stage writes besides the TemporalViews of temporalPixel.
+struct TemporalOutputs {
+    const PlaneLayout* layout = nullptr;
+    GuidePlanes guide;              ///< the à-trous guides of this frame
+    SignalPlanes signal;            ///< the à-trous input: integrated colour, a = temporal variance
+    ImageView<glm::vec4> estimate;  ///< the same as an image (the variance stage overwrites short histories)
+    ImageView<float> variance;      ///< optional debug output: the temporal variance
+};
+
+/// Pixel counts of one frame of the fused stage.
+struct TemporalCounts {
+    uint64_t rejected = 0;   ///< non-finite colour samples
+    uint64_t reference = 0;  ///< pixels that ran temporalPixel rather than the vector path
+};
+
+/// Stage 1 for the combined signal (p.split false) over the whole frame, in bands of `rows` whole rows.
+TemporalCounts temporalCombined(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
+                                uint32_t rows);
+
+}  // namespace loom::svgf::simd
