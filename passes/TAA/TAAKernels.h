@@ -89,6 +89,23 @@ LOOM_HD inline glm::vec4 fromYCoCg(const glm::vec4& v) {
     return glm::vec4(v.x + v.y - v.z, v.x + v.z, v.x - v.y - v.z, v.w);
 }
 
+/// The HDR compression TAAPass resolves in (hdrCompress): c / (1 + Y), Y = max(0, YCoCg luma of c), alpha kept
+/// (Karis 2014, "High Quality Temporal Supersampling": the reversible tone map). Every colour with Y >= 0 lands at a
+/// luma below 1, so a light next to a dark surface differs from it by a bounded amount and the bicubic history and
+/// the blend cannot carry a large fraction of the light into the dark side. expandColor() is its inverse, exact up to
+/// rounding: Y(c') = Y / (1 + Y), hence c = c' / (1 - Y(c')).
+LOOM_HD inline glm::vec4 compressColor(const glm::vec4& c) {
+    const float y = glm::max(0.25f * (c.x + c.z) + 0.5f * c.y, 0.f);
+    const float k = 1.f / (1.f + y);
+    return glm::vec4(c.x * k, c.y * k, c.z * k, c.w);
+}
+/// Inverse of compressColor(); a luma at or above 1 (only from rounding or non-HDR input) is held just below 1.
+LOOM_HD inline glm::vec4 expandColor(const glm::vec4& c) {
+    const float y = glm::max(0.25f * (c.x + c.z) + 0.5f * c.y, 0.f);
+    const float k = 1.f / glm::max(1.f - y, 1e-7f);
+    return glm::vec4(c.x * k, c.y * k, c.z * k, c.w);
+}
+
 /// Start value of a running minimum (and, negated, maximum).
 inline constexpr float kHuge = 3.0e38f;
 

@@ -22,6 +22,7 @@ namespace {
 const char kColorIn[] = "colorIn";
 const char kMvec[] = "mvec";
 const char kColorOut[] = "colorOut";
+const char kCompressed[] = "compressedIn";
 const char kColorHistory[] = "colorHistory";
 
 // Counters reported in the frame's stats.
@@ -536,7 +537,9 @@ void TAAPass::reflect(Reflection& r, const CompileInfo&) const {
     r.input(kColorIn, Format::RGBA32F).doc("this frame's jittered colour (connect with an explicit edge)");
     r.input(kMvec, Format::RG32F).doc("uvPrev - uvCur in [0, 1]^2 uv, jitter removed (by name from the G-buffer)");
     r.output(kColorOut, Format::RGBA32F).doc("anti-aliased colour; always finite");
-    r.history(kColorHistory, Format::RGBA32F).doc("last frame's colorOut, the history that is reprojected");
+    r.history(kColorHistory, Format::RGBA32F)
+        .doc("last frame's resolved colour, the history that is reprojected (compressed when hdrCompress)");
+    r.internal(kCompressed, Format::RGBA32F).doc("colorIn compressed, c / (1 + luma) (when hdrCompress)");
 }
 
 void TAAPass::declareParams(ParamList& p) {
@@ -548,13 +551,28 @@ void TAAPass::declareParams(ParamList& p) {
         .doc("clipping box half-size in standard deviations of the 3x3 neighbourhood (YCoCg)");
     p.add("antiFlicker", &mParams.antiFlicker, true)
         .doc("weight current and history by 1 / (1 + luma) (Karis 2014) so bright outliers do not flicker");
+    p.add("hdrCompress", &mHdrCompress, true)
+        .doc(
+            "resolve in c / (1 + luma) and expand after (Karis 2014), so a bright light does not bleed into dark "
+            "neighbours through the bicubic history under motion");
     p.add("reference", &mReference, false)
         .doc("run the plain per-pixel reference kernel instead of the tiled CPU path (agrees to 1e-4, slower)");
 }
 
 void TAAPass::execute(PassContext& ctx) {
     TaaInputs in;
-    in.color = clamped<glm::vec4>(*ctx.input(kColorIn));
+    const Texture& colorIn = *ctx.input(kColorIn);
+    const ImageView<const glm::vec4> linearIn = colorIn.view<glm::vec4>();
+    const bool compress = mHdrCompress;
+    Texture* compressedTex = ctx.internal(kCompressed);
+    if (compress) {
+        const ImageView<glm::vec4> c = compressedTex->view<glm::vec4>();
+        parallelForPixels(c.width, c.height,
+                          [&](uint32_t x, uint32_t y) { c.at(x, y) = taa::compressColor(linearIn.at(x, y)); });
+        in.color = clamped<glm::vec4>(*compressedTex);
+    } else {
+        in.color = clamped<glm::vec4>(colorIn);
+    }
     in.mvec = clamped<glm::vec2>(*ctx.input(kMvec));
     in.history = clamped<glm::vec4>(ctx.historyPrev(kColorHistory));
     in.historyValid = ctx.historyValid();
@@ -582,6 +600,20 @@ void TAAPass::execute(PassContext& ctx) {
         },
         1);  // one cell of the tile grid per task
 
+    if (compress) {
+        // Back to linear colour. Where the resolve returned the compressed current colour itself (no history, or
+        // history equal to it, as for a constant image) the linear input is passed on exactly.
+        const ImageView<glm::vec4> c = compressedTex->view<glm::vec4>();
+        parallelForPixels(out.width, out.height, [&](uint32_t x, uint32_t y) {
+            const glm::vec4 r = out.at(x, y);
+            if (r == c.at(x, y)) {
+                out.at(x, y) = linearIn.at(x, y);
+                return;
+            }
+            const glm::vec4 e = taa::expandColor(r);
+            out.at(x, y) = taa::isFinite(e) ? e : glm::vec4(0.f);
+        });
+    }
     ctx.stats().set(kStatNonFinite, double(nonFinite));
     ctx.stats().set(kStatNoHistory, double(noHistory));
     ctx.stats().set(kStatClipped, double(clipped));

@@ -33,6 +33,7 @@ public:
 private:
     taa::TaaParams mParams;
     bool mReference = false;
+    bool mHdrCompress = true;
 };
 
 }  // namespace loom
