@@ -16,6 +16,7 @@
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "BenchReport.h"
@@ -256,6 +257,25 @@ fs::path defaultCacheDir() {
     return fs::temp_directory_path() / "loom-references";
 }
 
+/// Hash of the scene: the file's bytes and, for a .gltf, those of every external buffer and image it names.
+uint64_t sceneHash(const fs::path& scene) {
+    std::string bytes = readBytes(scene);
+    if (scene.extension() == ".gltf") {
+        const nlohmann::json j = nlohmann::json::parse(bytes, nullptr, false);
+        if (j.is_object()) {
+            for (const char* list : {"buffers", "images"}) {
+                if (!j.contains(list) || !j[list].is_array()) continue;
+                for (const auto& item : j[list]) {
+                    if (!item.is_object() || !item.contains("uri") || !item["uri"].is_string()) continue;
+                    const std::string uri = item["uri"].get<std::string>();
+                    if (uri.rfind("data:", 0) != 0) bytes += uri + readBytes(scene.parent_path() / uri);
+                }
+            }
+        }
+    }
+    return fnv1a(bytes);
+}
+
 /// What a reference depends on, as text: hashed into the cache entry's name and stored in it (key.txt).
 std::string referenceKeyText(const BenchOptions& o, uint32_t width, uint32_t height, bool shared) {
     std::string env = o.scene.env;
@@ -264,7 +284,7 @@ std::string referenceKeyText(const BenchOptions& o, uint32_t width, uint32_t hei
     return fmt::format(
         "loom reference cache format {}\nloom version {}\nscene {} bytes {:016x}\nreference graph {} bytes {:016x}\n"
         "reference spp {}\nsize {}x{}\ncamera path {} speed {}\njitter {} count {}\nenvironment {}\n{}\n",
-        kCacheFormat, loom::version(), fs::path(o.scene.scene).filename().string(), fnv1a(readBytes(o.scene.scene)),
+        kCacheFormat, loom::version(), fs::path(o.scene.scene).filename().string(), sceneHash(o.scene.scene),
         fs::path(o.referenceGraph).filename().string(), fnv1a(readBytes(o.referenceGraph)), o.referenceSpp, width,
         height, o.scene.cameraPath, o.scene.cameraSpeed, o.scene.jitter, o.scene.jitterCount, env,
         shared ? std::string("frames: one image for every time (nothing moves)")
