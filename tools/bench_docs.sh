@@ -29,7 +29,7 @@ run 360p-static --scene $BOX --size 640x360 --frames 32 --warmup 16 --reference-
 run 360p-orbit  --scene $BOX --camera-path orbit --size 640x360 --frames 32 --warmup 16 --reference-spp 64
 run 360p-object --scene $DYN --size 640x360 --frames 32 --warmup 16 --reference-spp 64
 # 1280x720: the moving cases have 8 measured frames after the 16 warm-up frames and a 32 spp reference (each
-# reference spp costs about 0.5 s per frame at this size on the 2-core machine).
-run 720p-static --scene $BOX --size 1280x720 --frames 32 --warmup 16 --reference-spp 512 --brute-force-max 32
+# reference spp costs about 0.8 s per frame at this size on the shared 2-core machine).
+run 720p-static --scene $BOX --size 1280x720 --frames 32 --warmup 16 --reference-spp 256 --brute-force-max 16
 run 720p-orbit  --scene $BOX --camera-path orbit --size 1280x720 --frames 24 --warmup 16 --reference-spp 32
 run 720p-object --scene $DYN --size 1280x720 --frames 24 --warmup 16 --reference-spp 32
