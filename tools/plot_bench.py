@@ -40,7 +40,7 @@ def main():
         data["reference"]["spp"])
 
     metrics = [("relmse", "RelMSE"), ("flip", "FLIP")]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(12, 5))
+    fig, axes = plt.subplots(1, len(metrics), figsize=(12, 6))
     curve = data["brute_force"]
     for ax, (key, name) in zip(axes, metrics):
         if curve:
@@ -62,7 +62,8 @@ def main():
         ax.set_ylabel("mean {} per frame (after warm-up)".format(name))
         ax.set_title(name)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
+        # Below the axes, so no point hides behind it.
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, frameon=False)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(args.output, dpi=110)
