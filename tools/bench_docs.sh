@@ -33,3 +33,9 @@ run 360p-object --scene $DYN --size 640x360 --frames 32 --warmup 16 --reference-
 run 720p-static --scene $BOX --size 1280x720 --frames 32 --warmup 16 --reference-spp 256 --brute-force-max 16
 run 720p-orbit  --scene $BOX --camera-path orbit --size 1280x720 --frames 24 --warmup 16 --reference-spp 32
 run 720p-object --scene $DYN --size 1280x720 --frames 24 --warmup 16 --reference-spp 32
+# A sweep: the A-trous graph's level count on the moving camera (the reference is the 360p-orbit one, cached).
+if [ -z "${CASES:-}" ] || [[ " $CASES " == *" 360p-orbit-sweep "* ]]; then
+  "$LOOM" bench --scene $BOX --camera-path orbit --size 640x360 --frames 32 --warmup 16 --reference-spp 64 \
+    --graph PathTracerATrous --sweep SVGF.iterations=1,2,3,4,5 --out "$OUT/360p-orbit-sweep" --plot
+  cp "$OUT/360p-orbit-sweep/plot.png" docs/img/bench_360p-orbit-sweep.png
+fi
