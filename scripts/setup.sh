@@ -10,6 +10,7 @@ PACKAGES=(
   libembree-dev libtbb-dev libimgui-dev libstb-dev libcli11-dev libhwy-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libopencv-contrib-dev
+  python3-matplotlib
   libegl-dev libgl-dev libegl1-mesa-dev libgl1-mesa-dri libgles-dev
 )
 

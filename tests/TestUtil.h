@@ -1,9 +1,11 @@
 #pragma once
 // Helpers shared by the test files.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -94,6 +96,39 @@ inline float hash01(uint64_t a, uint32_t b, uint32_t c) {
 inline std::string dataScene(const std::string& name) {
     return std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + name;
 }
+
+/// Exit code and captured output of one run of the loom binary.
+struct CliResult {
+    int code = -1;       ///< exit code (-1 when killed by a signal)
+    std::string output;  ///< stdout and stderr
+};
+
+/// `s` quoted for /bin/sh.
+inline std::string shellQuoted(const std::string& s) {
+    std::string out = "'";
+    for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return out + "'";
+}
+
+#ifdef LOOM_TEST_LOOM_EXE
+/// Runs `loom ARGS` in `dir`, capturing stdout and stderr.
+inline CliResult runLoom(const std::filesystem::path& dir, const std::string& args) {
+    const std::string cmd =
+        "cd " + shellQuoted(dir.string()) + " && " + shellQuoted(LOOM_TEST_LOOM_EXE) + " " + args + " 2>&1 </dev/null";
+    CliResult r;
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    if (!pipe) {
+        ADD_FAILURE() << "popen failed: " << cmd;
+        return r;
+    }
+    char buffer[4096];
+    size_t n;
+    while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
+    const int status = ::pclose(pipe);
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+#endif
 
 /// A fresh folder per test (named after the suite and test), removed afterwards.
 class TempDirTest : public ::testing::Test {

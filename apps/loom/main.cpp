@@ -1,4 +1,4 @@
-// loom: render graphs headless, check them, list passes, inspect scenes.
+// loom: render graphs headless, check them, list passes, inspect scenes, benchmark run time against error.
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
     loom::cli::addPassesCommand(app);
     loom::cli::addSceneCommand(app);
     loom::cli::addImageCommand(app);
+    loom::cli::addBenchCommand(app);
 
     try {
         if (argc > 1 && argv[1][0] != '-') {

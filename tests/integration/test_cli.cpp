@@ -8,35 +8,26 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <glm/vec4.hpp>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
 
-#include <glm/vec4.hpp>
-#include <nlohmann/json.hpp>
-
+#include "TestUtil.h"
 #include "loom/ImageIO.h"
 #include "loom/Texture.h"
 
 namespace fs = std::filesystem;
 
-#define EXPECT_CONTAINS(text, part)                                                             \
-    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" \
-                                                               << (text)
+#define EXPECT_CONTAINS(text, part) \
+    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" << (text)
 
 namespace {
 
-struct RunResult {
-    int code = -1;       ///< exit code (-1 when killed by a signal)
-    std::string output;  ///< stdout and stderr
-};
-
-std::string quoted(const std::string& s) {
-    std::string out = "'";
-    for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-    return out + "'";
-}
+using RunResult = loom::test::CliResult;
+const auto& quoted = loom::test::shellQuoted;
 
 const std::string kTestPattern = std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json";
 
@@ -54,22 +45,7 @@ protected:
     }
 
     /// Runs `loom ARGS` in the test folder, capturing stdout and stderr.
-    RunResult loom(const std::string& args) const {
-        const std::string cmd =
-            "cd " + quoted(mDir.string()) + " && " + quoted(LOOM_TEST_LOOM_EXE) + " " + args + " 2>&1 </dev/null";
-        RunResult r;
-        FILE* pipe = ::popen(cmd.c_str(), "r");
-        if (!pipe) {
-            ADD_FAILURE() << "popen failed: " << cmd;
-            return r;
-        }
-        char buffer[4096];
-        size_t n;
-        while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
-        const int status = ::pclose(pipe);
-        r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-        return r;
-    }
+    RunResult loom(const std::string& args) const { return ::loom::test::runLoom(mDir, args); }
 
     /// Runs a render of TestPattern at 64x64 into OUT with extra arguments.
     RunResult render(const std::string& extra, const std::string& graph = kTestPattern) const {
@@ -139,8 +115,8 @@ TEST_F(Cli, RenderWritesTheMarkedOutputEveryFrame) {
     RunResult r = render("--frames 3");
     ASSERT_EQ(r.code, 0) << r.output;
     EXPECT_CONTAINS(r.output, "Rendered 3 frame(s) at 64x64");
-    EXPECT_EQ(files("out"), (std::vector<std::string>{"Display.dst.0000.png", "Display.dst.0001.png",
-                                                      "Display.dst.0002.png"}));
+    EXPECT_EQ(files("out"),
+              (std::vector<std::string>{"Display.dst.0000.png", "Display.dst.0001.png", "Display.dst.0002.png"}));
     loom::Texture img = loom::readImage(path("out/Display.dst.0002.png"));
     EXPECT_EQ(img.width(), 64u);
     EXPECT_EQ(img.height(), 64u);
@@ -193,8 +169,9 @@ TEST_F(Cli, RenderWithPoisonSucceeds) {
 // Bad input: exit code 2 and a message
 
 TEST_F(Cli, MalformedGraphJsonReportsLineAndColumn) {
-    writeText("bad.json", "{\n  \"loom_graph\": 1,\n  \"passes\": [\n    {\"name\": \"A\" \"type\": \"Constant\"}\n"
-                          "  ],\n  \"outputs\": [\"A.dst\"]\n}\n");
+    writeText("bad.json",
+              "{\n  \"loom_graph\": 1,\n  \"passes\": [\n    {\"name\": \"A\" \"type\": \"Constant\"}\n"
+              "  ],\n  \"outputs\": [\"A.dst\"]\n}\n");
     RunResult r = render("", path("bad.json").string());
     expectBadInput(r, {"bad.json", "line 4", "column", "malformed JSON"});
 }
@@ -316,8 +293,8 @@ TEST_F(Cli, PassesWritesMarkdown) {
 }  // namespace
 
 using loom::Format;
-using loom::Texture;
 using loom::readImage;
+using loom::Texture;
 using loom::writeImage;
 
 TEST_F(Cli, ImageMontagePlacesImagesSideBySide) {

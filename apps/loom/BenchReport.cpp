@@ -1,0 +1,300 @@
+#include "BenchReport.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "loom/ImageIO.h"
+
+namespace loom::cli::bench {
+
+namespace {
+
+double median(std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+/// log() that stays finite for a zero error or time (a perfect match is far below any curve point).
+double safeLog(double x) {
+    return std::log(std::max(x, 1e-30));
+}
+
+std::string csvField(const std::string& s) {
+    if (s.find_first_of(",\"\n") == std::string::npos) return s;
+    std::string out = "\"";
+    for (char c : s) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+    return out + "\"";
+}
+
+/// Shortest round-trip text of a double, so CSV and JSON carry the same value.
+std::string number(double v) {
+    return fmt::format("{}", v);
+}
+
+std::string passList(const std::vector<std::pair<std::string, double>>& passMs, const char* sep, int digits) {
+    std::string out;
+    for (const auto& [name, ms] : passMs) {
+        if (!out.empty()) out += sep;
+        out += fmt::format("{} {:.{}f}", name, ms, digits);
+    }
+    return out;
+}
+
+nlohmann::json passJson(const std::vector<std::pair<std::string, double>>& passMs) {
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& [name, ms] : passMs) j[name] = ms;
+    return j;
+}
+
+nlohmann::json optionalJson(const std::optional<double>& v) {
+    return v ? nlohmann::json(*v) : nlohmann::json();
+}
+
+nlohmann::json speedupJson(const Speedup& s) {
+    return {{"kind", s.kindName()},
+            {"value", s.kind == Speedup::Kind::None ? nlohmann::json() : nlohmann::json(s.value)},
+            {"text", s.text()}};
+}
+
+nlohmann::json runJson(const Run& r, bool withSpeedup) {
+    nlohmann::json frames = nlohmann::json::array();
+    for (const FrameResult& f : r.frames) {
+        frames.push_back({{"frame", f.frame},
+                          {"time", f.time},
+                          {"total_ms", f.totalMs},
+                          {"pass_ms", passJson(f.passMs)},
+                          {"relmse", f.metrics.relMSE},
+                          {"smape", f.metrics.smape},
+                          {"psnr", f.metrics.psnr},
+                          {"ssim", f.metrics.ssim},
+                          {"flip", f.metrics.flip},
+                          {"temporal", optionalJson(f.metrics.temporal)},
+                          {"non_finite", f.metrics.nonFinite}});
+    }
+    const Summary& s = r.summary;
+    nlohmann::json j = {{"graph", r.graph},
+                        {"graph_file", r.graphFile},
+                        {"params", r.params},
+                        {"measured", r.measured},
+                        {"summary",
+                         {{"frames", s.frames},
+                          {"total_ms", s.totalMs},
+                          {"pass_ms", passJson(s.passMs)},
+                          {"relmse", s.relMSE},
+                          {"smape", s.smape},
+                          {"psnr", s.psnr},
+                          {"ssim", s.ssim},
+                          {"flip", s.flip},
+                          {"temporal", optionalJson(s.temporal)},
+                          {"non_finite", s.nonFinite}}},
+                        {"frames", std::move(frames)}};
+    if (r.bruteForce) j["spp"] = r.spp;
+    if (withSpeedup) {
+        j["speedup_relmse"] = speedupJson(r.speedupRelMSE);
+        j["speedup_flip"] = speedupJson(r.speedupFlip);
+    }
+    return j;
+}
+
+std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& curve, uint64_t warmup) {
+    std::ostringstream s;
+    s << "kind,graph,params,measured,frame,time,warmup,total_ms,relmse,smape,psnr,ssim,flip,temporal,non_finite,"
+         "pass_ms\n";
+    auto rows = [&](const std::vector<Run>& runs) {
+        for (const Run& r : runs) {
+            for (const FrameResult& f : r.frames) {
+                const FrameMetrics& m = f.metrics;
+                s << (r.bruteForce ? "bruteforce" : "graph") << ',' << csvField(r.graph) << ',' << csvField(r.params)
+                  << ',' << csvField(r.measured) << ',' << f.frame << ',' << number(f.time) << ','
+                  << (f.frame < warmup ? 1 : 0) << ',' << number(f.totalMs) << ',' << number(m.relMSE) << ','
+                  << number(m.smape) << ',' << number(m.psnr) << ',' << number(m.ssim) << ',' << number(m.flip) << ','
+                  << (m.temporal ? number(*m.temporal) : std::string()) << ',' << m.nonFinite << ','
+                  << csvField(passList(f.passMs, ";", 4)) << '\n';
+            }
+        }
+    };
+    rows(variants);
+    rows(curve);
+    return s.str();
+}
+
+std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& variants, const std::vector<Run>& curve) {
+    std::ostringstream s;
+    s << fmt::format("### {} — {}x{}, camera {}", info.scene, info.width, info.height, info.cameraPath);
+    if (info.cameraPath != "static") s << fmt::format(" (speed {})", info.cameraSpeed);
+    s << "\n\n";
+    s << fmt::format(
+        "Loom {}; {} frames at {} fps, the first {} are warm-up; times are medians and metrics means over the {} "
+        "frames after it. Reference: {} at {} spp per frame{} ({} frame(s) from the cache, {} rendered). "
+        "Jitter: {}. Threads: {}. Load average (1, 5, 15 min) before: {}; after: {}.",
+        info.loomVersion, info.frames, info.fps, info.warmup, info.frames - info.warmup, info.referenceGraph,
+        info.referenceSpp, info.referenceShared ? ", one image for every frame (nothing moves)" : "",
+        info.referenceFramesCached, info.referenceFramesRendered, info.jitter,
+        info.threads ? std::to_string(info.threads) : std::string("all cores"), info.loadBefore, info.loadAfter);
+    if (!info.set.empty()) {
+        std::vector<std::string> quoted;
+        for (const auto& a : info.set) quoted.push_back("`" + a + "`");
+        s << " Set on every graph: " << fmt::format("{}", fmt::join(quoted, ", ")) << ".";
+    }
+    s << "\n\n";
+    s << "| graph | params | measured | ms/frame | per pass (ms) | RelMSE | SMAPE | PSNR (dB) | SSIM | FLIP | temporal "
+         "| speedup (RelMSE) | speedup (FLIP) |\n";
+    s << "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    auto row = [&](const Run& r, bool withSpeedup) {
+        const Summary& m = r.summary;
+        s << fmt::format("| {} | {} | {} | {:.1f} | {} | {:.4g} | {:.4f} | {:.2f} | {:.4f} | {:.4f} | {} | {} | {} |\n",
+                         r.graph, r.params.empty() ? "—" : r.params, r.measured, m.totalMs,
+                         passList(m.passMs, " · ", 1), m.relMSE, m.smape, m.psnr, m.ssim, m.flip,
+                         m.temporal ? fmt::format("{:.4f}", *m.temporal) : std::string("—"),
+                         withSpeedup ? r.speedupRelMSE.text() : "—", withSpeedup ? r.speedupFlip.text() : "—");
+    };
+    for (const Run& r : variants) row(r, true);
+    for (const Run& r : curve) row(r, false);
+    s << "\n";
+    return s.str();
+}
+
+}  // namespace
+
+std::string Speedup::text() const {
+    switch (kind) {
+        case Kind::Exact:
+            return fmt::format("{:.2f}x", value);
+        case Kind::AtLeast:
+            return fmt::format("> {:.2f}x", value);
+        case Kind::AtMost:
+            return fmt::format("< {:.2f}x", value);
+        case Kind::None:
+            break;
+    }
+    return "n/a";
+}
+
+const char* Speedup::kindName() const {
+    switch (kind) {
+        case Kind::Exact:
+            return "exact";
+        case Kind::AtLeast:
+            return "at_least";
+        case Kind::AtMost:
+            return "at_most";
+        case Kind::None:
+            break;
+    }
+    return "none";
+}
+
+Summary summarize(const std::vector<FrameResult>& frames, uint64_t warmup) {
+    Summary s;
+    std::vector<double> total;
+    std::map<std::string, std::vector<double>> perPass;
+    std::vector<std::string> passOrder;
+    double temporalSum = 0;
+    size_t temporalCount = 0;
+    for (const FrameResult& f : frames) {
+        if (f.frame < warmup) continue;
+        ++s.frames;
+        total.push_back(f.totalMs);
+        for (const auto& [name, ms] : f.passMs) {
+            auto [it, inserted] = perPass.try_emplace(name);
+            if (inserted) passOrder.push_back(name);
+            it->second.push_back(ms);
+        }
+        const FrameMetrics& m = f.metrics;
+        s.relMSE += m.relMSE;
+        s.smape += m.smape;
+        s.psnr += m.psnr;
+        s.ssim += m.ssim;
+        s.flip += m.flip;
+        s.nonFinite += m.nonFinite;
+        if (m.temporal) {
+            temporalSum += *m.temporal;
+            ++temporalCount;
+        }
+    }
+    if (s.frames == 0) return s;
+    const double n = double(s.frames);
+    s.relMSE /= n;
+    s.smape /= n;
+    s.psnr /= n;
+    s.ssim /= n;
+    s.flip /= n;
+    if (temporalCount) s.temporal = temporalSum / double(temporalCount);
+    s.totalMs = median(total);
+    for (const auto& name : passOrder) s.passMs.emplace_back(name, median(perPass[name]));
+    return s;
+}
+
+Speedup equalErrorSpeedup(const std::vector<Run>& curve, double error, double ms, double Summary::*metric) {
+    Speedup out;
+    if (curve.empty() || !(ms > 0.0) || !std::isfinite(error)) return out;
+    const double target = safeLog(error);
+    auto err = [&](size_t i) { return safeLog(curve[i].summary.*metric); };
+    auto time = [&](size_t i) { return safeLog(curve[i].summary.totalMs); };
+    // Worse than (or equal to) the cheapest point: brute force gets there in at most that point's time.
+    if (target >= err(0)) {
+        out.kind = Speedup::Kind::AtMost;
+        out.value = curve[0].summary.totalMs / ms;
+        return out;
+    }
+    // The first segment (in increasing spp) whose error range contains the target.
+    for (size_t i = 0; i + 1 < curve.size(); ++i) {
+        const double e0 = err(i), e1 = err(i + 1);
+        if (e1 <= target && target < e0) {
+            const double u = (target - e0) / (e1 - e0);
+            out.kind = Speedup::Kind::Exact;
+            out.value = std::exp(time(i) + u * (time(i + 1) - time(i))) / ms;
+            return out;
+        }
+    }
+    // Better than every point: brute force needs more than the most expensive point's time.
+    out.kind = Speedup::Kind::AtLeast;
+    out.value = curve.back().summary.totalMs / ms;
+    return out;
+}
+
+void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const std::vector<Run>& variants,
+                  const std::vector<Run>& curve) {
+    writeFileAtomic(dir / "results.csv", csvText(variants, curve, info.warmup));
+
+    nlohmann::json j;
+    j["loom_bench"] = 1;
+    j["loom_version"] = info.loomVersion;
+    j["scene"] = info.scene;
+    j["camera_path"] = info.cameraPath;
+    j["camera_speed"] = info.cameraSpeed;
+    j["jitter"] = info.jitter;
+    j["width"] = info.width;
+    j["height"] = info.height;
+    j["frames"] = info.frames;
+    j["warmup"] = info.warmup;
+    j["fps"] = info.fps;
+    j["set"] = info.set;
+    j["threads"] = info.threads;
+    j["load_before"] = info.loadBefore;
+    j["load_after"] = info.loadAfter;
+    j["reference"] = {{"graph", info.referenceGraph},
+                      {"spp", info.referenceSpp},
+                      {"cache", info.referenceCache},
+                      {"frames_cached", info.referenceFramesCached},
+                      {"frames_rendered", info.referenceFramesRendered},
+                      {"shared", info.referenceShared}};
+    j["brute_force_graph"] = info.bruteForceGraph;
+    j["equal_error_metrics"] = {"relmse", "flip"};
+    j["variants"] = nlohmann::json::array();
+    for (const Run& r : variants) j["variants"].push_back(runJson(r, true));
+    j["brute_force"] = nlohmann::json::array();
+    for (const Run& r : curve) j["brute_force"].push_back(runJson(r, false));
+    writeFileAtomic(dir / "results.json", j.dump(1) + "\n");
+
+    writeFileAtomic(dir / "summary.md", summaryMarkdown(info, variants, curve));
+}
+
+}  // namespace loom::cli::bench

@@ -1,0 +1,293 @@
+// loom bench on tiny cases (64x64, a few frames, low reference spp): every output file, the shape and sanity of the
+// results (finite, the brute-force error falling with spp, a denoiser below 1 spp), the reference cache (a second
+// run hits it and gives bit-identical metrics, also with another thread count), sweeps, and bad input (exit 2).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "TestUtil.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+const std::string kDynamic = loom::test::dataScene("cornell_dynamic.gltf");
+const std::string kBox = loom::test::dataScene("cornell_box.gltf");
+
+/// The tiny case: the moving-object scene (a reference per frame), 8 frames, 2 of them warm-up.
+std::string tinyArgs(const std::string& out) {
+    return "bench --scene " + loom::test::shellQuoted(kDynamic) +
+           " --size 64x64 --frames 8 --warmup 2 --reference-spp 32 --cache cache --out " + out;
+}
+
+std::vector<std::string> splitCsvLine(const std::string& line) {
+    std::vector<std::string> fields;
+    std::string cur;
+    bool inQuotes = false;
+    for (char c : line) {
+        if (c == '"')
+            inQuotes = !inQuotes;
+        else if (c == ',' && !inQuotes) {
+            fields.push_back(cur);
+            cur.clear();
+        } else
+            cur += c;
+    }
+    fields.push_back(cur);
+    return fields;
+}
+
+class BenchCli : public loom::test::TempDirTest {
+protected:
+    loom::test::CliResult run(const std::string& args) const { return loom::test::runLoom(mDir, args); }
+
+    json readJson(const std::string& rel) const {
+        std::ifstream in(mDir / rel);
+        return json::parse(in, nullptr, false);
+    }
+
+    /// CSV rows as maps from the header's column names.
+    std::vector<std::map<std::string, std::string>> readCsv(const std::string& rel) const {
+        std::ifstream in(mDir / rel);
+        std::string line;
+        std::vector<std::map<std::string, std::string>> rows;
+        if (!std::getline(in, line)) return rows;
+        const std::vector<std::string> header = splitCsvLine(line);
+        while (std::getline(in, line)) {
+            const std::vector<std::string> f = splitCsvLine(line);
+            EXPECT_EQ(f.size(), header.size()) << line;
+            std::map<std::string, std::string> row;
+            for (size_t i = 0; i < header.size() && i < f.size(); ++i) row[header[i]] = f[i];
+            rows.push_back(std::move(row));
+        }
+        return rows;
+    }
+
+    /// Runs a successful bench of `scene` at 64x64 into `out` (cache "cache") and returns its results.json.
+    json benchOk(const std::string& scene, const std::string& out, const std::string& extra) const {
+        const auto r = run("bench --scene " + loom::test::shellQuoted(scene) + " --size 64x64 --cache cache --out " +
+                           out + " " + extra);
+        EXPECT_EQ(r.code, 0) << r.output;
+        return readJson(out + "/results.json");
+    }
+
+    /// Expects exit code 2 and an "error:" message containing every part, and no result file. `options` replace
+    /// the tiny case's options of the same name ("--frames 0") or are added.
+    void expectBadInput(const std::vector<std::pair<std::string, std::string>>& options,
+                        const std::vector<std::string>& parts) const {
+        std::vector<std::pair<std::string, std::string>> args = {{"--scene", loom::test::shellQuoted(kDynamic)},
+                                                                 {"--size", "64x64"},
+                                                                 {"--frames", "8"},
+                                                                 {"--warmup", "2"},
+                                                                 {"--reference-spp", "32"},
+                                                                 {"--cache", "cache"},
+                                                                 {"--out", "out"},
+                                                                 {"--graph", "PathTracerATrous"}};
+        for (const auto& o : options) {
+            auto it = std::find_if(args.begin(), args.end(), [&](const auto& a) { return a.first == o.first; });
+            if (it != args.end())
+                it->second = o.second;
+            else
+                args.push_back(o);
+        }
+        std::string command = "bench";
+        for (const auto& [name, value] : args) command += " " + name + " " + value;
+        const auto r = run(command);
+        EXPECT_EQ(r.code, 2) << command << "\n" << r.output;
+        EXPECT_NE(r.output.find("error:"), std::string::npos) << r.output;
+        for (const auto& p : parts)
+            EXPECT_NE(r.output.find(p), std::string::npos) << "'" << p << "' not in\n" << r.output;
+        EXPECT_FALSE(fs::exists(mDir / "out" / "results.csv")) << command;
+    }
+};
+
+/// Per-frame metrics of every run in a results.json, keyed by run label and frame.
+std::map<std::string, json> frameMetrics(const json& results) {
+    std::map<std::string, json> out;
+    for (const char* list : {"variants", "brute_force"}) {
+        for (const json& run : results[list]) {
+            for (const json& f : run["frames"]) {
+                json m = f;
+                m.erase("total_ms");
+                m.erase("pass_ms");
+                out[run["graph"].get<std::string>() + " " + run["params"].get<std::string>() + " " +
+                    std::to_string(f["frame"].get<int>())] = m;
+            }
+        }
+    }
+    return out;
+}
+
+TEST_F(BenchCli, TinyRunWritesEveryOutputWithSaneValues) {
+    const auto r =
+        run(tinyArgs("out") + " --graph PathTracerSVGF --graph PathTracerATrous --graph PathTracerAccumulate");
+    ASSERT_EQ(r.code, 0) << r.output;
+    for (const char* file : {"results.csv", "results.json", "summary.md"})
+        EXPECT_TRUE(fs::is_regular_file(mDir / "out" / file)) << file;
+
+    const json results = readJson("out/results.json");
+    ASSERT_FALSE(results.is_discarded());
+    ASSERT_EQ(results["variants"].size(), 3u);
+    // Reference 32 spp: the default curve is 1, 2, 4, 8 spp (a quarter of the reference at most).
+    const json& curve = results["brute_force"];
+    ASSERT_EQ(curve.size(), 4u);
+    for (size_t i = 0; i < curve.size(); ++i) EXPECT_EQ(curve[i]["spp"].get<int>(), 1 << i);
+    EXPECT_EQ(results["reference"]["frames_rendered"].get<int>(), 8);
+    EXPECT_FALSE(results["reference"]["shared"].get<bool>());
+
+    // CSV: one row per graph and frame, and per brute-force point and frame after the first warm-up frame.
+    const auto rows = readCsv("out/results.csv");
+    size_t graphRows = 0, bruteRows = 0;
+    for (const auto& row : rows) {
+        (row.at("kind") == "graph" ? graphRows : bruteRows) += 1;
+        for (const char* col : {"total_ms", "relmse", "smape", "psnr", "ssim", "flip"}) {
+            const double v = std::stod(row.at(col));
+            EXPECT_TRUE(std::isfinite(v)) << col;
+            EXPECT_GE(v, 0.0) << col;
+        }
+        EXPECT_LE(std::stod(row.at("smape")), 1.0);
+        EXPECT_LE(std::stod(row.at("ssim")), 1.0);
+        EXPECT_LE(std::stod(row.at("flip")), 1.0);
+        EXPECT_EQ(row.at("non_finite"), "0");
+    }
+    EXPECT_EQ(graphRows, 3u * 8u);
+    EXPECT_EQ(bruteRows, 4u * 7u);
+
+    // The brute-force error falls with spp: each doubling lowers RelMSE, and 8 spp is well below 1 spp (the
+    // variance part of RelMSE halves per doubling).
+    for (size_t i = 0; i + 1 < curve.size(); ++i)
+        EXPECT_LT(curve[i + 1]["summary"]["relmse"].get<double>(), curve[i]["summary"]["relmse"].get<double>()) << i;
+    const double bf1 = curve[0]["summary"]["relmse"].get<double>();
+    EXPECT_LT(curve[3]["summary"]["relmse"].get<double>(), 0.5 * bf1);
+    EXPECT_LT(curve[3]["summary"]["flip"].get<double>(), curve[0]["summary"]["flip"].get<double>());
+
+    std::map<std::string, json> byGraph;
+    for (const json& v : results["variants"]) byGraph[v["graph"].get<std::string>()] = v;
+    // The denoiser beats one sample per pixel, and its speedup is a number or a bound, never made up.
+    const json& atrous = byGraph.at("PathTracerATrous");
+    EXPECT_EQ(atrous["measured"], "SVGF.filtered");
+    EXPECT_LT(atrous["summary"]["relmse"].get<double>(), bf1);
+    const std::set<std::string> kinds = {"exact", "at_least", "at_most"};
+    for (const json& v : results["variants"]) {
+        EXPECT_TRUE(kinds.count(v["speedup_relmse"]["kind"].get<std::string>())) << v["graph"];
+        EXPECT_GT(v["speedup_relmse"]["value"].get<double>(), 0.0);
+        EXPECT_TRUE(v["summary"]["temporal"].is_number());
+    }
+    // Below the 1 spp error at a cost above the 1 spp time: not an "at most" bound.
+    EXPECT_NE(atrous["speedup_relmse"]["kind"], "at_most");
+    // The object moves every frame, so the accumulation restarts every frame: it is the 1 spp path tracer, frame
+    // for frame (same samples, same metrics).
+    const json& accumulate = byGraph.at("PathTracerAccumulate");
+    EXPECT_EQ(accumulate["measured"], "Accumulate.dst");
+    for (const json& bf : curve[0]["frames"]) {
+        const json& acc = accumulate["frames"][bf["frame"].get<size_t>()];
+        EXPECT_EQ(acc["relmse"].get<double>(), bf["relmse"].get<double>()) << bf["frame"];
+        EXPECT_EQ(acc["flip"].get<double>(), bf["flip"].get<double>()) << bf["frame"];
+    }
+    EXPECT_EQ(byGraph.at("PathTracerSVGF")["measured"], "TAA.colorOut");
+
+    // The Markdown table has a row per variant and per curve point.
+    std::ifstream md(mDir / "out" / "summary.md");
+    std::stringstream text;
+    text << md.rdbuf();
+    EXPECT_NE(text.str().find("| graph | params |"), std::string::npos);
+    for (const char* g :
+         {"| PathTracerSVGF |", "| PathTracerATrous |", "| PathTracerAccumulate |", "PathTracer.samplesPerPixel=8"})
+        EXPECT_NE(text.str().find(g), std::string::npos) << g;
+}
+
+TEST_F(BenchCli, SecondRunHitsTheCacheWithIdenticalMetricsOnAnyThreadCount) {
+    const auto first = run(tinyArgs("a") + " --graph PathTracerATrous --brute-force-spp 1,4 --threads 2");
+    ASSERT_EQ(first.code, 0) << first.output;
+    EXPECT_EQ(first.output.find("cache hit"), std::string::npos);
+    const auto second = run(tinyArgs("b") + " --graph PathTracerATrous --brute-force-spp 1,4 --threads 1");
+    ASSERT_EQ(second.code, 0) << second.output;
+    EXPECT_NE(second.output.find("cache hit, 8 frame(s)"), std::string::npos) << second.output;
+    const json a = readJson("a/results.json"), b = readJson("b/results.json");
+    EXPECT_EQ(b["reference"]["frames_cached"].get<int>(), 8);
+    EXPECT_EQ(b["reference"]["frames_rendered"].get<int>(), 0);
+    EXPECT_EQ(frameMetrics(a), frameMetrics(b));
+    EXPECT_EQ(frameMetrics(a).size(), 8u + 2u * 7u);
+
+    // A different reference spp is a different cache entry.
+    const json other =
+        benchOk(kDynamic, "c", "--frames 8 --warmup 2 --reference-spp 16 --graph PathTracerATrous --brute-force-spp 1");
+    EXPECT_EQ(other["reference"]["frames_cached"].get<int>(), 0);
+    size_t entries = 0;
+    for (const auto& e : fs::directory_iterator(mDir / "cache")) entries += e.is_directory() ? 1 : 0;
+    EXPECT_EQ(entries, 2u);
+}
+
+TEST_F(BenchCli, SweepGivesOneResultPerValue) {
+    const json results =
+        benchOk(kDynamic, "out",
+                "--frames 4 --warmup 1 --reference-spp 16 --brute-force-spp 1 --graph PathTracerATrous "
+                "--graph PathTracerAccumulate --sweep SVGF.iterations=1,3,5");
+    ASSERT_EQ(results["variants"].size(), 4u);  // three sweep points, and the graph without an SVGF pass once
+    std::vector<std::string> params;
+    std::set<double> errors;
+    for (const json& v : results["variants"]) {
+        params.push_back(v["params"]);
+        if (v["graph"] == "PathTracerATrous") errors.insert(v["summary"]["relmse"].get<double>());
+    }
+    EXPECT_EQ(params, (std::vector<std::string>{"SVGF.iterations=1", "SVGF.iterations=3", "SVGF.iterations=5", ""}));
+    EXPECT_EQ(errors.size(), 3u) << "the swept parameter must change the result";
+    EXPECT_EQ(readCsv("out/results.csv").size(), 4u * 4u + 1u * 4u);
+}
+
+TEST_F(BenchCli, StaticSceneSharesOneReferenceAndAccumulationConverges) {
+    const json results = benchOk(kBox, "out",
+                                 "--frames 6 --warmup 1 --reference-spp 64 --brute-force-spp 1 "
+                                 "--graph PathTracerAccumulate");
+    EXPECT_TRUE(results["reference"]["shared"].get<bool>());
+    EXPECT_EQ(results["reference"]["frames_rendered"].get<int>(), 1);
+    EXPECT_TRUE(fs::exists(mDir / results["reference"]["cache"].get<std::string>() / "static.exr"));
+    // Nothing moves: the running mean of 6 frames is well below one frame's error.
+    const json& frames = results["variants"][0]["frames"];
+    EXPECT_LT(frames[5]["relmse"].get<double>(), 0.5 * frames[0]["relmse"].get<double>());
+
+    // An orbiting camera moves: one reference per frame.
+    const json orbit = benchOk(kBox, "orbit",
+                               "--camera-path orbit --frames 3 --warmup 1 --reference-spp 16 --brute-force-spp 1 "
+                               "--graph PathTracerAccumulate");
+    EXPECT_FALSE(orbit["reference"]["shared"].get<bool>());
+    EXPECT_EQ(orbit["reference"]["frames_rendered"].get<int>(), 3);
+}
+
+TEST_F(BenchCli, PlotNeedsMatplotlibButResultsAreWrittenFirst) {
+    const auto r = run(tinyArgs("out") + " --graph PathTracerAccumulate --brute-force-spp 1 --plot --python " +
+                       loom::test::shellQuoted((mDir / "no-python").string()));
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("matplotlib"), std::string::npos) << r.output;
+    EXPECT_TRUE(fs::is_regular_file(mDir / "out" / "results.csv"));
+    EXPECT_TRUE(fs::is_regular_file(mDir / "out" / "results.json"));
+    EXPECT_FALSE(fs::exists(mDir / "out" / "plot.png"));
+}
+
+TEST_F(BenchCli, BadInputExitsWithCode2AndAMessage) {
+    expectBadInput({{"--graph", "NoSuchGraph"}}, {"graph 'NoSuchGraph' does not exist"});
+    expectBadInput({{"--sweep", "SVFG.iterations=1,2"}}, {"no benchmarked graph has a pass 'SVFG'", "SVGF"});
+    expectBadInput({{"--sweep", "SVGF.iteratoins=1,2"}}, {"iteratoins"});
+    expectBadInput({{"--sweep", "SVGF.iterations"}}, {"not a sweep"});
+    expectBadInput({{"--sweep", "SVGF.iterations=1,,2"}}, {"empty value"});
+    expectBadInput({{"--sweep", "SVGF.iterations=1000"}}, {"SVGF.iterations"});
+    expectBadInput({{"--measure", "Nowhere.color"}}, {"has no pass 'Nowhere'"});
+    expectBadInput({{"--reference-spp", "100"}}, {"not a multiple"});
+    expectBadInput({{"--brute-force-spp", "1,x"}}, {"'x' is not a sample count"});
+    expectBadInput({{"--size", "64by64"}}, {"is not a size"});
+    expectBadInput({{"--frames", "0"}}, {"frame count is 0"});
+    expectBadInput({{"--warmup", "8"}}, {"nothing to measure"});
+    expectBadInput({{"--scene", "missing.gltf"}}, {"scene 'missing.gltf' does not exist"});
+}
+
+}  // namespace
