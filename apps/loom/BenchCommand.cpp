@@ -408,12 +408,15 @@ FrameMetrics measure(const Texture& test, const Texture& ref, const Texture* tes
     return m;
 }
 
-/// Runs a prepared graph over frames [first, frames) from the start of its history, measuring every frame.
+/// Runs a prepared graph over frames [first, frames) from the start of its history, measuring every frame. With
+/// `flicker`, the frames from `warmup` on also go into a FlickerAccumulator whose value lands there.
 std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::vector<Texture>& refs, uint64_t first,
                                      uint64_t frames, double fps, uint32_t width, uint32_t height,
-                                     const std::string& label) {
+                                     const std::string& label, uint64_t warmup = 0,
+                                     std::optional<double>* flicker = nullptr) {
     std::vector<FrameResult> out;
     Texture prev;
+    FlickerAccumulator flickerAcc;
     p.graph->resetHistory();
     const auto start = std::chrono::steady_clock::now();
     for (uint64_t i = first; i < frames; ++i) {
@@ -429,10 +432,12 @@ std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::
         const Texture& test = *p.graph->fieldTexture(p.measured.str());
         const bool hasPrev = i > first;
         r.metrics = measure(test, refs[i], hasPrev ? &prev : nullptr, hasPrev ? &refs[i - 1] : nullptr);
+        if (flicker && i >= warmup) flickerAcc.add(test);
         if (prev.empty()) prev = Texture(test.width(), test.height(), test.format());
         prev.copyFrom(test);
         out.push_back(std::move(r));
     }
+    if (flicker) *flicker = flickerAcc.frames() >= 2 ? std::optional<double>(flickerAcc.value().value) : std::nullopt;
     spdlog::info("{}: {} frame(s) in {:.1f} s", label, frames - first,
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     return out;
@@ -608,9 +613,12 @@ void runBench(BenchOptions o) {
         r.graphFile = v.file;
         r.params = v.label();
         r.measured = p.measured.str();
+        std::optional<double> flicker;
         r.frames = runSequence(p, *scene, refs, 0, o.frames, o.fps, width, height,
-                               r.graph + (r.params.empty() ? "" : " " + r.params));
+                               r.graph + (r.params.empty() ? "" : " " + r.params), o.warmup,
+                               info.referenceShared ? &flicker : nullptr);
         r.summary = bench::summarize(r.frames, o.warmup);
+        r.summary.flicker = flicker;
         results.push_back(std::move(r));
     }
 
@@ -627,9 +635,12 @@ void runBench(BenchOptions o) {
         r.params = fmt::format("{}.{}={}", bruteTracer, kSppParam, n);
         r.spp = n;
         r.measured = brute.measured.str();
-        r.frames = runSequence(brute, *scene, refs, bruteFirst, o.frames, o.fps, width, height,
-                               fmt::format("brute force {} spp", n));
+        std::optional<double> flicker;
+        r.frames =
+            runSequence(brute, *scene, refs, bruteFirst, o.frames, o.fps, width, height,
+                        fmt::format("brute force {} spp", n), o.warmup, info.referenceShared ? &flicker : nullptr);
         r.summary = bench::summarize(r.frames, o.warmup);
+        r.summary.flicker = flicker;
         curve.push_back(std::move(r));
     }
     for (Run& r : results) {

@@ -93,6 +93,7 @@ nlohmann::json runJson(const Run& r, bool withSpeedup) {
                           {"ssim", s.ssim},
                           {"flip", s.flip},
                           {"temporal", optionalJson(s.temporal)},
+                          {"flicker", optionalJson(s.flicker)},
                           {"non_finite", s.nonFinite}}},
                         {"frames", std::move(frames)}};
     if (r.bruteForce) j["spp"] = r.spp;
@@ -145,15 +146,16 @@ std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& varia
     }
     s << "\n\n";
     s << "| graph | params | measured | ms/frame | per pass (ms) | RelMSE | SMAPE | PSNR (dB) | SSIM | FLIP | temporal "
-         "| speedup (RelMSE) | speedup (FLIP) |\n";
-    s << "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+         "| flicker | speedup (RelMSE) | speedup (FLIP) |\n";
+    s << "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    auto optional4 = [](const std::optional<double>& v) { return v ? fmt::format("{:.4f}", *v) : std::string("—"); };
     auto row = [&](const Run& r, bool withSpeedup) {
         const Summary& m = r.summary;
-        s << fmt::format("| {} | {} | {} | {:.1f} | {} | {:.4g} | {:.4f} | {:.2f} | {:.4f} | {:.4f} | {} | {} | {} |\n",
-                         r.graph, r.params.empty() ? "—" : r.params, r.measured, m.totalMs,
-                         passList(m.passMs, " · ", 1), m.relMSE, m.smape, m.psnr, m.ssim, m.flip,
-                         m.temporal ? fmt::format("{:.4f}", *m.temporal) : std::string("—"),
-                         withSpeedup ? r.speedupRelMSE.text() : "—", withSpeedup ? r.speedupFlip.text() : "—");
+        s << fmt::format(
+            "| {} | {} | {} | {:.1f} | {} | {:.4g} | {:.4f} | {:.2f} | {:.4f} | {:.4f} | {} | {} | {} | {} |\n",
+            r.graph, r.params.empty() ? "—" : r.params, r.measured, m.totalMs, passList(m.passMs, " · ", 1), m.relMSE,
+            m.smape, m.psnr, m.ssim, m.flip, optional4(m.temporal), optional4(m.flicker),
+            withSpeedup ? r.speedupRelMSE.text() : "—", withSpeedup ? r.speedupFlip.text() : "—");
     };
     for (const Run& r : variants) row(r, true);
     for (const Run& r : curve) row(r, false);

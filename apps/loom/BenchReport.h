@@ -45,6 +45,9 @@ struct Summary {
     std::vector<std::pair<std::string, double>> passMs;
     double relMSE = 0, smape = 0, psnr = 0, ssim = 0, flip = 0;
     std::optional<double> temporal;
+    /// Static-camera flicker (FlickerAccumulator, Metrics.h) over the measured frames, when nothing moves (the
+    /// sequence shares one reference); empty otherwise.
+    std::optional<double> flicker;
     uint64_t nonFinite = 0;  ///< summed over the measured frames
 };
 

@@ -247,7 +247,7 @@ TEST_F(BenchCli, SweepGivesOneResultPerValue) {
 
 TEST_F(BenchCli, StaticSceneSharesOneReferenceAndAccumulationConverges) {
     const json results = benchOk(kBox, "out",
-                                 "--frames 6 --warmup 1 --reference-spp 64 --brute-force-spp 1 "
+                                 "--frames 6 --warmup 1 --reference-spp 64 --brute-force-spp 1,16 "
                                  "--graph PathTracerAccumulate");
     EXPECT_TRUE(results["reference"]["shared"].get<bool>());
     EXPECT_EQ(results["reference"]["frames_rendered"].get<int>(), 1);
@@ -255,6 +255,15 @@ TEST_F(BenchCli, StaticSceneSharesOneReferenceAndAccumulationConverges) {
     // Nothing moves: the running mean of 6 frames is well below one frame's error.
     const json& frames = results["variants"][0]["frames"];
     EXPECT_LT(frames[5]["relmse"].get<double>(), 0.5 * frames[0]["relmse"].get<double>());
+    // Static-camera flicker (temporal standard deviation of luminance over the measured frames): 16 spp per frame
+    // flickers about a quarter as much as 1 spp, and the running mean less than either single-frame point.
+    const double f1 = results["brute_force"][0]["summary"]["flicker"].get<double>();
+    const double f16 = results["brute_force"][1]["summary"]["flicker"].get<double>();
+    const double fAcc = results["variants"][0]["summary"]["flicker"].get<double>();
+    EXPECT_GT(f1, 0.0);
+    EXPECT_LT(f16, 0.4 * f1);
+    EXPECT_GT(f16, 0.1 * f1);
+    EXPECT_LT(fAcc, f1);
 
     // An orbiting camera moves: one reference per frame.
     const json orbit = benchOk(kBox, "orbit",
@@ -262,6 +271,7 @@ TEST_F(BenchCli, StaticSceneSharesOneReferenceAndAccumulationConverges) {
                                "--graph PathTracerAccumulate");
     EXPECT_FALSE(orbit["reference"]["shared"].get<bool>());
     EXPECT_EQ(orbit["reference"]["frames_rendered"].get<int>(), 3);
+    EXPECT_TRUE(orbit["variants"][0]["summary"]["flicker"].is_null());  // flicker is a static-camera metric
 }
 
 TEST_F(BenchCli, PlotNeedsMatplotlibButResultsAreWrittenFirst) {
