@@ -169,18 +169,6 @@ Sweep parseSweep(const std::string& text) {
     return s;
 }
 
-void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses) {
-    for (const auto& s : set) {
-        const auto eq = s.find('=');
-        const auto dot = s.find('.');
-        if (eq == std::string::npos || dot == std::string::npos || dot > eq)
-            throwBadInput("--set " + s, "not an assignment", "Pass.param=value, e.g. SVGF.iterations=4");
-        const std::string pass = s.substr(0, dot);
-        if (onlyKnownPasses && !graph.pass(pass)) continue;
-        graph.setParam(pass, s.substr(dot + 1, eq - dot - 1), parseParamValue(s.substr(eq + 1)), "--set " + s);
-    }
-}
-
 /// The field a graph's metrics are taken of: --measure, else the linear HDR image feeding ToneMap.src, else the
 /// first marked output. The graph must be compiled.
 ChannelRef measuredField(const RenderGraph& graph, const std::string& measure, const std::string& file) {
@@ -229,16 +217,6 @@ PreparedGraph prepareGraph(const GraphDesc& desc, const std::string& file, Plugi
         throwBadInput("--measure", "field '" + p.measured.str() + "' is not RGBA32F", "a linear RGBA32F image", "",
                       file);
     return p;
-}
-
-FrameInfo frameInfo(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool first) {
-    FrameInfo f;
-    f.frameIndex = index;
-    f.time = double(index) / fps;
-    beginSceneFrame(scene, f.frameIndex, f.time, width, height, first);
-    f.scene = &scene;
-    f.camera = &scene.camera;
-    return f;
 }
 
 Texture copyTexture(const Texture& src) {
@@ -340,7 +318,7 @@ std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry,
             graph->compile(copts);
         }
         graph->resetHistory();
-        const FrameInfo f = frameInfo(*scene, frame, o.fps, width, height, true);
+        const FrameInfo f = sceneFrame(*scene, frame, o.fps, width, height, true);
         for (uint32_t b = 0; b < batches; ++b) {
             graph->setParam(tracer, kSeedParam, kReferenceSeedBase + b, "reference");
             graph->execute(f);
@@ -420,7 +398,7 @@ std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::
     p.graph->resetHistory();
     const auto start = std::chrono::steady_clock::now();
     for (uint64_t i = first; i < frames; ++i) {
-        const FrameInfo f = frameInfo(scene, i, fps, width, height, i == first);
+        const FrameInfo f = sceneFrame(scene, i, fps, width, height, i == first);
         const auto t0 = std::chrono::steady_clock::now();
         p.graph->execute(f);
         const auto t1 = std::chrono::steady_clock::now();

@@ -7,6 +7,7 @@
 #include <regex>
 
 #include "loom/Error.h"
+#include "loom/Params.h"
 
 namespace loom::cli {
 
@@ -30,8 +31,7 @@ std::set<uint64_t> parseFrameList(const std::string& text, const std::string& op
         std::string part = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
         std::smatch m;
         if (!std::regex_match(part, m, item))
-            throwBadInput(option, "'" + part + "' in '" + text + "' is not a frame or range",
-                          "a list like 3,10-12");
+            throwBadInput(option, "'" + part + "' in '" + text + "' is not a frame or range", "a list like 3,10-12");
         uint64_t a = std::stoull(m[1]), b = m[2].matched ? std::stoull(m[2]) : a;
         if (b < a) throwBadInput(option, "range '" + part + "' runs backwards", "FIRST-LAST with FIRST <= LAST");
         if (b - a > 1000000) throwBadInput(option, "range '" + part + "' is too long", "at most 10^6 frames");
@@ -42,7 +42,9 @@ std::set<uint64_t> parseFrameList(const std::string& text, const std::string& op
     return frames;
 }
 
-PluginRegistry makeRegistry() { return PluginRegistry(PluginRegistry::defaultDirs()); }
+PluginRegistry makeRegistry() {
+    return PluginRegistry(PluginRegistry::defaultDirs());
+}
 
 void ensureWritableDir(const std::string& dir, const std::string& option) {
     namespace fs = std::filesystem;
@@ -84,6 +86,18 @@ CameraPath parseCameraPath(const std::string& text, const std::string& option) {
         path.amount = number(m[3], "amount");
     }
     return path;
+}
+
+void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses) {
+    for (const auto& s : set) {
+        const auto eq = s.find('=');
+        const auto dot = s.find('.');
+        if (eq == std::string::npos || dot == std::string::npos || dot > eq)
+            throwBadInput("--set " + s, "not an assignment", "Pass.param=value, e.g. SVGF.iterations=4");
+        const std::string pass = s.substr(0, dot);
+        if (onlyKnownPasses && !graph.pass(pass)) continue;
+        graph.setParam(pass, s.substr(dot + 1, eq - dot - 1), parseParamValue(s.substr(eq + 1)), "--set " + s);
+    }
 }
 
 }  // namespace loom::cli

@@ -1,12 +1,13 @@
 #pragma once
 // Helpers shared by the loom subcommands.
+#include <CLI/CLI.hpp>
 #include <cstdint>
 #include <set>
 #include <string>
-
-#include <CLI/CLI.hpp>
+#include <vector>
 
 #include "loom/Plugin.h"
+#include "loom/RenderGraph.h"
 #include "loom/Scene.h"
 
 namespace loom::cli {
@@ -19,6 +20,9 @@ std::set<uint64_t> parseFrameList(const std::string& text, const std::string& op
 PluginRegistry makeRegistry();
 /// Fails with a clear error when `dir` cannot be created or written.
 void ensureWritableDir(const std::string& dir, const std::string& option);
+/// Applies --set assignments "Pass.param=value" to a graph (loom::Error for a malformed one or a bad value). With
+/// onlyKnownPasses, assignments to passes the graph does not have are skipped (one --set list for several graphs).
+void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses = false);
 
 void addRenderCommand(CLI::App& app);
 void addCheckCommand(CLI::App& app);

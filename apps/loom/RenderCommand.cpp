@@ -1,4 +1,6 @@
 // loom render: run a graph headless for N frames, writing marked outputs and dumps.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -6,10 +8,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
-
-#include <fmt/format.h>
 #include <nlohmann/json.hpp>
-#include <spdlog/spdlog.h>
 
 #include "CliUtil.h"
 #include "SceneSetup.h"
@@ -66,14 +65,7 @@ void runRender(const RenderOptions& o) {
     std::shared_ptr<Scene> scene = loadScene(o.scene);
     RenderGraph graph(loadGraph(o.graph), registry);
     if (scene) graph.setScene(scene);
-    for (const auto& s : o.set) {
-        auto eq = s.find('=');
-        auto dot = s.find('.');
-        if (eq == std::string::npos || dot == std::string::npos || dot > eq)
-            throwBadInput("--set " + s, "not an assignment", "Pass.param=value, e.g. SVGF.iterations=4");
-        graph.setParam(s.substr(0, dot), s.substr(dot + 1, eq - dot - 1), parseParamValue(s.substr(eq + 1)),
-                       "--set " + s);
-    }
+    applySet(graph, o.set);
     CompileOptions copts;
     copts.width = width;
     copts.height = height;
@@ -84,26 +76,26 @@ void runRender(const RenderOptions& o) {
     const std::filesystem::path outDir(o.out);
     uint64_t dumped = 0;
     if (!o.dump.empty()) {
-        graph.setFieldObserver([&](const FrameInfo& f, const std::string& pass, const std::string& field,
-                                   const Texture& tex) {
-            if (!dumpFrames.empty() && !dumpFrames.count(f.frameIndex)) return;
-            writeImage(outDir / frameFileName(pass, field, f.frameIndex, tex.format()), tex);
-            ++dumped;
-        });
+        graph.setFieldObserver(
+            [&](const FrameInfo& f, const std::string& pass, const std::string& field, const Texture& tex) {
+                if (!dumpFrames.empty() && !dumpFrames.count(f.frameIndex)) return;
+                writeImage(outDir / frameFileName(pass, field, f.frameIndex, tex.format()), tex);
+                ++dumped;
+            });
     }
 
     const bool showProgress = !o.quiet && isatty(STDERR_FILENO);
-    nlohmann::json statsJson = {{"graph", o.graph}, {"width", width}, {"height", height}, {"frames", nlohmann::json::array()}};
+    nlohmann::json statsJson = {
+        {"graph", o.graph}, {"width", width}, {"height", height}, {"frames", nlohmann::json::array()}};
     uint64_t written = 0;
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames; ++i) {
         FrameInfo frame;
-        frame.frameIndex = o.startFrame + i;
-        frame.time = double(frame.frameIndex) / o.fps;
         if (scene) {
-            beginSceneFrame(*scene, frame.frameIndex, frame.time, width, height, i == 0);
-            frame.scene = scene.get();
-            frame.camera = &scene->camera;
+            frame = sceneFrame(*scene, o.startFrame + i, o.fps, width, height, i == 0);
+        } else {
+            frame.frameIndex = o.startFrame + i;
+            frame.time = double(frame.frameIndex) / o.fps;
         }
         graph.execute(frame);
         for (const auto& out : graph.outputs()) {
@@ -119,7 +111,8 @@ void runRender(const RenderOptions& o) {
             statsJson["frames"].push_back(std::move(jf));
         }
         if (showProgress) {
-            double elapsed = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+            double elapsed =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
             progress(i + 1, o.frames, elapsed / double(i + 1));
         }
     }

@@ -9,8 +9,9 @@ namespace loom::cli {
 
 void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
     cmd->add_option("--scene,-s", o.scene, "glTF 2.0 scene (.gltf or .glb)");
-    cmd->add_option("--camera-path", o.cameraPath, "camera motion when the scene's camera is not animated: "
-                                                   "static, orbit or dolly")
+    cmd->add_option("--camera-path", o.cameraPath,
+                    "camera motion when the scene's camera is not animated: "
+                    "static, orbit or dolly")
         ->capture_default_str();
     cmd->add_option("--camera-speed", o.cameraSpeed, "orbit: radians per second; dolly: cycles per second")
         ->capture_default_str();
@@ -22,9 +23,12 @@ void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
 std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
     if (o.scene.empty()) return nullptr;
     CameraPath path;
-    if (o.cameraPath == "static") path.kind = CameraPathKind::Static;
-    else if (o.cameraPath == "orbit") path.kind = CameraPathKind::Orbit;
-    else if (o.cameraPath == "dolly") path.kind = CameraPathKind::Dolly;
+    if (o.cameraPath == "static")
+        path.kind = CameraPathKind::Static;
+    else if (o.cameraPath == "orbit")
+        path.kind = CameraPathKind::Orbit;
+    else if (o.cameraPath == "dolly")
+        path.kind = CameraPathKind::Dolly;
     else
         throwBadInput("--camera-path", "unknown camera path '" + o.cameraPath + "'", "static, orbit or dolly",
                       didYouMean(o.cameraPath, {"static", "orbit", "dolly"}, "paths"));
@@ -32,9 +36,12 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
         throwBadInput("--camera-speed", "camera speed must be a finite number", "a value in [-1000, 1000]");
     path.speed = o.cameraSpeed;
     JitterPattern jitter;
-    if (o.jitter == "none") jitter = JitterPattern::None;
-    else if (o.jitter == "halton") jitter = JitterPattern::Halton;
-    else if (o.jitter == "stratified") jitter = JitterPattern::Stratified;
+    if (o.jitter == "none")
+        jitter = JitterPattern::None;
+    else if (o.jitter == "halton")
+        jitter = JitterPattern::Halton;
+    else if (o.jitter == "stratified")
+        jitter = JitterPattern::Stratified;
     else
         throwBadInput("--jitter", "unknown jitter pattern '" + o.jitter + "'", "none, halton or stratified",
                       didYouMean(o.jitter, {"none", "halton", "stratified"}, "patterns"));
@@ -61,13 +68,22 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
     return scene;
 }
 
-void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height,
-                     bool firstFrame) {
+void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height, bool firstFrame) {
     scene.update(time);
     if (firstFrame) scene.cutMotion();
     scene.camera.aspect = float(width) / float(height);
     scene.camera.beginFrame(frameIndex);
     if (firstFrame) scene.camera.cut();
+}
+
+FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool first) {
+    FrameInfo f;
+    f.frameIndex = index;
+    f.time = double(index) / fps;
+    beginSceneFrame(scene, f.frameIndex, f.time, width, height, first);
+    f.scene = &scene;
+    f.camera = &scene.camera;
+    return f;
 }
 
 }  // namespace loom::cli

@@ -1,11 +1,11 @@
 #pragma once
 // Scene options shared by the commands that render (render, bench, view).
+#include <CLI/CLI.hpp>
 #include <cstdint>
 #include <memory>
 #include <string>
 
-#include <CLI/CLI.hpp>
-
+#include "loom/RenderGraph.h"
 #include "loom/Scene.h"
 
 namespace loom::cli {
@@ -26,7 +26,8 @@ void addSceneOptions(CLI::App* cmd, SceneOptions& o);
 std::shared_ptr<Scene> loadScene(const SceneOptions& o);
 /// Animates the scene to `time` and sets the camera for this frame. The first
 /// frame of a sequence has no motion (prev = current).
-void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height,
-                     bool firstFrame);
+void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height, bool firstFrame);
+/// The FrameInfo of frame `index` on a clock of `fps` frames per second, after beginSceneFrame() for it.
+FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool firstFrame);
 
 }  // namespace loom::cli

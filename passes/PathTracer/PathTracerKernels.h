@@ -147,6 +147,21 @@ LOOM_HD inline ScatterFrame scatterFrame(const SurfaceHit& s, glm::vec3 wo) {
     return f;
 }
 
+/// Radiance a light sample carries toward a shading point with normals (n, fn): the light's own value, or for a
+/// textured emitter the material evaluated at the sampled point (only where the sample can reach the surface).
+LOOM_HD inline glm::vec3 lightSampleRadiance(const SceneView& scene, const LightSample& ls, glm::vec3 n, glm::vec3 fn) {
+    if (!ls.isTriangle || !(glm::dot(n, ls.wi) > 0.f && glm::dot(fn, ls.wi) > 0.f)) return ls.Li;
+    const SurfaceHit e =
+        evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi, SurfaceEval::Shading);
+    return emittedRadiance(scene, e, ls.wi);
+}
+
+/// Length of a shadow ray toward a light point at `distance` (stopping just short of the light's own surface), or
+/// "infinite" for the environment and directional lights.
+LOOM_HD inline float shadowRayTMax(float distance) {
+    return distance >= 1e29f ? 1e30f : distance * (1.f - 1e-4f);
+}
+
 /// Whether the vertex at `bounce` is a path's last scattering vertex: no BRDF-sampled ray follows it, so light
 /// sampling alone estimates direct light there (weight 1): unbiased, and it saves a closest-hit ray per path.
 /// BRDF-only mode still traces it.
@@ -183,12 +198,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
     if (ls.valid && (set.lightSampling != kBsdfOnly || ls.delta)) {
         const float cosI = glm::dot(n, ls.wi);
         if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
-            glm::vec3 Li = ls.Li;
-            if (ls.isTriangle) {
-                const SurfaceHit e =
-                    evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi, SurfaceEval::Shading);
-                Li = emittedRadiance(scene, e, ls.wi);
-            }
+            const glm::vec3 Li = lightSampleRadiance(scene, ls, n, fn);
             if (Li != glm::vec3(0.f)) {
                 glm::vec3 f;
                 float bsdfPdf;
@@ -205,7 +215,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
                 if (f != glm::vec3(0.f)) {
                     ++r.rays;
                     st.shadowDir = ls.wi;
-                    st.shadowTMax = ls.distance >= 1e29f ? 1e30f : ls.distance * (1.f - 1e-4f);
+                    st.shadowTMax = shadowRayTMax(ls.distance);
                     // MIS weight over the light pdf, w / pdf, with the power heuristic's division shared:
                     // (p^2 / (p^2 + q^2)) / p = p / (p^2 + q^2).
                     const float wOverPdf = (!ls.delta && set.lightSampling == kMis && !lastVertex)

@@ -375,12 +375,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         const glm::vec2 l01 = rng.next2(), l23 = rng.next2(), b01 = rng.next2();
         const float uLobe = rng.next(), uRoulette = rng.next();
         const LightSample ls = sampleLight(lights, sf.p, l01.x, l01.y, l23.x, l23.y);
-        glm::vec3 Li = ls.Li;
-        if (ls.valid && ls.isTriangle && glm::dot(sf.n, ls.wi) > 0.f && glm::dot(sf.fn, ls.wi) > 0.f) {
-            const SurfaceHit e =
-                evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi, SurfaceEval::Shading);
-            Li = emittedRadiance(scene, e, ls.wi);
-        }
+        const glm::vec3 Li = ls.valid ? lightSampleRadiance(scene, ls, sf.n, sf.fn) : glm::vec3(0.f);
         set3(b.n, j, sf.n);
         set3(b.fn, j, sf.fn);
         set3(b.wo, j, wo);
@@ -388,7 +383,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         b.metallic[j] = s.metallic;
         b.roughness[j] = s.roughness;
         set3(b.lightDir, j, ls.valid ? ls.wi : glm::vec3(0.f, 0.f, 1.f));
-        set3(b.lightLi, j, ls.valid ? Li : glm::vec3(0.f));
+        set3(b.lightLi, j, Li);
         b.lightPdf[j] = ls.valid ? ls.pdf : 1.f;
         b.lightDistance[j] = ls.distance;
         b.lightOk[j] = ls.valid ? 1.f : 0.f;
@@ -412,8 +407,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         if (b.shadow[j] != 0.f) {
             ++st.r.rays;
             st.shadowDir = get3(b.lightDir, j);
-            const float dist = b.lightDistance[j];
-            st.shadowTMax = dist >= 1e29f ? 1e30f : dist * (1.f - 1e-4f);
+            st.shadowTMax = shadowRayTMax(b.lightDistance[j]);
             st.shadowContrib = get3(b.contrib, j);
             st.shadowNearSurface = st.bounce == 0;
             requests[j] |= kShadowRay;

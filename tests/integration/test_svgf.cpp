@@ -137,15 +137,9 @@ struct Harness {
     uint64_t next = 0;
 };
 
-/// A hash in [0, 1): noise that depends on frame and pixel only.
+/// A hash in [0, 1): noise that depends on frame and pixel only (and a salt, for independent streams).
 float hash01(uint64_t frame, uint32_t x, uint32_t y, uint32_t salt = 0) {
-    uint32_t h = uint32_t(frame) * 0x9E3779B1u ^ x * 0x85EBCA77u ^ y * 0xC2B2AE3Du ^ salt * 0x27D4EB2Fu;
-    h ^= h >> 15;
-    h *= 0x2C1B3C6Du;
-    h ^= h >> 12;
-    h *= 0x297A2D39u;
-    h ^= h >> 15;
-    return float(h >> 8) / float(1u << 24);
+    return test::hash01(frame + (uint64_t(salt) << 40), x, y);
 }
 
 /// Noisy colour on two depth planes with a checker albedo: a non-trivial signal for the tests below.
