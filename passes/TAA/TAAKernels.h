@@ -64,10 +64,11 @@ struct ClampedImage {
 };
 
 struct TaaInputs {
-    ClampedImage<glm::vec4> color;    ///< this frame
+    ClampedImage<glm::vec4> color;    ///< this frame (linear)
     ClampedImage<glm::vec2> mvec;     ///< uvPrev - uvCur
-    ClampedImage<glm::vec4> history;  ///< last frame's output
+    ClampedImage<glm::vec4> history;  ///< last frame's output (compressed when `compress`)
     bool historyValid = false;
+    bool compress = false;  ///< resolve in compressColor() space: every current colour is compressed as it is read
 };
 
 LOOM_HD inline bool isFinite(float v) {
@@ -106,6 +107,14 @@ LOOM_HD inline glm::vec4 expandColor(const glm::vec4& c) {
     return glm::vec4(c.x * k, c.y * k, c.z * k, c.w);
 }
 
+/// The current colour at (x, y) as the resolve sees it: compressed when in.compress. Compression keeps finiteness:
+/// a finite colour compresses to a finite one, a non-finite one to a non-finite one.
+template <class Inputs>
+LOOM_HD inline glm::vec4 currentColor(const Inputs& in, int x, int y) {
+    const glm::vec4 c = in.color.at(x, y);
+    return in.compress ? compressColor(c) : c;
+}
+
 /// Start value of a running minimum (and, negated, maximum).
 inline constexpr float kHuge = 3.0e38f;
 
@@ -135,13 +144,14 @@ LOOM_HD inline ClipBox makeClipBox(const glm::vec4& sum, const glm::vec4& sumSq,
 /// The 3x3 statistics of the current colour around (x, y). Each row's sums
 /// are formed first, then the rows are added, each sum starting from 0: the
 /// order the tiled CPU path uses too, so both give the same bits.
-LOOM_HD inline ClipBox neighbourhoodBox(const ClampedImage<glm::vec4>& color, int x, int y, float sigma) {
+template <class Inputs>
+LOOM_HD inline ClipBox neighbourhoodBox(const Inputs& in, int x, int y, float sigma) {
     glm::vec4 sum(0.f), sumSq(0.f), mn(kHuge), mx(-kHuge);
     uint32_t n = 0;
     for (int dy = -1; dy <= 1; ++dy) {
         glm::vec4 rowSum(0.f), rowSumSq(0.f), rowMin(kHuge), rowMax(-kHuge);
         for (int dx = -1; dx <= 1; ++dx) {
-            const glm::vec4 c = color.at(x + dx, y + dy);
+            const glm::vec4 c = currentColor(in, x + dx, y + dy);
             if (!isFinite(c)) continue;
             const glm::vec4 v = toYCoCg(c);
             rowSum += v;
@@ -284,11 +294,21 @@ LOOM_HD inline glm::vec4 resolveWithBox(const TaaInputs& in, const TaaParams& p,
 LOOM_HD inline glm::vec4 resolvePixel(const TaaInputs& in, const TaaParams& p, uint32_t x, uint32_t y,
                                       uint32_t& flags) {
     flags = 0;
-    const ClipBox box = neighbourhoodBox(in.color, int(x), int(y), p.sigma);
-    const glm::vec4 current = saneCurrent(in.color.at(int(x), int(y)), box, flags);
+    const ClipBox box = neighbourhoodBox(in, int(x), int(y), p.sigma);
+    const glm::vec4 current = saneCurrent(currentColor(in, int(x), int(y)), box, flags);
     glm::vec2 motion(0.f);
     const bool motionFinite = dilatedMotion(in.mvec, int(x), int(y), motion);
     return resolveWithBox(in, p, x, y, current, box, motionFinite, motion, flags);
+}
+
+/// The pass's output for a resolved value (compressed when in.compress) and the pixel's linear input: without
+/// compression the value itself; with it, the linear input exactly where the resolve returned the compressed input
+/// (no history, or history equal to it, as for a constant image), else the expanded value (0 if that overflows).
+LOOM_HD inline glm::vec4 outputColor(bool compress, const glm::vec4& resolved, const glm::vec4& linearInput) {
+    if (!compress) return resolved;
+    if (resolved == compressColor(linearInput)) return linearInput;
+    const glm::vec4 e = expandColor(resolved);
+    return isFinite(e) ? e : glm::vec4(0.f);
 }
 
 }  // namespace loom::taa

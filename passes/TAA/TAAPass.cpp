@@ -22,7 +22,6 @@ namespace {
 const char kColorIn[] = "colorIn";
 const char kMvec[] = "mvec";
 const char kColorOut[] = "colorOut";
-const char kCompressed[] = "compressedIn";
 const char kColorHistory[] = "colorHistory";
 
 // Counters reported in the frame's stats.
@@ -74,7 +73,7 @@ void resolveTileReference(const TaaInputs& in, const taa::TaaParams& p, const Ti
         for (uint32_t x = t.x0; x < t.x1; ++x) {
             uint32_t flags = 0;
             const glm::vec4 c = taa::resolvePixel(in, p, x, y, flags);
-            out.at(x, y) = c;
+            out.at(x, y) = taa::outputColor(in.compress, c, in.color.at(int(x), int(y)));
             history.at(x, y) = c;
             counts.add(flags);
         }
@@ -94,6 +93,26 @@ HWY_INLINE void toYCoCgVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, Float
     y = hn::Add(hn::Mul(hn::Set(d, 0.25f), rb), hn::Mul(hn::Set(d, 0.5f), g));
     co = hn::Mul(hn::Set(d, 0.5f), hn::Sub(r, b));
     cg = hn::Sub(hn::Mul(hn::Set(d, 0.5f), g), hn::Mul(hn::Set(d, 0.25f), rb));
+}
+
+/// compressColor() lane-wise: c / (1 + max(0, Y)), alpha kept.
+HWY_INLINE void compressVec(FloatTag d, FloatVec& r, FloatVec& g, FloatVec& b) {
+    const FloatVec one = hn::Set(d, 1.f);
+    const FloatVec y = hn::Max(hn::MulAdd(hn::Set(d, 0.25f), hn::Add(r, b), hn::Mul(hn::Set(d, 0.5f), g)), hn::Zero(d));
+    const FloatVec k = hn::Div(one, hn::Add(one, y));
+    r = hn::Mul(r, k);
+    g = hn::Mul(g, k);
+    b = hn::Mul(b, k);
+}
+
+/// expandColor() lane-wise: c / max(1 - max(0, Y), 1e-7), alpha kept.
+HWY_INLINE void expandVec(FloatTag d, FloatVec& r, FloatVec& g, FloatVec& b) {
+    const FloatVec one = hn::Set(d, 1.f);
+    const FloatVec y = hn::Max(hn::MulAdd(hn::Set(d, 0.25f), hn::Add(r, b), hn::Mul(hn::Set(d, 0.5f), g)), hn::Zero(d));
+    const FloatVec k = hn::Div(one, hn::Max(hn::Sub(one, y), hn::Set(d, 1e-7f)));
+    r = hn::Mul(r, k);
+    g = hn::Mul(g, k);
+    b = hn::Mul(b, k);
 }
 
 HWY_INLINE FloatMask finiteVec(FloatTag d, FloatVec v) {
@@ -193,11 +212,8 @@ HWY_INLINE void transpose8(const Float4 (&s)[kLanes], FloatVec& r, FloatVec& g, 
     a = hn::BitCast(d, hn::InterleaveUpper(dd, t1, t3));
 }
 
-/// Writes 8 pixels from structure of arrays to out and to history (the first n of them); to history with streaming
-/// stores when all 8 go to an aligned place: it is read again only next frame, long after it has left the caches, and
-/// streaming skips the read-for-ownership of its lines. (Streaming the output too measured no gain.)
-HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm::vec4* out, glm::vec4* history,
-                            uint32_t n) {
+/// 8 pixels from structure of arrays to interleaved RGBA: v[k] holds pixels 2k and 2k + 1.
+HWY_INLINE void interleavePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, FloatVec (&v)[4]) {
     const FloatTag d;
     const hn::Repartition<double, FloatTag> dd;
     // The inverse of transpose8: (r g b a) per pixel, pixels (0 1), (2 3), (4 5), (6 7) per vector.
@@ -207,23 +223,34 @@ HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm:
                    u1 = hn::BitCast(d, hn::InterleaveUpper(dd, t0, t1));
     const FloatVec u2 = hn::BitCast(d, hn::InterleaveLower(t2, t3)),
                    u3 = hn::BitCast(d, hn::InterleaveUpper(dd, t2, t3));
-    const FloatVec v[4] = {hn::ConcatLowerLower(d, u1, u0), hn::ConcatLowerLower(d, u3, u2),
-                           hn::ConcatUpperUpper(d, u1, u0), hn::ConcatUpperUpper(d, u3, u2)};
-    float* o = reinterpret_cast<float*>(out);
-    float* h = reinterpret_cast<float*>(history);
+    v[0] = hn::ConcatLowerLower(d, u1, u0);
+    v[1] = hn::ConcatLowerLower(d, u3, u2);
+    v[2] = hn::ConcatUpperUpper(d, u1, u0);
+    v[3] = hn::ConcatUpperUpper(d, u3, u2);
+}
+
+/// Writes the first n of 8 interleaved pixels v (interleavePixels) to p; streaming when all 8 go to an aligned place.
+HWY_INLINE void storeInterleaved(const FloatVec (&v)[4], glm::vec4* p, uint32_t n, bool stream) {
+    const FloatTag d;
+    float* o = reinterpret_cast<float*>(p);
     if (n == kLanes) {
-        for (uint32_t k = 0; k < 4; ++k) hn::StoreU(v[k], d, o + k * kLanes);
-        if (reinterpret_cast<uintptr_t>(h) % 64 == 0) {
-            for (uint32_t k = 0; k < 4; ++k) hn::Stream(v[k], d, h + k * kLanes);
+        if (stream && reinterpret_cast<uintptr_t>(o) % 64 == 0) {
+            for (uint32_t k = 0; k < 4; ++k) hn::Stream(v[k], d, o + k * kLanes);
         } else {
-            for (uint32_t k = 0; k < 4; ++k) hn::StoreU(v[k], d, h + k * kLanes);
+            for (uint32_t k = 0; k < 4; ++k) hn::StoreU(v[k], d, o + k * kLanes);
         }
         return;
     }
     alignas(64) float packed[4 * kLanes];
     for (uint32_t k = 0; k < 4; ++k) hn::Store(v[k], d, packed + k * kLanes);
     std::memcpy(o, packed, sizeof(glm::vec4) * n);
-    std::memcpy(h, packed, sizeof(glm::vec4) * n);
+}
+
+/// Writes 8 pixels (the first n of them) to history, with streaming stores: it is read again only next frame, long
+/// after it has left the caches, and streaming skips the read-for-ownership of its lines. (Streaming the output too
+/// measured no gain.)
+HWY_INLINE void storeHistory(const FloatVec (&v)[4], glm::vec4* history, uint32_t n) {
+    storeInterleaved(v, history, n, true);
 }
 
 /// How many region rows ahead the load asks for.
@@ -276,7 +303,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
         }
         const auto scalarColumn = [&](uint32_t rx) {
             const uint32_t sx = clampIndex(int(t.x0 + rx) - 1, W);
-            const glm::vec4 c = colorRow[sx];
+            const glm::vec4 c = in.compress ? taa::compressColor(colorRow[sx]) : colorRow[sx];
             const glm::vec2 m = mvecRow[sx];
             finite &= taa::isFinite(c) & taa::isFinite(m);
             alphaConstant &= c.w == alpha0;
@@ -300,6 +327,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             rx = std::min(rx, vx1 - N);  // the last vector overlaps the one before
             FloatVec r, g, b, a, mx, my, y, co, cg;
             hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorBase + rx), r, g, b, a);
+            if (in.compress) compressVec(d, r, g, b);  // finite colours stay finite, non-finite ones non-finite
             hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecBase + rx), mx, my);
             ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
                                      hn::And(hn::And(finiteVec(d, b), hn::Eq(a, a0)),
@@ -449,6 +477,9 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 currentPixels = current;
             }
             hn::LoadInterleaved4(d, reinterpret_cast<const float*>(currentPixels), cr, cgr, cb, ca);
+            // The linear input, kept for the output; the resolve runs on the compressed colour.
+            const FloatVec lr = cr, lg = cgr, lb = cb;
+            if (in.compress) compressVec(d, cr, cgr, cb);
             // The box (makeClipBox with n = 9) channel by channel, each clipped at once (clipToBox): the exact test
             // "outside", the ratio by the refined reciprocal. Formed after the sampling, so that few vectors are live
             // across it.
@@ -517,7 +548,23 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             og = hn::IfThenElse(keep, og, cgr);
             ob = hn::IfThenElse(keep, ob, cb);
             oa = hn::IfThenElse(keep, oa, ca);
-            storePixels(orr, og, ob, oa, outRow + t.x0 + x, historyRow + t.x0 + x, n);
+            FloatVec packed[4];
+            interleavePixels(orr, og, ob, oa, packed);
+            storeHistory(packed, historyRow + t.x0 + x, n);
+            if (in.compress) {
+                // outputColor(): the linear input where the resolve returned the compressed input, else expanded.
+                const FloatMask same = hn::And(hn::And(hn::Eq(orr, cr), hn::Eq(og, cgr)),
+                                               hn::And(hn::Eq(ob, cb), hn::Eq(oa, ca)));
+                expandVec(d, orr, og, ob);
+                const FloatMask finiteOut = hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)),
+                                                    hn::And(finiteVec(d, ob), finiteVec(d, oa)));
+                orr = hn::IfThenElse(same, lr, hn::IfThenElseZero(finiteOut, orr));
+                og = hn::IfThenElse(same, lg, hn::IfThenElseZero(finiteOut, og));
+                ob = hn::IfThenElse(same, lb, hn::IfThenElseZero(finiteOut, ob));
+                oa = hn::IfThenElse(same, ca, hn::IfThenElseZero(finiteOut, oa));
+                interleavePixels(orr, og, ob, oa, packed);
+            }
+            storeInterleaved(packed, outRow + t.x0 + x, n, false);
             counts.noHistory += n - hn::CountTrue(d, useHistory);
             counts.clipped += hn::CountTrue(d, clipped);
         }
@@ -539,7 +586,6 @@ void TAAPass::reflect(Reflection& r, const CompileInfo&) const {
     r.output(kColorOut, Format::RGBA32F).doc("anti-aliased colour; always finite");
     r.history(kColorHistory, Format::RGBA32F)
         .doc("last frame's resolved colour, the history that is reprojected (compressed when hdrCompress)");
-    r.internal(kCompressed, Format::RGBA32F).doc("colorIn compressed, c / (1 + luma) (when hdrCompress)");
 }
 
 void TAAPass::declareParams(ParamList& p) {
@@ -561,18 +607,8 @@ void TAAPass::declareParams(ParamList& p) {
 
 void TAAPass::execute(PassContext& ctx) {
     TaaInputs in;
-    const Texture& colorIn = *ctx.input(kColorIn);
-    const ImageView<const glm::vec4> linearIn = colorIn.view<glm::vec4>();
-    const bool compress = mHdrCompress;
-    Texture* compressedTex = ctx.internal(kCompressed);
-    if (compress) {
-        const ImageView<glm::vec4> c = compressedTex->view<glm::vec4>();
-        parallelForPixels(c.width, c.height,
-                          [&](uint32_t x, uint32_t y) { c.at(x, y) = taa::compressColor(linearIn.at(x, y)); });
-        in.color = clamped<glm::vec4>(*compressedTex);
-    } else {
-        in.color = clamped<glm::vec4>(colorIn);
-    }
+    in.color = clamped<glm::vec4>(*ctx.input(kColorIn));
+    in.compress = mHdrCompress;
     in.mvec = clamped<glm::vec2>(*ctx.input(kMvec));
     in.history = clamped<glm::vec4>(ctx.historyPrev(kColorHistory));
     in.historyValid = ctx.historyValid();
@@ -600,20 +636,6 @@ void TAAPass::execute(PassContext& ctx) {
         },
         1);  // one cell of the tile grid per task
 
-    if (compress) {
-        // Back to linear colour. Where the resolve returned the compressed current colour itself (no history, or
-        // history equal to it, as for a constant image) the linear input is passed on exactly.
-        const ImageView<glm::vec4> c = compressedTex->view<glm::vec4>();
-        parallelForPixels(out.width, out.height, [&](uint32_t x, uint32_t y) {
-            const glm::vec4 r = out.at(x, y);
-            if (r == c.at(x, y)) {
-                out.at(x, y) = linearIn.at(x, y);
-                return;
-            }
-            const glm::vec4 e = taa::expandColor(r);
-            out.at(x, y) = taa::isFinite(e) ? e : glm::vec4(0.f);
-        });
-    }
     ctx.stats().set(kStatNonFinite, double(nonFinite));
     ctx.stats().set(kStatNoHistory, double(noHistory));
     ctx.stats().set(kStatClipped, double(clipped));
