@@ -2,6 +2,7 @@
 // overhead of a 10-pass graph of no-op passes.
 #include <benchmark/benchmark.h>
 
+#include "loom/Parallel.h"
 #include "loom/RenderGraph.h"
 
 using namespace loom;
@@ -71,5 +72,38 @@ void BM_FrameOverhead10NoOp(benchmark::State& state) {
 BENCHMARK(BM_FrameOverhead10NoOp)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
+
+// The cost of denormal arithmetic, and what parallelFor2D's flush-to-zero mode saves: products of small weights
+// that land in the denormal range (2^-65 squared, as a variance propagated with squared weights), summed in four
+// independent chains; once on the calling thread (the default floating-point mode: each denormal result and input
+// takes a microcode assist) and once inside a parallelFor2D task (FTZ and DAZ: flushed to 0). Arg 0: calling thread,
+// 1: inside a task.
+float denormalSums(float w, int n) {
+    float sums[4] = {0.f, 0.f, 0.f, 0.f};
+    for (int i = 0; i < n; i += 4)
+        for (int k = 0; k < 4; ++k) {
+            const float wi = w * (1.f + float((i + k) & 7) * 0x1p-4f);  // ~2^-65: a normal float
+            sums[k] += wi * wi * 0x1p20f;                                // wi * wi ~ 2^-130: denormal
+        }
+    return (sums[0] + sums[1]) + (sums[2] + sums[3]);
+}
+
+void BM_DenormalProducts(benchmark::State& state) {
+    const bool inTask = state.range(0) != 0;
+    volatile float w = 0x1p-65f;
+    constexpr int kProducts = 1 << 20;
+    float sink = 0.f;
+    for (auto _ : state) {
+        if (inTask) {
+            loom::parallelFor2D(1, 1, [&](const loom::Tile&) { sink += denormalSums(w, kProducts); });
+        } else {
+            sink += denormalSums(w, kProducts);
+        }
+    }
+    benchmark::DoNotOptimize(sink);
+    state.counters["ns_per_product"] = benchmark::Counter(double(state.iterations()) * kProducts,
+                                                          benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_DenormalProducts)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 BENCHMARK_MAIN();
