@@ -204,21 +204,26 @@ void SVGFPass::execute(PassContext& ctx) {
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();
     tp.split = split;
-    // The fused fast path (combined signal, fast à-trous): stage 1 also packs the à-trous guides and input planes
-    // and the estimate of every pixel; stage 2 then revisits only the short histories.
-    const bool fused = !split && !mReferenceStages && !mReferenceAtrous;
+    // The fused fast path: stage 1 (vectorised) also writes every pixel's estimate and stage 2 revisits only the
+    // short histories; for the combined signal with the fast à-trous, stage 1 also packs the à-trous guides and
+    // input planes (`fused`).
+    const bool fusedTemporal = !mReferenceStages;
+    const bool fused = fusedTemporal && !split && !mReferenceAtrous;
     std::atomic<uint64_t> nonFinite{0};
     uint64_t referencePixels = uint64_t(w) * h;
     AtrousFilter::FramePlanes planes{};
-    if (fused) {
-        planes = mAtrous.preparePlanes(tv.linearZ, tv.normW, mIterations);
+    if (fusedTemporal) {
         simd::TemporalOutputs to;
-        to.layout = planes.layout;
-        to.guide = planes.guide;
-        to.signal = planes.signal;
+        if (fused) {
+            planes = mAtrous.preparePlanes(tv.linearZ, tv.normW, mIterations);
+            to.layout = planes.layout;
+            to.guide = planes.guide;
+            to.signal = planes.signal;
+        }
         to.estimate = ctx.internal(kEstimate)->view<glm::vec4>();
+        if (split) to.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
         to.variance = outputView<float>(ctx, kVariance);
-        const simd::TemporalCounts counts = simd::temporalCombined(tv, tp, to, kTemporalBandRows);
+        const simd::TemporalCounts counts = simd::temporalFused(tv, tp, to, kTemporalBandRows);
         nonFinite = counts.rejected;
         referencePixels = counts.reference;
     } else {
@@ -250,7 +255,7 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
     vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
-    if (fused) {
+    if (fusedTemporal) {
         // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate. Bands of
         // whole rows, as stage 1: the scan of the lengths is a plain stream.
         parallelFor2D(
@@ -259,8 +264,8 @@ void SVGFPass::execute(PassContext& ctx) {
                 for (uint32_t y = band.y0; y < band.y1; ++y)
                     for (uint32_t x = 0; x < w; ++x) {
                         if (vv.length.at(x, y) >= kSpatialVarianceFrames || !(vv.linearZ.at(x, y).x >= 0.f)) continue;
-                        varianceEstimatePixel(vv, x, y, ap, false);
-                        simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
+                        varianceEstimatePixel(vv, x, y, ap, split);
+                        if (fused) simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
                     }
             },
             kTemporalBandRows);

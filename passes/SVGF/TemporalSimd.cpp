@@ -63,10 +63,14 @@ struct RowJob {
 bool scalarPixel(const RowJob& j, uint32_t x, uint32_t y) {
     const bool rejected = temporalPixel(j.v, x, y, j.p);
     const glm::vec4 i0 = j.v.integrated0.at(x, y);
+    const glm::vec4 i1 = j.p.split ? j.v.integrated1.at(x, y) : glm::vec4(0.f);
     j.out.estimate.at(x, y) = i0;
-    packSignalPixel(*j.out.layout, j.out.signal, x, y, i0);
-    packGuidePixel(*j.out.layout, j.out.guide, x, y, j.v.linearZ.at(x, y), j.v.normW.at(x, y));
-    if (j.out.variance.data) j.out.variance.at(x, y) = i0.a + 0.f;  // the variance stage's i0.a + i1.a, i1 = 0
+    if (j.p.split) j.out.estimate1.at(x, y) = i1;
+    if (j.out.layout) {
+        packSignalPixel(*j.out.layout, j.out.signal, x, y, i0);
+        packGuidePixel(*j.out.layout, j.out.guide, x, y, j.v.linearZ.at(x, y), j.v.normW.at(x, y));
+    }
+    if (j.out.variance.data) j.out.variance.at(x, y) = i0.a + i1.a;  // as the variance stage (i1 = 0 unsplit)
     return rejected;
 }
 
@@ -80,9 +84,15 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     const size_t N = hn::Lanes(d);
     const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
 
-    V cr, cg, cb, ca;
-    hn::LoadInterleaved4(d, &v.color.at(x, y).x, cr, cg, cb, ca);
+    // Signal 0: colour, or direct in the split; signal 1: indirect (split only, else zero).
+    const bool split = p.split;
+    V cr, cg, cb, ca, dr = zero, dg = zero, db = zero, da;
+    hn::LoadInterleaved4(d, &(split ? v.direct : v.color).at(x, y).x, cr, cg, cb, ca);
     if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(cr), hn::IsFinite(cg)), hn::IsFinite(cb)))) return false;
+    if (split) {
+        hn::LoadInterleaved4(d, &v.indirect.at(x, y).x, dr, dg, db, da);
+        if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(dr), hn::IsFinite(dg)), hn::IsFinite(db)))) return false;
+    }
     V z, dz;
     hn::LoadInterleaved2(d, &v.linearZ.at(x, y).x, z, dz);
     const M hit = hn::Ge(z, zero);
@@ -93,6 +103,7 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     // Reprojection (reproject() of SVGFKernels.h) for footprints with one integer offset, all inside the frame.
     M valid = hn::FirstN(d, 0);
     V rr = zero, rg = zero, rb = zero, rm[4] = {zero, zero, zero, zero}, rl = zero;
+    V sr = zero, sg = zero, sb = zero;  // signal 1's reprojected rgb
     if (p.temporal && !hn::AllFalse(d, hit)) {
         V mx, my;
         hn::LoadInterleaved2(d, &v.mvec.at(x, y).x, mx, my);
@@ -134,7 +145,7 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         const M bilinear = hn::Ge(sumW, hn::Set(d, kMinBilinearWeight));
         // A hit whose footprint carries too little weight needs the 3x3 fallback: the reference does it.
         if (!hn::AllTrue(d, hn::Or(hn::Not(hit), bilinear))) return false;
-        V ra = zero;
+        V ra = zero, sa = zero;
         for (int k = 0; k < 4; ++k) {
             if (hn::AllFalse(d, tapValid[k])) continue;
             const uint32_t qx = c0 + uint32_t(k & 1), qy = r0 + uint32_t(k >> 1);
@@ -152,6 +163,14 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, m2)));
             rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, m3)));
             rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, hn::LoadU(d, &v.prevLength.at(qx, qy)))));
+            if (split) {
+                V jr, jg, jb, ja;
+                hn::LoadInterleaved4(d, &v.prevIllum1.at(qx, qy).x, jr, jg, jb, ja);
+                sr = hn::Add(sr, hn::IfThenElseZero(m, hn::Mul(w, jr)));
+                sg = hn::Add(sg, hn::IfThenElseZero(m, hn::Mul(w, jg)));
+                sb = hn::Add(sb, hn::IfThenElseZero(m, hn::Mul(w, jb)));
+                sa = hn::Add(sa, hn::IfThenElseZero(m, hn::Mul(w, ja)));
+            }
         }
         const V inv = hn::Div(one, sumW);
         rr = hn::Mul(rr, inv);
@@ -160,8 +179,14 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         ra = hn::Mul(ra, inv);
         for (V& c : rm) c = hn::Mul(c, inv);
         rl = hn::Mul(rl, inv);
+        sr = hn::Mul(sr, inv);
+        sg = hn::Mul(sg, inv);
+        sb = hn::Mul(sb, inv);
+        sa = hn::Mul(sa, inv);
         // History that is not finite counts as disoccluded (reference: r.valid).
         M finite = hn::And(hn::And(hn::IsFinite(rr), hn::IsFinite(rg)), hn::And(hn::IsFinite(rb), hn::IsFinite(ra)));
+        finite = hn::And(finite, hn::And(hn::And(hn::IsFinite(sr), hn::IsFinite(sg)),
+                                         hn::And(hn::IsFinite(sb), hn::IsFinite(sa))));
         finite = hn::And(finite, hn::And(hn::And(hn::IsFinite(rm[0]), hn::IsFinite(rm[1])),
                                          hn::And(hn::IsFinite(rm[2]), hn::IsFinite(rm[3]))));
         valid = hn::And(hn::And(hit, bilinear), hn::And(finite, hn::IsFinite(rl)));
@@ -184,7 +209,12 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     const V lr = demodulate(cr, er, ar), lg = demodulate(cg, eg, ag), lb = demodulate(cb, eb, ab);
     const V lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), lr), hn::Mul(hn::Set(d, 0.7152f), lg)),
                           hn::Mul(hn::Set(d, 0.0722f), lb));
-    const V moments[4] = {lum, hn::Mul(lum, lum), zero, zero};
+    // Signal 1 (split): divided by the albedo, no emission (that is part of direct).
+    const V kr = demodulate(dr, zero, ar), kg = demodulate(dg, zero, ag), kb = demodulate(db, zero, ab);
+    const V lum1 = split ? hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), kr), hn::Mul(hn::Set(d, 0.7152f), kg)),
+                                   hn::Mul(hn::Set(d, 0.0722f), kb))
+                         : zero;
+    const V moments[4] = {lum, hn::Mul(lum, lum), lum1, hn::Mul(lum1, lum1)};
 
     // Temporal accumulation (paper eq. 1 with Falcor's max(alpha, 1 / n)).
     const V length = hn::IfThenElse(valid, minOf(hn::Add(rl, one), hn::Set(d, p.maxHistory)), one);
@@ -196,6 +226,10 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     V m[4];
     for (int c = 0; c < 4; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], moments[c], am), moments[c]);
     V ia = maxOf(zero, hn::Sub(m[1], hn::Mul(m[0], m[0])));
+    V jr = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sr, kr, a), kr));
+    V jg = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sg, kg, a), kg));
+    V jb = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sb, kb, a), kb));
+    V ja = hn::IfThenElseZero(hit, maxOf(zero, hn::Sub(m[3], hn::Mul(m[2], m[2]))));
     // Misses: no history, zero signal.
     ir = hn::IfThenElseZero(hit, ir);
     ig = hn::IfThenElseZero(hit, ig);
@@ -211,10 +245,17 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
     hn::Stream(hn::BitCast(d, mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
     streamInterleaved4(d, ir, ig, ib, ia, &j.out.estimate.at(x, y).x);
-    const size_t o = j.out.layout->offset(x, y);
-    storeSignal<true>(d, j.out.signal, o, ir, ig, ib, ia);
-    storeGuide<true>(d, j.out.guide, o, z, dz, nx, ny, nz);
-    if (j.out.variance.data) hn::StoreU(hn::Add(ia, zero), d, &j.out.variance.at(x, y));
+    if (split) {
+        streamInterleaved4(d, jr, jg, jb, ja, &v.integrated1.at(x, y).x);
+        streamInterleaved4(d, jr, jg, jb, ja, &j.out.estimate1.at(x, y).x);
+    }
+    if (j.out.layout) {
+        const size_t o = j.out.layout->offset(x, y);
+        storeSignal<true>(d, j.out.signal, o, ir, ig, ib, ia);
+        storeGuide<true>(d, j.out.guide, o, z, dz, nx, ny, nz);
+    }
+    // As the variance stage: the two signals' variances summed (signal 1 is zero unsplit).
+    if (j.out.variance.data) hn::StoreU(hn::Add(ia, split ? ja : zero), d, &j.out.variance.at(x, y));
     return true;
 }
 
@@ -234,7 +275,7 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
     return counts;
 }
 
-TemporalCounts TemporalCombinedTarget(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
+TemporalCounts TemporalFusedTarget(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
                                       uint32_t rows) {
     const RowJob job{v, p, out};
     std::atomic<uint64_t> rejected{0}, reference{0};
@@ -258,11 +299,11 @@ HWY_AFTER_NAMESPACE();
 #if HWY_ONCE
 namespace loom::svgf::simd {
 
-HWY_EXPORT(TemporalCombinedTarget);
+HWY_EXPORT(TemporalFusedTarget);
 
-TemporalCounts temporalCombined(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
+TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
                                 uint32_t rows) {
-    return HWY_DYNAMIC_DISPATCH(TemporalCombinedTarget)(v, p, out, rows);
+    return HWY_DYNAMIC_DISPATCH(TemporalFusedTarget)(v, p, out, rows);
 }
 
 }  // namespace loom::svgf::simd

@@ -1,8 +1,9 @@
 #pragma once
-// The vectorised temporal stage of SVGF (Google Highway, dispatched at run time) for the combined signal: one pass
-// over the frame that does what temporalPixel (SVGFKernels.h) does, and in the same loop packs the à-trous guide
-// planes and the à-trous input (the integrated colour with its temporal variance) into its planes, so the à-trous
-// stage reads no image of its own. The variance stage then only revisits pixels whose history is short.
+// The vectorised temporal stage of SVGF (Google Highway, dispatched at run time): one pass over the frame that does
+// what temporalPixel (SVGFKernels.h) does, for the combined signal or for direct and indirect (the split), and
+// writes every pixel's à-trous input as if its history were long, so the variance stage only revisits pixels whose
+// history is short. For the combined signal it also packs the à-trous guide planes and input planes in the same
+// loop, so the à-trous stage reads no image of its own.
 //
 // The common case is vectorised: N pixels of a row (N = 8 on AVX2) whose colour samples and motion vectors are
 // finite, whose 2x2 bilinear footprints all have the same integer offset from the pixels (a camera pan or a static
@@ -23,11 +24,12 @@ namespace loom::svgf::simd {
 
 /// What the fused temporal stage writes besides the TemporalViews of temporalPixel.
 struct TemporalOutputs {
-    const PlaneLayout* layout = nullptr;
-    GuidePlanes guide;              ///< the à-trous guides of this frame
-    SignalPlanes signal;            ///< the à-trous input: integrated colour, a = temporal variance
-    ImageView<glm::vec4> estimate;  ///< the same as an image (the variance stage overwrites short histories)
-    ImageView<float> variance;      ///< optional debug output: the temporal variance
+    const PlaneLayout* layout = nullptr;  ///< null: no à-trous planes are packed (guide and signal unused)
+    GuidePlanes guide;                    ///< the à-trous guides of this frame
+    SignalPlanes signal;                  ///< the à-trous input: integrated colour, a = temporal variance
+    ImageView<glm::vec4> estimate;   ///< signal 0 as an image (the variance stage overwrites short histories)
+    ImageView<glm::vec4> estimate1;  ///< signal 1 (indirect) as an image, split only
+    ImageView<float> variance;       ///< optional debug output: the temporal variance (split: summed)
 };
 
 /// Pixel counts of one frame of the fused stage.
@@ -36,8 +38,9 @@ struct TemporalCounts {
     uint64_t reference = 0;  ///< pixels that ran temporalPixel rather than the vector path
 };
 
-/// Stage 1 for the combined signal (p.split false) over the whole frame, in bands of `rows` whole rows.
-TemporalCounts temporalCombined(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
+/// Stage 1 over the whole frame, in bands of `rows` whole rows: the combined signal, or with p.split direct and
+/// indirect (then without planes: out.layout null).
+TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
                                 uint32_t rows);
 
 }  // namespace loom::svgf::simd

@@ -549,7 +549,8 @@ TEST(SVGF, BitIdenticalForAnyThreadCount) {
 // every history field is bit-identical to running temporalPixel, varianceEstimatePixel and modulatePixel one after
 // the other (referenceStages), and the output (remodulated inside the last à-trous level) agrees within rounding,
 // on the animated scene (camera and objects move: footprints with differing offsets, disocclusion, the 3x3
-// fallback) and on synthetic input with a sub-pixel pan, emission, non-finite samples and misses.
+// fallback) and on synthetic input with a sub-pixel pan, emission, non-finite samples and misses; for the
+// direct/indirect split (no à-trous packing there) the output is bit-identical too.
 TEST(SVGF, FusedStagesMatchTheReferenceStages) {
     auto expectSameOutput = [](const Texture& a, const Texture& b, const std::string& where) {
         for (uint32_t y = 0; y < a.height(); ++y)
@@ -606,5 +607,30 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
             EXPECT_TRUE(a.field(name).samePixels(b.field(name))) << name << " frame " << frame;
         for (const char* hist : kHistoryFields)
             EXPECT_TRUE(a.field(hist).samePixels(b.field(hist))) << hist << " frame " << frame;
+    }
+
+    // The direct/indirect split takes the same vector path for both signals (without the à-trous packing): the
+    // same pan, emission inside direct, an independent indirect noise, and a bad indirect sample in frame 2.
+    auto splitFn = [&](uint64_t frame, uint32_t x, uint32_t y) {
+        GPixel p = fn(frame, x, y);
+        const float n = test::hash01(frame + 1000, x, y);
+        p.indirect = glm::vec4(glm::vec3(p.albedo) * (0.05f + 0.9f * n * n * n), 1.f);
+        p.direct = glm::vec4(glm::vec3(p.color) * 0.7f + glm::vec3(p.emission), 1.f);
+        if (frame == 2 && x == 11 && y == 33) p.indirect = glm::vec4(1.f, INFINITY, 1.f, 1.f);
+        p.color = p.direct + glm::vec4(glm::vec3(p.indirect), 0.f);
+        return p;
+    };
+    Harness c({{"referenceStages", false}}, splitFn, true, 48, 40), e({{"referenceStages", true}}, splitFn, true, 48, 40);
+    for (int frame = 0; frame < 6; ++frame) {
+        c.run();
+        e.run();
+        EXPECT_EQ(c.stat("split"), 1.0);
+        EXPECT_EQ(c.stat("nonFinite"), e.stat("nonFinite"));
+        EXPECT_LT(c.stat("temporal.referenceShare"), 0.5) << "split frame " << frame;
+        EXPECT_TRUE(c.field("filtered").samePixels(e.field("filtered"))) << "split frame " << frame;
+        for (const char* name : {"variance", "historyLength", "estimate", "prevMeshId"})
+            EXPECT_TRUE(c.field(name).samePixels(e.field(name))) << "split " << name << " frame " << frame;
+        for (const char* hist : kHistoryFields)
+            EXPECT_TRUE(c.field(hist).samePixels(e.field(hist))) << "split " << hist << " frame " << frame;
     }
 }
