@@ -33,21 +33,29 @@ ImageView<const glm::vec4> asConst(ImageView<glm::vec4> v) {
 
 bool AtrousFilter::ensureLayout(int maxStep) {
     const simd::PlaneLayout want = simd::makeLayout(mWidth, mHeight, maxStep);
-    if (!mPlaneStorage.empty() && mLayout.width == mWidth && mLayout.height == mHeight && mLayout.margin >= want.margin)
+    if (!mPlaneStorage.empty() && mLayout.width == mWidth && mLayout.height == mHeight &&
+        mLayout.margin >= want.margin && mAllocatedSlots >= mSlots)
         return false;
     mLayout = want;
     const size_t plane = mLayout.planeSize();
     const size_t alignFloats = kRowAlignment / sizeof(float);
-    mPlaneStorage.assign(plane * (kGuidePlanes + 2 * kSignalPlanes) + alignFloats, 0.f);
+    const int count = kGuidePlanes + 2 * kSignalPlanes * mSlots;
+    mPlaneStorage.assign(plane * size_t(count) + alignFloats, 0.f);
     float* base = mPlaneStorage.data();
     base += (alignFloats - (reinterpret_cast<uintptr_t>(base) / sizeof(float)) % alignFloats) % alignFloats;
-    float* planes[kGuidePlanes + 2 * kSignalPlanes];
-    for (int i = 0; i < kGuidePlanes + 2 * kSignalPlanes; ++i) planes[i] = base + plane * size_t(i);
-    mGuide = {planes[0], planes[1], planes[2], planes[3], planes[4]};
-    for (int s = 0; s < 2; ++s) {
-        float** p = planes + kGuidePlanes + s * kSignalPlanes;
-        mSignal[s] = {p[0], p[1], p[2], p[3], p[4]};
-    }
+    auto planeAt = [&](int i) { return base + plane * size_t(i); };
+    mGuide = {planeAt(0), planeAt(1), planeAt(2), planeAt(3), planeAt(4)};
+    for (int slot = 0; slot < 2; ++slot)
+        for (int s = 0; s < 2; ++s) {
+            if (slot >= mSlots) {
+                mSignal[slot][s] = {};
+                continue;
+            }
+            const int first = kGuidePlanes + (slot * 2 + s) * kSignalPlanes;
+            mSignal[slot][s] = {planeAt(first), planeAt(first + 1), planeAt(first + 2), planeAt(first + 3),
+                                planeAt(first + 4)};
+        }
+    mAllocatedSlots = mSlots;
     // Margins read as misses; the interior is overwritten by every packGuide.
     std::fill(mGuide.z, mGuide.z + plane, -1.f);
     return true;
@@ -66,27 +74,35 @@ void AtrousFilter::setGuide(ImageView<const glm::vec2> linearZ, ImageView<const 
     mHeight = linearZ.height;
     ensureLayout(std::max(kDefaultMaxStep, mLayout.margin > 0 ? int(mLayout.margin / 2) : 0));
     packGuide();
-    mSignalPacked = false;
+    mSignalPacked[0] = mSignalPacked[1] = false;
 }
 
 AtrousFilter::FramePlanes AtrousFilter::preparePlanes(ImageView<const glm::vec2> linearZ,
-                                                      ImageView<const glm::vec4> normal, int iterations) {
+                                                      ImageView<const glm::vec4> normal, int iterations,
+                                                      int signals) {
     mLinearZ = linearZ;
     mNormal = normal;
     mWidth = linearZ.width;
     mHeight = linearZ.height;
+    mSlots = std::max(mSlots, std::clamp(signals, 1, 2));
     const int maxStep = 1 << std::clamp(iterations - 1, 0, 30);
     ensureLayout(std::max({kDefaultMaxStep, maxStep, mLayout.margin > 0 ? int(mLayout.margin / 2) : 0}));
     mGuideMs = 0.0;
-    mSignalPacked = true;
-    return {&mLayout, mGuide, mSignal[0]};
+    mSignalPacked[0] = true;
+    mSignalPacked[1] = signals >= 2;
+    return {&mLayout, mGuide, mSignal[0][0], signals >= 2 ? mSignal[1][0] : simd::SignalPlanes{}};
 }
 
 void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations,
                        const AtrousParams& params, int feedbackTap, ImageView<glm::vec4> feedback, bool reference,
-                       AtrousTimings* timings, const simd::Remodulation* modulate) {
+                       AtrousTimings* timings, const simd::Remodulation* modulate, int slot) {
     const bool wantsFeedback = feedback.data != nullptr;
-    bool packed = std::exchange(mSignalPacked, false);
+    slot = std::clamp(slot, 0, 1);
+    bool packed = std::exchange(mSignalPacked[slot], false);
+    if (slot >= mSlots) {
+        mSlots = slot + 1;
+        packed = false;
+    }
     if (timings) *timings = AtrousTimings{};
     if (iterations <= 0) {
         copyImage(src, dst);
@@ -128,14 +144,15 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
         guideMs += mGuideMs;
         packed = false;
     }
-    if (!packed) simd::packSignal(mLayout, src, mSignal[0]);
+    simd::SignalPlanes* signal = mSignal[slot];
+    if (!packed) simd::packSignal(mLayout, src, signal[0]);
     if (timings) timings->prepareMs = guideMs + msSince(t0);
 
     for (int level = 0; level < iterations; ++level) {
         const auto t1 = std::chrono::steady_clock::now();
         const bool last = level == iterations - 1;
         simd::LevelOutputs out;
-        if (!last) out.planes = mSignal[(level + 1) % 2];
+        if (!last) out.planes = signal[(level + 1) % 2];
         const bool feedbackHere = wantsFeedback && level == tap;
         if (last && modulate) {
             out.modulate = *modulate;
@@ -144,7 +161,7 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
             out.image[0] = dst;
         }
         if (feedbackHere) out.image[1] = feedback;
-        simd::filterLevel(mLayout, mGuide, mSignal[level % 2], out, 1 << std::min(level, 30), params);
+        simd::filterLevel(mLayout, mGuide, signal[level % 2], out, 1 << std::min(level, 30), params);
         if (timings && level < 16) timings->levelMs[level] = msSince(t1);
     }
 }

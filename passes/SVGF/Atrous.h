@@ -29,10 +29,13 @@ public:
     struct FramePlanes {
         const simd::PlaneLayout* layout;
         simd::GuidePlanes guide;
-        simd::SignalPlanes signal;
+        simd::SignalPlanes signal;   ///< input of the next run() with slot 0
+        simd::SignalPlanes signal1;  ///< input of the next run() with slot 1 (signals = 2 only)
     };
-    /// Lays out the planes for `iterations` levels and returns them for the caller to fill (interior only).
-    FramePlanes preparePlanes(ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal, int iterations);
+    /// Lays out the planes for `iterations` levels and `signals` (1 or 2) inputs and returns them for the caller to
+    /// fill (interior only).
+    FramePlanes preparePlanes(ImageView<const glm::vec2> linearZ, ImageView<const glm::vec4> normal, int iterations,
+                              int signals = 1);
 
     /// Runs `iterations` levels with steps 1, 2, 4, ... on src (rgb illumination, a variance) into dst.
     /// When `feedback` is non-null it receives the output of level `feedbackTap` (0-based; clamped to the last
@@ -41,9 +44,10 @@ public:
     /// With `modulate` (fast path only), the last level writes the remodulated result to modulate->dst instead of
     /// its rgb + variance to dst (dst is not written, and the last level's variance is not propagated unless it is
     /// the feedback tap).
+    /// `slot` 1 runs a second signal on the same guides (SVGF's direct/indirect split) with planes of its own.
     void run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations, const AtrousParams& params,
              int feedbackTap = -1, ImageView<glm::vec4> feedback = {}, bool reference = false,
-             AtrousTimings* timings = nullptr, const simd::Remodulation* modulate = nullptr);
+             AtrousTimings* timings = nullptr, const simd::Remodulation* modulate = nullptr, int slot = 0);
 
 private:
     /// (Re)allocates the planes for steps up to maxStep; true when the layout changed (guides need packing).
@@ -59,9 +63,10 @@ private:
     simd::PlaneLayout mLayout;
     std::vector<float> mPlaneStorage;
     simd::GuidePlanes mGuide;
-    simd::SignalPlanes mSignal[2];
+    simd::SignalPlanes mSignal[2][2];  // [slot][ping-pong]
+    int mSlots = 1, mAllocatedSlots = 0;
     double mGuideMs = 0.0;
-    bool mSignalPacked = false;  // preparePlanes was called: the next run's input is in mSignal[0]
+    bool mSignalPacked[2] = {false, false};  // preparePlanes was called: the slot's next input is in mSignal[slot][0]
 };
 
 }  // namespace loom::svgf

@@ -164,6 +164,7 @@ HWY_INLINE void prefetchRemodulation(const Remodulation& m, uint32_t x0, uint32_
         hwy::Prefetch(&m.color.at(x, y));
         hwy::Prefetch(&m.albedo.at(x, y));
         if (m.emission.data) hwy::Prefetch(&m.emission.at(x, y));
+        if (m.add.data) hwy::Prefetch(&m.add.at(x, y));
         if ((x & 7) == 0) hwy::Prefetch(&m.linearZ.at(x, y));
     }
 }
@@ -179,8 +180,9 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_
         for (uint32_t k = 0; k < count; ++k) {
             const uint32_t x = x0 + k;
             const glm::vec3 emission = m.emission.data ? glm::vec3(m.emission.at(x, y)) : glm::vec3(0.f);
-            m.dst.at(x, y) = remodulate(glm::vec3(lanes[0][k], lanes[1][k], lanes[2][k]), m.color.at(x, y),
-                                        m.albedo.at(x, y), emission, m.linearZ.at(x, y).x);
+            glm::vec3 illum(lanes[0][k], lanes[1][k], lanes[2][k]);
+            if (m.add.data) illum = glm::vec3(m.add.at(x, y)) + illum;  // modulatePixel's filtered0 + filtered1
+            m.dst.at(x, y) = remodulate(illum, m.color.at(x, y), m.albedo.at(x, y), emission, m.linearZ.at(x, y).x);
         }
         return;
     }
@@ -189,6 +191,14 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_
     hn::LoadInterleaved4(d, &m.color.at(x0, y).x, cr, cg, cb, ca);
     hn::LoadInterleaved4(d, &m.albedo.at(x0, y).x, ar, ag, ab, aa);
     if (m.emission.data) hn::LoadInterleaved4(d, &m.emission.at(x0, y).x, er, eg, eb, ea);
+    if (m.add.data) {
+        // modulatePixel's filtered0 + filtered1: the other signal first.
+        V sr, sg, sb, sa;
+        hn::LoadInterleaved4(d, &m.add.at(x0, y).x, sr, sg, sb, sa);
+        r = hn::Add(sr, r);
+        g = hn::Add(sg, g);
+        b = hn::Add(sb, b);
+    }
     hn::LoadInterleaved2(d, &m.linearZ.at(x0, y).x, z, dz);
     const auto hit = hn::Ge(z, zero);
     // As remodulate(): illum * max(finiteOrZero(albedo), kMinAlbedo) + finiteOrZero(emission) on hits, the colour

@@ -108,10 +108,11 @@ void packGuide(const PlaneLayout& layout, ImageView<const glm::vec2> linearZ, Im
 /// Writes a signal's interior planes from rgb + variance pixels (sanitised, luminance computed).
 void packSignal(const PlaneLayout& layout, ImageView<const glm::vec4> src, const SignalPlanes& dst);
 
-/// Remodulation fused into a level's output: dst = remodulate() of SVGFKernels.h (albedo times the level's rgb plus
-/// emission; miss pixels, by linearZ, pass color through). emission is optional.
+/// Remodulation fused into a level's output: dst = remodulate() of SVGFKernels.h (albedo times the level's rgb, plus
+/// add's rgb when given, plus emission; miss pixels, by linearZ, pass color through). emission and add are optional.
 struct Remodulation {
     ImageView<const glm::vec4> color, albedo, emission;
+    ImageView<const glm::vec4> add;  ///< optional: illumination added to the level's rgb first (the split's other signal)
     ImageView<const glm::vec2> linearZ;
     ImageView<glm::vec4> dst;
 };

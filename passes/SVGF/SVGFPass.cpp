@@ -205,20 +205,20 @@ void SVGFPass::execute(PassContext& ctx) {
     tp.temporal = mTemporal && ctx.historyValid();
     tp.split = split;
     // The fused fast path: stage 1 (vectorised) also writes every pixel's estimate and stage 2 revisits only the
-    // short histories; for the combined signal with the fast à-trous, stage 1 also packs the à-trous guides and
-    // input planes (`fused`).
+    // short histories; with the fast à-trous, stage 1 also packs the à-trous guides and input planes (`fused`).
     const bool fusedTemporal = !mReferenceStages;
-    const bool fused = fusedTemporal && !split && !mReferenceAtrous;
+    const bool fused = fusedTemporal && !mReferenceAtrous;
     std::atomic<uint64_t> nonFinite{0};
     uint64_t referencePixels = uint64_t(w) * h;
     AtrousFilter::FramePlanes planes{};
     if (fusedTemporal) {
         simd::TemporalOutputs to;
         if (fused) {
-            planes = mAtrous.preparePlanes(tv.linearZ, tv.normW, mIterations);
+            planes = mAtrous.preparePlanes(tv.linearZ, tv.normW, mIterations, split ? 2 : 1);
             to.layout = planes.layout;
             to.guide = planes.guide;
             to.signal = planes.signal;
+            to.signal1 = planes.signal1;
         }
         to.estimate = ctx.internal(kEstimate)->view<glm::vec4>();
         if (split) to.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
@@ -265,7 +265,10 @@ void SVGFPass::execute(PassContext& ctx) {
                     for (uint32_t x = 0; x < w; ++x) {
                         if (vv.length.at(x, y) >= kSpatialVarianceFrames || !(vv.linearZ.at(x, y).x >= 0.f)) continue;
                         varianceEstimatePixel(vv, x, y, ap, split);
-                        if (fused) simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
+                        if (!fused) continue;
+                        simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
+                        if (split)
+                            simd::packSignalPixel(*planes.layout, planes.signal1, x, y, vv.estimate1.at(x, y));
                     }
             },
             kTemporalBandRows);
@@ -282,7 +285,7 @@ void SVGFPass::execute(PassContext& ctx) {
     const int levels = mIterations;
     double levelMs[16] = {};
     double prepareMs = 0.0;
-    // The combined signal's remodulation is fused into the last fast level's output.
+    // The remodulation is fused into the last fast level's output (split: the second signal's, adding the first's).
     ModulateViews mv;
     mv.filtered0 = asConst(tv.integrated0);
     mv.filtered1 = asConst(tv.integrated1);
@@ -292,16 +295,25 @@ void SVGFPass::execute(PassContext& ctx) {
     mv.linearZ = tv.linearZ;
     mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
     const bool fusedModulation = fused && levels > 0;
-    const simd::Remodulation remodulation{mv.color, mv.albedo, mv.emission, mv.linearZ, mv.dst};
-    auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback) {
+    simd::Remodulation remodulation;
+    remodulation.color = mv.color;
+    remodulation.albedo = mv.albedo;
+    remodulation.emission = mv.emission;
+    remodulation.linearZ = mv.linearZ;
+    remodulation.dst = mv.dst;
+    if (split) remodulation.add = mv.filtered0;  // signal 0's result, in integrated0 by then
+    auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback,
+                      const simd::Remodulation* modulate, int slot) {
         AtrousTimings timings;
-        mAtrous.run(asConst(src), dst, levels, ap, mFeedbackTap, feedback, mReferenceAtrous, &timings,
-                    fusedModulation ? &remodulation : nullptr);
+        mAtrous.run(asConst(src), dst, levels, ap, mFeedbackTap, feedback, mReferenceAtrous, &timings, modulate, slot);
         prepareMs += timings.prepareMs;
         for (int level = 0; level < levels && level < 16; ++level) levelMs[level] += timings.levelMs[level];
     };
-    filter(vv.estimate0, tv.integrated0, ctx.historyCur(kIllumHistory).view<glm::vec4>());
-    if (split) filter(vv.estimate1, tv.integrated1, ctx.historyCur(kIndirectHistory).view<glm::vec4>());
+    const simd::Remodulation* modulate = fusedModulation ? &remodulation : nullptr;
+    filter(vv.estimate0, tv.integrated0, ctx.historyCur(kIllumHistory).view<glm::vec4>(), split ? nullptr : modulate,
+           0);
+    if (split)
+        filter(vv.estimate1, tv.integrated1, ctx.historyCur(kIndirectHistory).view<glm::vec4>(), modulate, 1);
     stats.set(kStatAtrousPrepare, stats.values().at(kStatAtrousPrepare) + prepareMs);
     double atrousMs = 0.0;
     for (int level = 0; level < levels && level < 16; ++level) {

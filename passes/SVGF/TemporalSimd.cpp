@@ -68,6 +68,7 @@ bool scalarPixel(const RowJob& j, uint32_t x, uint32_t y) {
     if (j.p.split) j.out.estimate1.at(x, y) = i1;
     if (j.out.layout) {
         packSignalPixel(*j.out.layout, j.out.signal, x, y, i0);
+        if (j.p.split) packSignalPixel(*j.out.layout, j.out.signal1, x, y, i1);
         packGuidePixel(*j.out.layout, j.out.guide, x, y, j.v.linearZ.at(x, y), j.v.normW.at(x, y));
     }
     if (j.out.variance.data) j.out.variance.at(x, y) = i0.a + i1.a;  // as the variance stage (i1 = 0 unsplit)
@@ -252,6 +253,7 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     if (j.out.layout) {
         const size_t o = j.out.layout->offset(x, y);
         storeSignal<true>(d, j.out.signal, o, ir, ig, ib, ia);
+        if (split) storeSignal<true>(d, j.out.signal1, o, jr, jg, jb, ja);
         storeGuide<true>(d, j.out.guide, o, z, dz, nx, ny, nz);
     }
     // As the variance stage: the two signals' variances summed (signal 1 is zero unsplit).

@@ -2,8 +2,8 @@
 // The vectorised temporal stage of SVGF (Google Highway, dispatched at run time): one pass over the frame that does
 // what temporalPixel (SVGFKernels.h) does, for the combined signal or for direct and indirect (the split), and
 // writes every pixel's à-trous input as if its history were long, so the variance stage only revisits pixels whose
-// history is short. For the combined signal it also packs the à-trous guide planes and input planes in the same
-// loop, so the à-trous stage reads no image of its own.
+// history is short. With the fast à-trous it also packs the à-trous guide planes and input planes in the same loop,
+// so the à-trous stage reads no image of its own.
 //
 // The common case is vectorised: N pixels of a row (N = 8 on AVX2) whose colour samples and motion vectors are
 // finite, whose 2x2 bilinear footprints all have the same integer offset from the pixels (a camera pan or a static
@@ -27,6 +27,7 @@ struct TemporalOutputs {
     const PlaneLayout* layout = nullptr;  ///< null: no à-trous planes are packed (guide and signal unused)
     GuidePlanes guide;                    ///< the à-trous guides of this frame
     SignalPlanes signal;                  ///< the à-trous input: integrated colour, a = temporal variance
+    SignalPlanes signal1;                 ///< the split's second à-trous input (indirect)
     ImageView<glm::vec4> estimate;   ///< signal 0 as an image (the variance stage overwrites short histories)
     ImageView<glm::vec4> estimate1;  ///< signal 1 (indirect) as an image, split only
     ImageView<float> variance;       ///< optional debug output: the temporal variance (split: summed)
@@ -39,7 +40,7 @@ struct TemporalCounts {
 };
 
 /// Stage 1 over the whole frame, in bands of `rows` whole rows: the combined signal, or with p.split direct and
-/// indirect (then without planes: out.layout null).
+/// indirect.
 TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
                                 uint32_t rows);
 
