@@ -34,7 +34,7 @@ ImageView<const glm::vec4> asConst(ImageView<glm::vec4> v) {
 bool AtrousFilter::ensureLayout(int maxStep) {
     const simd::PlaneLayout want = simd::makeLayout(mWidth, mHeight, maxStep);
     if (!mPlaneStorage.empty() && mLayout.width == mWidth && mLayout.height == mHeight &&
-        mLayout.margin >= want.margin && mAllocatedSlots >= mSlots)
+        mLayout.margin >= want.margin && (mSlots < 2 || mSignal[1][0].r))
         return false;
     mLayout = want;
     const size_t plane = mLayout.planeSize();
@@ -55,7 +55,6 @@ bool AtrousFilter::ensureLayout(int maxStep) {
             mSignal[slot][s] = {planeAt(first), planeAt(first + 1), planeAt(first + 2), planeAt(first + 3),
                                 planeAt(first + 4)};
         }
-    mAllocatedSlots = mSlots;
     // Margins read as misses; the interior is overwritten by every packGuide.
     std::fill(mGuide.z, mGuide.z + plane, -1.f);
     return true;
@@ -99,10 +98,7 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
     const bool wantsFeedback = feedback.data != nullptr;
     slot = std::clamp(slot, 0, 1);
     bool packed = std::exchange(mSignalPacked[slot], false);
-    if (slot >= mSlots) {
-        mSlots = slot + 1;
-        packed = false;
-    }
+    mSlots = std::max(mSlots, slot + 1);  // a second signal's planes are allocated by ensureLayout below
     if (timings) *timings = AtrousTimings{};
     if (iterations <= 0) {
         copyImage(src, dst);

@@ -64,7 +64,7 @@ private:
     std::vector<float> mPlaneStorage;
     simd::GuidePlanes mGuide;
     simd::SignalPlanes mSignal[2][2];  // [slot][ping-pong]
-    int mSlots = 1, mAllocatedSlots = 0;
+    int mSlots = 1;  // signals laid out (mSignal[1] is allocated when 2)
     double mGuideMs = 0.0;
     bool mSignalPacked[2] = {false, false};  // preparePlanes was called: the slot's next input is in mSignal[slot][0]
 };

@@ -159,18 +159,21 @@ HWY_INLINE void accumulateRow(D d, const TapContext& t, const Centre& k, Sums& s
 }
 
 /// Prefetches pixels x0 .. x1 - 1 of row y of the remodulation's inputs.
-HWY_INLINE void prefetchRemodulation(const Remodulation& m, uint32_t x0, uint32_t x1, uint32_t y) {
+HWY_INLINE void prefetchRemodulation(const Remodulation& r, uint32_t x0, uint32_t x1, uint32_t y) {
+    const ModulateViews& m = r.views;
     for (uint32_t x = x0; x < x1; x += 4) {  // 4 RGBA32F pixels to a cache line
         hwy::Prefetch(&m.color.at(x, y));
         hwy::Prefetch(&m.albedo.at(x, y));
         if (m.emission.data) hwy::Prefetch(&m.emission.at(x, y));
-        if (m.add.data) hwy::Prefetch(&m.add.at(x, y));
+        if (r.split) hwy::Prefetch(&m.filtered0.at(x, y));
         if ((x & 7) == 0) hwy::Prefetch(&m.linearZ.at(x, y));
     }
 }
 
 /// The remodulated result of pixels x0 .. x0 + count - 1 of row y from the level's rgb.
-HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_t y, uint32_t count, V r, V g, V b) {
+HWY_INLINE void remodulateStore(D d, const Remodulation& modulation, uint32_t x0, uint32_t y, uint32_t count, V r, V g,
+                                V b) {
+    const ModulateViews& m = modulation.views;
     const size_t N = hn::Lanes(d);
     if (count < N) {
         HWY_ALIGN float lanes[3][kMaxLanes];
@@ -181,7 +184,7 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_
             const uint32_t x = x0 + k;
             const glm::vec3 emission = m.emission.data ? glm::vec3(m.emission.at(x, y)) : glm::vec3(0.f);
             glm::vec3 illum(lanes[0][k], lanes[1][k], lanes[2][k]);
-            if (m.add.data) illum = glm::vec3(m.add.at(x, y)) + illum;  // modulatePixel's filtered0 + filtered1
+            if (modulation.split) illum = glm::vec3(m.filtered0.at(x, y)) + illum;  // modulatePixel's order
             m.dst.at(x, y) = remodulate(illum, m.color.at(x, y), m.albedo.at(x, y), emission, m.linearZ.at(x, y).x);
         }
         return;
@@ -191,10 +194,10 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& m, uint32_t x0, uint32_
     hn::LoadInterleaved4(d, &m.color.at(x0, y).x, cr, cg, cb, ca);
     hn::LoadInterleaved4(d, &m.albedo.at(x0, y).x, ar, ag, ab, aa);
     if (m.emission.data) hn::LoadInterleaved4(d, &m.emission.at(x0, y).x, er, eg, eb, ea);
-    if (m.add.data) {
+    if (modulation.split) {
         // modulatePixel's filtered0 + filtered1: the other signal first.
         V sr, sg, sb, sa;
-        hn::LoadInterleaved4(d, &m.add.at(x0, y).x, sr, sg, sb, sa);
+        hn::LoadInterleaved4(d, &m.filtered0.at(x0, y).x, sr, sg, sb, sa);
         r = hn::Add(sr, r);
         g = hn::Add(sg, g);
         b = hn::Add(sb, b);
@@ -226,7 +229,7 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
     for (uint32_t y = t.y0; y < t.y1; ++y) {
         // The remodulation's inputs are read once, in short row segments of a tile: prefetch the next row's while
         // this one is filtered (the hardware prefetchers do not follow tiles across rows).
-        if (out.modulate.dst.data && y + 1 < t.y1) prefetchRemodulation(out.modulate, t.x0, t.x1, y + 1);
+        if (out.modulate.views.dst.data && y + 1 < t.y1) prefetchRemodulation(out.modulate, t.x0, t.x1, y + 1);
         // Likewise the one tap row the next output row reads first (y + 1 + 2 step), margins included.
         if (y + 1 < t.y1 && int(y) + 1 + 2 * c.step < H) {
             const size_t row = L.offset(0, y + 1 + 2 * uint32_t(c.step));
@@ -308,7 +311,7 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
                 hn::StoreU(luminanceOf(d, r, g, b), d, out.planes.l + o);
             }
             const uint32_t count = std::min<uint32_t>(uint32_t(N), t.x1 - x0);
-            if (out.modulate.dst.data) remodulateStore(d, out.modulate, x0, y, count, r, g, b);
+            if (out.modulate.views.dst.data) remodulateStore(d, out.modulate, x0, y, count, r, g, b);
             for (const ImageView<glm::vec4>& image : out.image) {
                 if (!image.data) continue;
                 float* px = &image.at(x0, y).x;

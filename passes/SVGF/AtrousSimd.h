@@ -30,6 +30,7 @@
 #include <string>
 
 #include "AtrousKernels.h"
+#include "SVGFKernels.h"
 #include "loom/Texture.h"
 
 namespace loom::svgf::simd {
@@ -108,17 +109,16 @@ void packGuide(const PlaneLayout& layout, ImageView<const glm::vec2> linearZ, Im
 /// Writes a signal's interior planes from rgb + variance pixels (sanitised, luminance computed).
 void packSignal(const PlaneLayout& layout, ImageView<const glm::vec4> src, const SignalPlanes& dst);
 
-/// Remodulation fused into a level's output: dst = remodulate() of SVGFKernels.h (albedo times the level's rgb, plus
-/// add's rgb when given, plus emission; miss pixels, by linearZ, pass color through). emission and add are optional.
+/// Remodulation fused into a level's output: modulatePixel() of SVGFKernels.h with the level's rgb as the last
+/// filtered signal: views.filtered0, or with `split` views.filtered1 (filtered0, read from its view, is added first).
+/// views.filtered1 is not read.
 struct Remodulation {
-    ImageView<const glm::vec4> color, albedo, emission;
-    ImageView<const glm::vec4> add;  ///< optional: illumination added to the level's rgb first (the split's other signal)
-    ImageView<const glm::vec2> linearZ;
-    ImageView<glm::vec4> dst;
+    ModulateViews views;
+    bool split = false;
 };
 
 /// Where one level writes: its planes (skipped when planes.r is null), up to two rgb + variance images, and the
-/// remodulated result (skipped when modulate.dst is null). variance = false: nobody reads the level's variance, so it
+/// remodulated result (skipped when modulate.views.dst is null). variance = false: nobody reads the level's variance, so it
 /// is not propagated (planes and images then receive 0 in its place).
 struct LevelOutputs {
     SignalPlanes planes;

@@ -333,15 +333,15 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
     if (v.variance.data) v.variance.at(x, y) = e0.a + (split ? e1.a : 0.f);
 }
 
-/// Views of the modulation stage.
+/// Views of the modulation stage (filtered1: split only).
 struct ModulateViews {
     ImageView<const glm::vec4> filtered0, filtered1, color, albedo, emission;
     ImageView<const glm::vec2> linearZ;
     ImageView<glm::vec4> dst;
 };
 
-/// Stage 4 for pixel (x, y): albedo * (sum of the filtered signals) + emission; miss pixels copy the input colour
-/// (non-finite channels as 0). The alpha channel is the input colour's.
+/// Remodulation of one pixel: albedo * illum + emission; miss pixels (z < 0) copy the input colour (non-finite
+/// channels as 0). The alpha channel is the input colour's.
 LOOM_HD inline glm::vec4 remodulate(const glm::vec3& illum, const glm::vec4& color, const glm::vec4& albedo,
                                     const glm::vec3& emission, float z) {
     const float alpha = isFiniteBits(color.a) ? color.a : 1.f;
@@ -349,6 +349,7 @@ LOOM_HD inline glm::vec4 remodulate(const glm::vec3& illum, const glm::vec4& col
     return glm::vec4(illum * guardedAlbedo(albedo) + finiteOrZero(emission), alpha);
 }
 
+/// Stage 4 for pixel (x, y): remodulate() of the sum of the filtered signals.
 LOOM_HD inline void modulatePixel(const ModulateViews& v, uint32_t x, uint32_t y, bool split) {
     glm::vec3 illum = glm::vec3(v.filtered0.at(x, y));
     if (split) illum += glm::vec3(v.filtered1.at(x, y));

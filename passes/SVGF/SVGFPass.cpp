@@ -295,13 +295,7 @@ void SVGFPass::execute(PassContext& ctx) {
     mv.linearZ = tv.linearZ;
     mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
     const bool fusedModulation = fused && levels > 0;
-    simd::Remodulation remodulation;
-    remodulation.color = mv.color;
-    remodulation.albedo = mv.albedo;
-    remodulation.emission = mv.emission;
-    remodulation.linearZ = mv.linearZ;
-    remodulation.dst = mv.dst;
-    if (split) remodulation.add = mv.filtered0;  // signal 0's result, in integrated0 by then
+    const simd::Remodulation remodulation{mv, split};  // split: signal 0's result is in integrated0 by then
     auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback,
                       const simd::Remodulation* modulate, int slot) {
         AtrousTimings timings;
@@ -352,8 +346,6 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "reprojection with disocclusion tests, moments, spatial variance while history is short, a-trous levels "
         "with feedback, remodulation; direct and indirect filtered separately when both are connected. History in "
         "graph fields. Stats: nonFinite (colour samples rejected), split, temporal.referenceShare (fraction of pixels "
-        "the "
-        "temporal stage ran through the scalar reference kernel rather than the vector path), ms.reproject, "
-        "ms.variance, "
-        "ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate.");
+        "the temporal stage ran through the scalar reference kernel rather than the vector path), ms.reproject, "
+        "ms.variance, ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate.");
 }

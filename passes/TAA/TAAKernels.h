@@ -95,22 +95,22 @@ LOOM_HD inline glm::vec4 fromYCoCg(const glm::vec4& v) {
 /// luma below 1, so a light next to a dark surface differs from it by a bounded amount and the bicubic history and
 /// the blend cannot carry a large fraction of the light into the dark side. expandColor() is its inverse, exact up to
 /// rounding: Y(c') = Y / (1 + Y), hence c = c' / (1 - Y(c')).
+LOOM_HD inline float nonNegativeLuma(const glm::vec4& c) {
+    return glm::max(0.25f * (c.x + c.z) + 0.5f * c.y, 0.f);  // toYCoCg(c).x, clamped
+}
 LOOM_HD inline glm::vec4 compressColor(const glm::vec4& c) {
-    const float y = glm::max(0.25f * (c.x + c.z) + 0.5f * c.y, 0.f);
-    const float k = 1.f / (1.f + y);
+    const float k = 1.f / (1.f + nonNegativeLuma(c));
     return glm::vec4(c.x * k, c.y * k, c.z * k, c.w);
 }
 /// Inverse of compressColor(); a luma at or above 1 (only from rounding or non-HDR input) is held just below 1.
 LOOM_HD inline glm::vec4 expandColor(const glm::vec4& c) {
-    const float y = glm::max(0.25f * (c.x + c.z) + 0.5f * c.y, 0.f);
-    const float k = 1.f / glm::max(1.f - y, 1e-7f);
+    const float k = 1.f / glm::max(1.f - nonNegativeLuma(c), 1e-7f);
     return glm::vec4(c.x * k, c.y * k, c.z * k, c.w);
 }
 
 /// The current colour at (x, y) as the resolve sees it: compressed when in.compress. Compression keeps finiteness:
 /// a finite colour compresses to a finite one, a non-finite one to a non-finite one.
-template <class Inputs>
-LOOM_HD inline glm::vec4 currentColor(const Inputs& in, int x, int y) {
+LOOM_HD inline glm::vec4 currentColor(const TaaInputs& in, int x, int y) {
     const glm::vec4 c = in.color.at(x, y);
     return in.compress ? compressColor(c) : c;
 }
@@ -144,8 +144,7 @@ LOOM_HD inline ClipBox makeClipBox(const glm::vec4& sum, const glm::vec4& sumSq,
 /// The 3x3 statistics of the current colour around (x, y). Each row's sums
 /// are formed first, then the rows are added, each sum starting from 0: the
 /// order the tiled CPU path uses too, so both give the same bits.
-template <class Inputs>
-LOOM_HD inline ClipBox neighbourhoodBox(const Inputs& in, int x, int y, float sigma) {
+LOOM_HD inline ClipBox neighbourhoodBox(const TaaInputs& in, int x, int y, float sigma) {
     glm::vec4 sum(0.f), sumSq(0.f), mn(kHuge), mx(-kHuge);
     uint32_t n = 0;
     for (int dy = -1; dy <= 1; ++dy) {

@@ -96,10 +96,14 @@ HWY_INLINE void toYCoCgVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, Float
 }
 
 /// compressColor() lane-wise: c / (1 + max(0, Y)), alpha kept.
+/// nonNegativeLuma() lane-wise.
+HWY_INLINE FloatVec nonNegativeLumaVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b) {
+    return hn::Max(hn::MulAdd(hn::Set(d, 0.25f), hn::Add(r, b), hn::Mul(hn::Set(d, 0.5f), g)), hn::Zero(d));
+}
+
 HWY_INLINE void compressVec(FloatTag d, FloatVec& r, FloatVec& g, FloatVec& b) {
     const FloatVec one = hn::Set(d, 1.f);
-    const FloatVec y = hn::Max(hn::MulAdd(hn::Set(d, 0.25f), hn::Add(r, b), hn::Mul(hn::Set(d, 0.5f), g)), hn::Zero(d));
-    const FloatVec k = hn::Div(one, hn::Add(one, y));
+    const FloatVec k = hn::Div(one, hn::Add(one, nonNegativeLumaVec(d, r, g, b)));
     r = hn::Mul(r, k);
     g = hn::Mul(g, k);
     b = hn::Mul(b, k);
@@ -108,8 +112,7 @@ HWY_INLINE void compressVec(FloatTag d, FloatVec& r, FloatVec& g, FloatVec& b) {
 /// expandColor() lane-wise: c / max(1 - max(0, Y), 1e-7), alpha kept.
 HWY_INLINE void expandVec(FloatTag d, FloatVec& r, FloatVec& g, FloatVec& b) {
     const FloatVec one = hn::Set(d, 1.f);
-    const FloatVec y = hn::Max(hn::MulAdd(hn::Set(d, 0.25f), hn::Add(r, b), hn::Mul(hn::Set(d, 0.5f), g)), hn::Zero(d));
-    const FloatVec k = hn::Div(one, hn::Max(hn::Sub(one, y), hn::Set(d, 1e-7f)));
+    const FloatVec k = hn::Div(one, hn::Max(hn::Sub(one, nonNegativeLumaVec(d, r, g, b)), hn::Set(d, 1e-7f)));
     r = hn::Mul(r, k);
     g = hn::Mul(g, k);
     b = hn::Mul(b, k);
@@ -246,12 +249,6 @@ HWY_INLINE void storeInterleaved(const FloatVec (&v)[4], glm::vec4* p, uint32_t 
     std::memcpy(o, packed, sizeof(glm::vec4) * n);
 }
 
-/// Writes 8 pixels (the first n of them) to history, with streaming stores: it is read again only next frame, long
-/// after it has left the caches, and streaming skips the read-for-ownership of its lines. (Streaming the output too
-/// measured no gain.)
-HWY_INLINE void storeHistory(const FloatVec (&v)[4], glm::vec4* history, uint32_t n) {
-    storeInterleaved(v, history, n, true);
-}
 
 /// How many region rows ahead the load asks for.
 constexpr uint32_t kPrefetchRows = 3;
@@ -303,7 +300,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
         }
         const auto scalarColumn = [&](uint32_t rx) {
             const uint32_t sx = clampIndex(int(t.x0 + rx) - 1, W);
-            const glm::vec4 c = in.compress ? taa::compressColor(colorRow[sx]) : colorRow[sx];
+            const glm::vec4 c = taa::currentColor(in, int(sx), int(sy));
             const glm::vec2 m = mvecRow[sx];
             finite &= taa::isFinite(c) & taa::isFinite(m);
             alphaConstant &= c.w == alpha0;
@@ -550,7 +547,9 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             oa = hn::IfThenElse(keep, oa, ca);
             FloatVec packed[4];
             interleavePixels(orr, og, ob, oa, packed);
-            storeHistory(packed, historyRow + t.x0 + x, n);
+            // History streams: it is read again only next frame, long after it has left the caches, and streaming
+            // skips the read-for-ownership of its lines. (Streaming the output too measured no gain.)
+            storeInterleaved(packed, historyRow + t.x0 + x, n, true);
             if (in.compress) {
                 // outputColor(): the linear input where the resolve returned the compressed input, else expanded.
                 const FloatMask same = hn::And(hn::And(hn::Eq(orr, cr), hn::Eq(og, cgr)),

@@ -71,8 +71,6 @@ void BM_FrameOverhead10NoOp(benchmark::State& state) {
 }
 BENCHMARK(BM_FrameOverhead10NoOp)->Unit(benchmark::kMicrosecond);
 
-}  // namespace
-
 // The cost of denormal arithmetic, and what parallelFor2D's flush-to-zero mode saves: products of small weights
 // that land in the denormal range (2^-65 squared, as a variance propagated with squared weights), summed in four
 // independent chains; once on the calling thread (the default floating-point mode: each denormal result and input
@@ -123,5 +121,7 @@ void BM_FmaThroughput(benchmark::State& state) {
         benchmark::Counter(double(state.iterations()) * kRounds * kChains, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_FmaThroughput)->Unit(benchmark::kMillisecond);
+
+}  // namespace
 
 BENCHMARK_MAIN();
