@@ -245,62 +245,67 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             const V rc = hn::LoadU(d, in.r + o), gc = hn::LoadU(d, in.g + o), bc = hn::LoadU(d, in.b + o);
             const V vc = hn::LoadU(d, in.v + o), lc = hn::LoadU(d, in.l + o);
 
-            // 3x3 Gaussian of the variance over in-frame, non-miss pixels (off-frame columns are misses).
-            V num = zero, den = zero;
-            for (int j = -1; j <= 1; ++j) {
-                const int qy = int(y) + j;
-                if (qy < 0 || qy >= H) continue;
-                for (int i = -1; i <= 1; ++i) {
-                    const ptrdiff_t q = ptrdiff_t(o) + j * stride + i;
-                    const auto m = hn::Ge(hn::LoadU(d, G.z + q), zero);
-                    const V k = hn::Set(d, blurKernel[i < 0 ? -i : i][j < 0 ? -j : j]);
-                    num = hn::MulAdd(k, hn::IfThenElseZero(m, hn::LoadU(d, in.v + q)), num);
-                    den = hn::Add(den, hn::IfThenElseZero(m, k));
+            // A vector of misses only (sky, or the margin past the frame's right edge) keeps its input, as every
+            // miss centre does below: nothing to weigh.
+            V r = rc, g = gc, b = bc, v = kVariance ? vc : zero;
+            if (!hn::AllTrue(d, hn::Lt(zc, zero))) {
+                // 3x3 Gaussian of the variance over in-frame, non-miss pixels (off-frame columns are misses).
+                V num = zero, den = zero;
+                for (int j = -1; j <= 1; ++j) {
+                    const int qy = int(y) + j;
+                    if (qy < 0 || qy >= H) continue;
+                    for (int i = -1; i <= 1; ++i) {
+                        const ptrdiff_t q = ptrdiff_t(o) + j * stride + i;
+                        const auto m = hn::Ge(hn::LoadU(d, G.z + q), zero);
+                        const V k = hn::Set(d, blurKernel[i < 0 ? -i : i][j < 0 ? -j : j]);
+                        num = hn::MulAdd(k, hn::IfThenElseZero(m, hn::LoadU(d, in.v + q)), num);
+                        den = hn::Add(den, hn::IfThenElseZero(m, k));
+                    }
                 }
+                const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
+                const V sigma = hn::Sqrt(hn::Max(blurred, zero));
+                const V log2e = hn::Set(d, kLog2e);
+                const V eps = hn::Set(d, kAtrousEpsilon);
+                // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
+                const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, c.phiColor), sigma, eps));
+                const V phiZ = hn::Mul(hn::Set(d, c.phiDepthStep), dzc);
+                // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five.
+                // They differ by eps (1 - |(i, j)|) / (|(i, j)| (phiZ + eps)) relative, below 1e-6 for phiZ >= 1e-4;
+                // only phiZ ~ eps (a zero depth derivative) moves the already enormous exponent of a depth step.
+                const V invPhiZ1 = hn::Div(log2e, hn::Add(phiZ, eps));
+                V invPhiZ[5];
+                for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Mul(invPhiZ1, hn::Set(d, 1.f / kTapDistance[k]));
+
+                // Centre tap: no depth or luminance difference, only its normal with itself.
+                V w = exp2Neg(d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx,
+                                                            ncy, ncz, c));
+                V sumR = hn::Mul(w, rc), sumG = hn::Mul(w, gc), sumB = hn::Mul(w, bc);
+                V sumW = w, sumV = hn::Mul(hn::Mul(w, w), vc);
+
+                // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
+                const Centre centre{
+                    zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
+                Sums sums{sumR, sumG, sumB, sumV, sumW};
+                const TapContext ctx{G, in, c, W, H, int(y), ptrdiff_t(o), stride};
+                accumulateRow<kSeries, kVariance, -2>(d, ctx, centre, sums);
+                accumulateRow<kSeries, kVariance, -1>(d, ctx, centre, sums);
+                accumulateRow<kSeries, kVariance, 0>(d, ctx, centre, sums);
+                accumulateRow<kSeries, kVariance, 1>(d, ctx, centre, sums);
+                accumulateRow<kSeries, kVariance, 2>(d, ctx, centre, sums);
+                sumR = sums.r;
+                sumG = sums.g;
+                sumB = sums.b;
+                sumV = sums.v;
+                sumW = sums.w;
+
+                // Miss centres, and pixels whose every weight vanished (degenerate normal), keep their input.
+                const auto keep = hn::Or(hn::Lt(zc, zero), hn::Not(hn::Gt(sumW, hn::Set(d, 1e-30f))));
+                const V inv = hn::Div(hn::Set(d, 1.f), hn::Max(sumW, hn::Set(d, 1e-30f)));
+                r = hn::IfThenElse(keep, rc, hn::Mul(sumR, inv));
+                g = hn::IfThenElse(keep, gc, hn::Mul(sumG, inv));
+                b = hn::IfThenElse(keep, bc, hn::Mul(sumB, inv));
+                if constexpr (kVariance) v = hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sumV, inv), inv));
             }
-            const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
-            const V sigma = hn::Sqrt(hn::Max(blurred, zero));
-            const V log2e = hn::Set(d, kLog2e);
-            const V eps = hn::Set(d, kAtrousEpsilon);
-            // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
-            const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, c.phiColor), sigma, eps));
-            const V phiZ = hn::Mul(hn::Set(d, c.phiDepthStep), dzc);
-            // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five.
-            // They differ by eps (1 - |(i, j)|) / (|(i, j)| (phiZ + eps)) relative, below 1e-6 for phiZ >= 1e-4;
-            // only phiZ ~ eps (a zero depth derivative) moves the already enormous exponent of a depth step.
-            const V invPhiZ1 = hn::Div(log2e, hn::Add(phiZ, eps));
-            V invPhiZ[5];
-            for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Mul(invPhiZ1, hn::Set(d, 1.f / kTapDistance[k]));
-
-            // Centre tap: no depth or luminance difference, only its normal with itself.
-            V w = exp2Neg(
-                d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx, ncy, ncz, c));
-            V sumR = hn::Mul(w, rc), sumG = hn::Mul(w, gc), sumB = hn::Mul(w, bc);
-            V sumW = w, sumV = hn::Mul(hn::Mul(w, w), vc);
-
-            // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
-            const Centre centre{
-                zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
-            Sums sums{sumR, sumG, sumB, sumV, sumW};
-            const TapContext ctx{G, in, c, W, H, int(y), ptrdiff_t(o), stride};
-            accumulateRow<kSeries, kVariance, -2>(d, ctx, centre, sums);
-            accumulateRow<kSeries, kVariance, -1>(d, ctx, centre, sums);
-            accumulateRow<kSeries, kVariance, 0>(d, ctx, centre, sums);
-            accumulateRow<kSeries, kVariance, 1>(d, ctx, centre, sums);
-            accumulateRow<kSeries, kVariance, 2>(d, ctx, centre, sums);
-            sumR = sums.r;
-            sumG = sums.g;
-            sumB = sums.b;
-            sumV = sums.v;
-            sumW = sums.w;
-
-            // Miss centres, and pixels whose every weight vanished (degenerate normal), keep their input.
-            const auto keep = hn::Or(hn::Lt(zc, zero), hn::Not(hn::Gt(sumW, hn::Set(d, 1e-30f))));
-            const V inv = hn::Div(hn::Set(d, 1.f), hn::Max(sumW, hn::Set(d, 1e-30f)));
-            const V r = hn::IfThenElse(keep, rc, hn::Mul(sumR, inv));
-            const V g = hn::IfThenElse(keep, gc, hn::Mul(sumG, inv));
-            const V b = hn::IfThenElse(keep, bc, hn::Mul(sumB, inv));
-            const V v = kVariance ? hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sumV, inv), inv)) : zero;
 
             if (out.planes.r) {
                 // Lanes past the frame's right edge have miss centres: they store the margin's zeros back.
