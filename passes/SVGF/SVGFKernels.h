@@ -244,16 +244,93 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
     return !sampleFinite;
 }
 
-/// Edge-stopping weight of the spatial variance estimate (Falcor's computeWeight: exp of the depth and luminance
-/// terms times the normal power, paper eq. 3-5 without the variance in the luminance term).
-LOOM_HD inline float varianceWeight(float zCentre, float zTap, float phiDepth, const glm::vec3& nCentre,
-                                    const glm::vec3& nTap, float phiNormal, float lCentre, float lTap, float phiL) {
-    // Flat surfaces (equal normals) skip the power.
-    const float cosine = glm::dot(nCentre, nTap);
-    const float wn = cosine >= 1.f ? 1.f : cosine <= 0.f ? 0.f : powf(cosine, phiNormal);
-    const float wz = phiDepth > 0.f ? fabsf(zCentre - zTap) / phiDepth : 0.f;
-    const float wl = fabsf(lCentre - lTap) / phiL;
-    return expf(-wl - wz) * wn;
+/// The spatial variance estimate's weight, spelt in operations a vector unit performs identically (products and
+/// sums without contraction, a polynomial exponential), so the vectorised variance stage (TemporalSimd.cpp)
+/// reproduces it bit for bit. It is Falcor's computeWeight, exp(-|dl| / phiColor - |dz| / (phiDepth |(i, j)|)) *
+/// max(0, n.n')^phiNormal (paper eq. 3-5 without the variance in the luminance term), as one power of two:
+/// - the normal power, for phiNormal >= kVarianceSeriesMinPhi, as exp(-phi (d + d^2/2 + d^3/3 + d^4/4)) with
+///   d = 1 - n.n' in [0, 1) (the first terms of -ln(1 - d); absolute error <= 3.2e-6 for phi >= 32); below that,
+///   powf;
+/// - 2^-t = 2^-round(t) p(t - round(t)), p a degree-4 fit of 2^f on [-0.5, 0.5] (relative error <= 2.6e-6), t
+///   clamped to 100 (weights below 2^-100 stay there).
+inline constexpr float kVarianceSeriesMinPhi = 32.f;
+inline constexpr float kVarianceLog2e = 1.44269504088896341f;
+inline constexpr float kVarianceMaxExponent = 100.f;
+/// p(f), lowest degree first (scalars, not an array: device code reads them as constants).
+inline constexpr float kVarianceExp2C0 = 0.9999992614457146f, kVarianceExp2C1 = 0.6931218147367706f,
+                       kVarianceExp2C2 = 0.2402474482794381f, kVarianceExp2C3 = 0.05591786031930501f,
+                       kVarianceExp2C4 = 0.009570101908089415f;
+
+/// 1 / |(i, j)| for tap (i, j) of the 7x7 footprint (|i|, |j| <= 3); 0 for the centre, whose depth term is 0.
+LOOM_HD inline float varianceInvDistance(int i, int j) {
+    switch (i * i + j * j) {
+        case 1:
+            return 1.f;
+        case 2:
+            return 0.707106769f;
+        case 4:
+            return 0.5f;
+        case 5:
+            return 0.447213590f;
+        case 8:
+            return 0.353553385f;
+        case 9:
+            return 0.333333343f;
+        case 10:
+            return 0.316227764f;
+        case 13:
+            return 0.277350098f;
+        case 18:
+            return 0.235702261f;
+        default:
+            return 0.f;
+    }
+}
+
+/// 2^-t for t >= 0 (see above): the operations of the vector stage, lane for lane.
+LOOM_HD inline float varianceExp2Neg(float t) {
+    const float magic = 12582912.f;  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
+    t = minf(t, kVarianceMaxExponent);
+    const float r = t + magic;
+    const float f = (r - magic) - t;  // in [-0.5, 0.5]
+    float q = kVarianceExp2C4 * f + kVarianceExp2C3;
+    q = q * f + kVarianceExp2C2;
+    q = q * f + kVarianceExp2C1;
+    q = q * f + kVarianceExp2C0;
+    return bitsToFloat(floatBits(q) - (floatBits(r) << 23));
+}
+
+/// What every tap of a centre shares: the scales of the luminance term and of the normal series.
+struct VarianceScales {
+    float invPhiL;    ///< 1 / phiColor (1e30 for phiColor <= 0)
+    float phiNormal;  ///< the normal power
+    bool series;      ///< phiNormal >= kVarianceSeriesMinPhi: the series form
+    float terms[4];   ///< phi log2(e) / k, k = 1..4
+};
+
+LOOM_HD inline VarianceScales varianceScales(const AtrousParams& p) {
+    VarianceScales s{};
+    s.invPhiL = p.phiColor > 0.f ? 1.f / p.phiColor : 1e30f;
+    s.phiNormal = maxf(p.phiNormal, 0.f);
+    s.series = s.phiNormal >= kVarianceSeriesMinPhi;
+    for (int k = 0; k < 4; ++k) s.terms[k] = s.phiNormal * kVarianceLog2e / float(k + 1);
+    return s;
+}
+
+/// The weight of a tap at depth difference |dz| (invDepth: 1 / (phiDepth |(i, j)|)), normals nC, nT (finite) and
+/// luminances lC, lT.
+LOOM_HD inline float varianceWeight(float dz, float invDepth, const glm::vec3& nC, const glm::vec3& nT, float lC,
+                                    float lT, const VarianceScales& s) {
+    const float cosine = (nC.x * nT.x + nC.y * nT.y) + nC.z * nT.z;
+    if (!(cosine > 0.f)) return 0.f;
+    const float linear = fabsf(lC - lT) * s.invPhiL + fabsf(dz) * invDepth;
+    if (!s.series) {
+        const float wn = cosine >= 1.f ? 1.f : powf(cosine, s.phiNormal);
+        return expf(-linear) * wn;
+    }
+    const float d = maxf(1.f - cosine, 0.f);
+    const float normal = d * (s.terms[0] + d * (s.terms[1] + d * (s.terms[2] + d * s.terms[3])));
+    return varianceExp2Neg(linear * kVarianceLog2e + normal);
 }
 
 /// Views of the variance stage: integrated signals and moments in, à-trous input out.
@@ -279,9 +356,10 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
         if (v.variance.data) v.variance.at(x, y) = i0.a + i1.a;
         return;
     }
-    const glm::vec3 n = glm::vec3(v.normW.at(x, y));
+    const glm::vec3 n = finiteOrZero(glm::vec3(v.normW.at(x, y)));
     const float l0 = luminance(glm::vec3(i0)), l1 = luminance(glm::vec3(i1));
-    const float phiDepth = maxf(z.y, 1e-8f) * 3.f;
+    const float invPhiDepth = 1.f / (maxf(z.y, 1e-8f) * 3.f);
+    const VarianceScales scales = varianceScales(p);
     glm::vec3 sum0(0.f), sum1(0.f);
     glm::vec4 sumMoments(0.f);
     float sumW0 = 0.f, sumW1 = 0.f;
@@ -293,22 +371,25 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
             const int qx = int(x) + i;
             if (qx < 0 || qx >= w) continue;
             const glm::vec2 zq = v.linearZ.at(uint32_t(qx), uint32_t(qy));
-            if (zq.x < 0.f) continue;
-            const glm::vec3 nq = glm::vec3(v.normW.at(uint32_t(qx), uint32_t(qy)));
+            if (!(zq.x >= 0.f) || !isFiniteBits(zq.x)) continue;  // misses and non-finite depths
+            const glm::vec3 nq = finiteOrZero(glm::vec3(v.normW.at(uint32_t(qx), uint32_t(qy))));
             const glm::vec4 q0 = v.integrated0.at(uint32_t(qx), uint32_t(qy));
             const glm::vec4 mq = v.moments.at(uint32_t(qx), uint32_t(qy));
-            const float distance = sqrtf(float(i * i + j * j));
-            const float w0 = varianceWeight(z.x, zq.x, phiDepth * distance, n, nq, p.phiNormal, l0,
-                                            luminance(glm::vec3(q0)), p.phiColor);
-            sum0 += w0 * glm::vec3(q0);
+            const float invDepth = invPhiDepth * varianceInvDistance(i, j);
+            const float dz = z.x - zq.x;
+            const float w0 = varianceWeight(dz, invDepth, n, nq, l0, luminance(glm::vec3(q0)), scales);
+            sum0.x += w0 * q0.x;
+            sum0.y += w0 * q0.y;
+            sum0.z += w0 * q0.z;
             sumMoments.x += w0 * mq.x;
             sumMoments.y += w0 * mq.y;
             sumW0 += w0;
             if (split) {
                 const glm::vec4 q1 = v.integrated1.at(uint32_t(qx), uint32_t(qy));
-                const float w1 = varianceWeight(z.x, zq.x, phiDepth * distance, n, nq, p.phiNormal, l1,
-                                                luminance(glm::vec3(q1)), p.phiColor);
-                sum1 += w1 * glm::vec3(q1);
+                const float w1 = varianceWeight(dz, invDepth, n, nq, l1, luminance(glm::vec3(q1)), scales);
+                sum1.x += w1 * q1.x;
+                sum1.y += w1 * q1.y;
+                sum1.z += w1 * q1.z;
                 sumMoments.z += w1 * mq.z;
                 sumMoments.w += w1 * mq.w;
                 sumW1 += w1;
@@ -319,14 +400,12 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
     const float boost = kSpatialVarianceFrames / maxf(length, 1.f);
     glm::vec4 e0 = i0, e1 = i1;
     if (sumW0 > 0.f) {
-        sum0 /= sumW0;
         const float m1 = sumMoments.x / sumW0, m2 = sumMoments.y / sumW0;
-        e0 = glm::vec4(sum0, maxf(0.f, m2 - m1 * m1) * boost);
+        e0 = glm::vec4(sum0.x / sumW0, sum0.y / sumW0, sum0.z / sumW0, maxf(0.f, m2 - m1 * m1) * boost);
     }
     if (split && sumW1 > 0.f) {
-        sum1 /= sumW1;
         const float m1 = sumMoments.z / sumW1, m2 = sumMoments.w / sumW1;
-        e1 = glm::vec4(sum1, maxf(0.f, m2 - m1 * m1) * boost);
+        e1 = glm::vec4(sum1.x / sumW1, sum1.y / sumW1, sum1.z / sumW1, maxf(0.f, m2 - m1 * m1) * boost);
     }
     v.estimate0.at(x, y) = e0;
     if (split) v.estimate1.at(x, y) = e1;

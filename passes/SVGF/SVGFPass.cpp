@@ -45,6 +45,8 @@ const char kEstimateIndirect[] = "estimateIndirect";
 const char kStatNonFinite[] = "nonFinite";
 const char kStatSplit[] = "split";
 const char kStatReferencePixels[] = "temporal.referenceShare";
+const char kStatSpatialPixels[] = "variance.spatialPixels";
+const char kStatVarianceReference[] = "variance.referenceShare";
 const char kStatReproject[] = "ms.reproject";
 const char kStatVariance[] = "ms.variance";
 const char kStatAtrousPrepare[] = "ms.atrous.prepare";
@@ -255,7 +257,13 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
     vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
-    if (fusedTemporal) {
+    double spatialPixels = -1.0, varianceReference = 1.0;  // -1: not counted (the scalar stages)
+    if (fused && varianceScales(ap).series) {
+        const simd::VarianceCounts counts = simd::varianceFused(vv, ap, *planes.layout, planes.guide, planes.signal,
+                                                                planes.signal1, split, kTemporalBandRows);
+        spatialPixels = double(counts.spatial);
+        varianceReference = counts.spatial ? double(counts.reference) / double(counts.spatial) : 0.0;
+    } else if (fusedTemporal) {
         // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate. Bands of
         // whole rows, as stage 1: the scan of the lengths is a plain stream.
         parallelFor2D(
@@ -267,8 +275,7 @@ void SVGFPass::execute(PassContext& ctx) {
                         varianceEstimatePixel(vv, x, y, ap, split);
                         if (!fused) continue;
                         simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
-                        if (split)
-                            simd::packSignalPixel(*planes.layout, planes.signal1, x, y, vv.estimate1.at(x, y));
+                        if (split) simd::packSignalPixel(*planes.layout, planes.signal1, x, y, vv.estimate1.at(x, y));
                     }
             },
             kTemporalBandRows);
@@ -277,6 +284,8 @@ void SVGFPass::execute(PassContext& ctx) {
             w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, ap, split); }, kStreamTileSize);
     }
     stats.set(kStatVariance, msSince(t0));
+    if (spatialPixels >= 0.0) stats.set(kStatSpatialPixels, spatialPixels);
+    stats.set(kStatVarianceReference, varianceReference);
 
     // Stage 3: à-trous levels; the integrated fields are free now and take the filtered signals.
     t0 = Clock::now();
@@ -306,8 +315,7 @@ void SVGFPass::execute(PassContext& ctx) {
     const simd::Remodulation* modulate = fusedModulation ? &remodulation : nullptr;
     filter(vv.estimate0, tv.integrated0, ctx.historyCur(kIllumHistory).view<glm::vec4>(), split ? nullptr : modulate,
            0);
-    if (split)
-        filter(vv.estimate1, tv.integrated1, ctx.historyCur(kIndirectHistory).view<glm::vec4>(), modulate, 1);
+    if (split) filter(vv.estimate1, tv.integrated1, ctx.historyCur(kIndirectHistory).view<glm::vec4>(), modulate, 1);
     stats.set(kStatAtrousPrepare, stats.values().at(kStatAtrousPrepare) + prepareMs);
     double atrousMs = 0.0;
     for (int level = 0; level < levels && level < 16; ++level) {
@@ -346,6 +354,8 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "reprojection with disocclusion tests, moments, spatial variance while history is short, a-trous levels "
         "with feedback, remodulation; direct and indirect filtered separately when both are connected. History in "
         "graph fields. Stats: nonFinite (colour samples rejected), split, temporal.referenceShare (fraction of pixels "
-        "the temporal stage ran through the scalar reference kernel rather than the vector path), ms.reproject, "
+        "the temporal stage ran through the scalar reference kernel rather than the vector path), "
+        "variance.spatialPixels (pixels given the spatial variance estimate; fused path only), "
+        "variance.referenceShare (fraction of those through the scalar kernel), ms.reproject, "
         "ms.variance, ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate.");
 }

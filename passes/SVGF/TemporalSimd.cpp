@@ -186,8 +186,8 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         sa = hn::Mul(sa, inv);
         // History that is not finite counts as disoccluded (reference: r.valid).
         M finite = hn::And(hn::And(hn::IsFinite(rr), hn::IsFinite(rg)), hn::And(hn::IsFinite(rb), hn::IsFinite(ra)));
-        finite = hn::And(finite, hn::And(hn::And(hn::IsFinite(sr), hn::IsFinite(sg)),
-                                         hn::And(hn::IsFinite(sb), hn::IsFinite(sa))));
+        finite = hn::And(
+            finite, hn::And(hn::And(hn::IsFinite(sr), hn::IsFinite(sg)), hn::And(hn::IsFinite(sb), hn::IsFinite(sa))));
         finite = hn::And(finite, hn::And(hn::And(hn::IsFinite(rm[0]), hn::IsFinite(rm[1])),
                                          hn::And(hn::IsFinite(rm[2]), hn::IsFinite(rm[3]))));
         valid = hn::And(hn::And(hit, bilinear), hn::And(finite, hn::IsFinite(rl)));
@@ -278,7 +278,7 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
 }
 
 TemporalCounts TemporalFusedTarget(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
-                                      uint32_t rows) {
+                                   uint32_t rows) {
     const RowJob job{v, p, out};
     std::atomic<uint64_t> rejected{0}, reference{0};
     // Bands of whole rows rather than square tiles: each of the some twenty streams is then one long run per row,
@@ -295,6 +295,203 @@ TemporalCounts TemporalFusedTarget(const TemporalViews& v, const TemporalParams&
     return {rejected.load(), reference.load()};
 }
 
+/// varianceExp2Neg lane-wise (the same operations).
+HWY_INLINE V exp2NegOf(D d, V t) {
+    const DI di;
+    const V magic = hn::Set(d, 12582912.f);
+    t = minOf(t, hn::Set(d, kVarianceMaxExponent));
+    const V r = hn::Add(t, magic);
+    const V f = hn::Sub(hn::Sub(r, magic), t);
+    V q = hn::Add(hn::Mul(hn::Set(d, kVarianceExp2C4), f), hn::Set(d, kVarianceExp2C3));
+    q = hn::Add(hn::Mul(q, f), hn::Set(d, kVarianceExp2C2));
+    q = hn::Add(hn::Mul(q, f), hn::Set(d, kVarianceExp2C1));
+    q = hn::Add(hn::Mul(q, f), hn::Set(d, kVarianceExp2C0));
+    return hn::BitCast(d, hn::Sub(hn::BitCast(di, q), hn::ShiftLeft<23>(hn::BitCast(di, r))));
+}
+
+/// luminance() lane-wise (the same operations).
+HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
+    return hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
+                   hn::Mul(hn::Set(d, 0.0722f), b));
+}
+
+struct VarianceJob {
+    const VarianceViews& v;
+    const VarianceScales& s;
+    const PlaneLayout& L;
+    const GuidePlanes& G;
+    const SignalPlanes& S0;
+    const SignalPlanes& S1;  ///< split only
+};
+
+/// Lanes of the N pixels from x on row y that take the spatial estimate (varianceEstimatePixel's test).
+HWY_INLINE M shortHistory(D d, const VarianceViews& v, uint32_t x, uint32_t y, V& z, V& dz) {
+    hn::LoadInterleaved2(d, &v.linearZ.at(x, y).x, z, dz);
+    const V length = hn::LoadU(d, &v.length.at(x, y));
+    return hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hn::Ge(z, hn::Zero(d)));
+}
+
+/// One signal's sums over the 7x7 taps.
+struct VarianceSums {
+    V r, g, b, m1, m2, w;
+};
+
+/// The signal's estimate from its sums where a weight survived (the centre's unless its normal is degenerate),
+/// else the temporal values (i), blended into the short lanes of the estimate image at p.
+HWY_INLINE V storeEstimate(D d, const VarianceSums& s, V ir, V ig, V ib, V ia, V boost, M isShort, float* p) {
+    const V zero = hn::Zero(d);
+    const V m1 = hn::Div(s.m1, s.w), m2 = hn::Div(s.m2, s.w);
+    const M has = hn::Gt(s.w, zero);
+    const V er = hn::IfThenElse(has, hn::Div(s.r, s.w), ir), eg = hn::IfThenElse(has, hn::Div(s.g, s.w), ig);
+    const V eb = hn::IfThenElse(has, hn::Div(s.b, s.w), ib);
+    const V ea = hn::IfThenElse(has, hn::Mul(maxOf(zero, hn::Sub(m2, hn::Mul(m1, m1))), boost), ia);
+    V pr, pg, pb, pa;  // the other lanes keep what stage 1 wrote
+    hn::LoadInterleaved4(d, p, pr, pg, pb, pa);
+    hn::StoreInterleaved4(hn::IfThenElse(isShort, er, pr), hn::IfThenElse(isShort, eg, pg),
+                          hn::IfThenElse(isShort, eb, pb), hn::IfThenElse(isShort, ea, pa), d, p);
+    return ea;
+}
+
+/// varianceEstimatePixel (series normal weight) for the N pixels from x on row y, all of whose taps lie inside the
+/// frame's columns: the reference's operations in the reference's order, taps read from the à-trous planes stage 1
+/// packed (the same values, sanitised as the reference sanitises them) and from the moments. False: no lane short.
+template <bool kSplit>
+bool varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
+    const VarianceViews& v = j.v;
+    const D d;
+    const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
+    V zc, dzc;
+    const M isShort = shortHistory(d, v, x, y, zc, dzc);
+    if (hn::AllFalse(d, isShort)) return false;
+    const size_t o = j.L.offset(x, y);
+    const ptrdiff_t stride = ptrdiff_t(j.L.stride);
+    const GuidePlanes& G = j.G;
+    const SignalPlanes &S0 = j.S0, &S1 = j.S1;
+    const V ncx = hn::LoadU(d, G.nx + o), ncy = hn::LoadU(d, G.ny + o), ncz = hn::LoadU(d, G.nz + o);
+    V ir, ig, ib, ia, kr = zero, kg = zero, kb = zero, ka = zero;
+    hn::LoadInterleaved4(d, &v.integrated0.at(x, y).x, ir, ig, ib, ia);
+    if constexpr (kSplit) hn::LoadInterleaved4(d, &v.integrated1.at(x, y).x, kr, kg, kb, ka);
+    const V lc0 = luminanceExact(d, ir, ig, ib), lc1 = luminanceExact(d, kr, kg, kb);
+    const V invPhiDepth = hn::Div(one, hn::Mul(maxOf(dzc, hn::Set(d, 1e-8f)), hn::Set(d, 3.f)));
+    const V invPhiL = hn::Set(d, j.s.invPhiL), log2e = hn::Set(d, kVarianceLog2e);
+    const V t0 = hn::Set(d, j.s.terms[0]), t1 = hn::Set(d, j.s.terms[1]), t2 = hn::Set(d, j.s.terms[2]),
+            t3 = hn::Set(d, j.s.terms[3]);
+    VarianceSums s0{zero, zero, zero, zero, zero, zero}, s1 = s0;
+    const int H = int(v.integrated0.height);
+    for (int jy = -3; jy <= 3; ++jy) {
+        const int qy = int(y) + jy;
+        if (qy < 0 || qy >= H) continue;
+        const ptrdiff_t row = ptrdiff_t(o) + jy * stride;
+        const glm::vec4* moments = v.moments.row(uint32_t(qy)) + x;
+        for (int ix = -3; ix <= 3; ++ix) {
+            const ptrdiff_t q = row + ix;
+            const V zq = hn::LoadU(d, G.z + q);
+            const V cosine =
+                hn::Add(hn::Add(hn::Mul(ncx, hn::LoadU(d, G.nx + q)), hn::Mul(ncy, hn::LoadU(d, G.ny + q))),
+                        hn::Mul(ncz, hn::LoadU(d, G.nz + q)));
+            const M use = hn::And(hn::Ge(zq, zero), hn::Gt(cosine, zero));
+            const V invDepth = hn::Mul(invPhiDepth, hn::Set(d, varianceInvDistance(ix, jy)));
+            const V depthTerm = hn::Mul(hn::Abs(hn::Sub(zc, zq)), invDepth);
+            const V dd = maxOf(hn::Sub(one, cosine), zero);
+            const V normal =
+                hn::Mul(dd, hn::Add(t0, hn::Mul(dd, hn::Add(t1, hn::Mul(dd, hn::Add(t2, hn::Mul(dd, t3)))))));
+            V m0, m1, m2, m3;
+            hn::LoadInterleaved4(d, &moments[ix].x, m0, m1, m2, m3);
+            // varianceWeight and the sums of one signal.
+            auto accumulate = [&](const SignalPlanes& P, V lc, V ma, V mb, VarianceSums& s) HWY_ATTR {
+                const V rq = hn::LoadU(d, P.r + q), gq = hn::LoadU(d, P.g + q), bq = hn::LoadU(d, P.b + q);
+                const V linear =
+                    hn::Add(hn::Mul(hn::Abs(hn::Sub(lc, luminanceExact(d, rq, gq, bq))), invPhiL), depthTerm);
+                const V w = hn::IfThenElseZero(use, exp2NegOf(d, hn::Add(hn::Mul(linear, log2e), normal)));
+                s.r = hn::Add(s.r, hn::Mul(w, rq));
+                s.g = hn::Add(s.g, hn::Mul(w, gq));
+                s.b = hn::Add(s.b, hn::Mul(w, bq));
+                s.m1 = hn::Add(s.m1, hn::Mul(w, ma));
+                s.m2 = hn::Add(s.m2, hn::Mul(w, mb));
+                s.w = hn::Add(s.w, w);
+            };
+            accumulate(S0, lc0, m0, m1, s0);
+            if constexpr (kSplit) accumulate(S1, lc1, m2, m3, s1);
+        }
+    }
+    const V boost = hn::Div(hn::Set(d, kSpatialVarianceFrames), maxOf(hn::LoadU(d, &v.length.at(x, y)), one));
+    const V ea0 = storeEstimate(d, s0, ir, ig, ib, ia, boost, isShort, &v.estimate0.at(x, y).x);
+    const V ea1 = kSplit ? storeEstimate(d, s1, kr, kg, kb, ka, boost, isShort, &v.estimate1.at(x, y).x) : zero;
+    if (v.variance.data) {
+        float* variance = &v.variance.at(x, y);
+        hn::StoreU(hn::IfThenElse(isShort, hn::Add(ea0, ea1), hn::LoadU(d, variance)), d, variance);
+    }
+    return true;
+}
+
+VarianceCounts VarianceFusedTarget(const VarianceViews& v, const AtrousParams& p, const PlaneLayout& L,
+                                   const GuidePlanes& G, const SignalPlanes& S0, const SignalPlanes& S1, bool split,
+                                   uint32_t rows) {
+    const VarianceScales scales = varianceScales(p);
+    const VarianceJob job{v, scales, L, G, S0, S1};
+    const uint32_t W = v.integrated0.width, H = v.integrated0.height;
+    const uint32_t N = uint32_t(hn::Lanes(D()));
+    auto isShort = [&v](uint32_t x, uint32_t y) {
+        return v.linearZ.at(x, y).x >= 0.f && !(v.length.at(x, y) >= kSpatialVarianceFrames);
+    };
+    std::atomic<uint64_t> spatial{0}, reference{0};
+    // The estimates. The planes are read as taps here, so they are repacked only once every estimate is done.
+    parallelFor2D(
+        1, H,
+        [&](const Tile& band) {
+            const D d;
+            uint64_t vectorCount = 0, scalarCount = 0;
+            for (uint32_t y = band.y0; y < band.y1; ++y)
+                for (uint32_t x = 0; x < W;) {
+                    if (x >= 3 && x + N + 3 <= W) {
+                        V z, dz;
+                        vectorCount += hn::CountTrue(d, shortHistory(d, v, x, y, z, dz));
+                        if (split)
+                            varianceVector<true>(job, x, y);
+                        else
+                            varianceVector<false>(job, x, y);
+                        x += N;
+                        continue;
+                    }
+                    if (isShort(x, y)) {
+                        varianceEstimatePixel(v, x, y, p, split);
+                        ++scalarCount;
+                    }
+                    ++x;
+                }
+            spatial += vectorCount + scalarCount;
+            reference += scalarCount;
+        },
+        rows);
+    // The à-trous input planes of the pixels whose estimate changed.
+    parallelFor2D(
+        1, H,
+        [&](const Tile& band) {
+            const D d;
+            for (uint32_t y = band.y0; y < band.y1; ++y) {
+                uint32_t x = 0;
+                for (; x + N <= W; x += N) {
+                    V z, dz;
+                    if (hn::AllFalse(d, shortHistory(d, v, x, y, z, dz))) continue;
+                    // Every lane: the unchanged ones store what stage 1 stored from the same values.
+                    V r, g, b, a;
+                    hn::LoadInterleaved4(d, &v.estimate0.at(x, y).x, r, g, b, a);
+                    storeSignal(d, S0, L.offset(x, y), r, g, b, a);
+                    if (!split) continue;
+                    hn::LoadInterleaved4(d, &v.estimate1.at(x, y).x, r, g, b, a);
+                    storeSignal(d, S1, L.offset(x, y), r, g, b, a);
+                }
+                for (; x < W; ++x) {
+                    if (!isShort(x, y)) continue;
+                    packSignalPixel(L, S0, x, y, v.estimate0.at(x, y));
+                    if (split) packSignalPixel(L, S1, x, y, v.estimate1.at(x, y));
+                }
+            }
+        },
+        rows);
+    return {spatial.load(), reference.load()};
+}
+
 }  // namespace loom::svgf::simd::HWY_NAMESPACE
 HWY_AFTER_NAMESPACE();
 
@@ -302,10 +499,17 @@ HWY_AFTER_NAMESPACE();
 namespace loom::svgf::simd {
 
 HWY_EXPORT(TemporalFusedTarget);
+HWY_EXPORT(VarianceFusedTarget);
 
 TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
-                                uint32_t rows) {
+                             uint32_t rows) {
     return HWY_DYNAMIC_DISPATCH(TemporalFusedTarget)(v, p, out, rows);
+}
+
+VarianceCounts varianceFused(const VarianceViews& v, const AtrousParams& p, const PlaneLayout& layout,
+                             const GuidePlanes& guide, const SignalPlanes& signal0, const SignalPlanes& signal1,
+                             bool split, uint32_t rows) {
+    return HWY_DYNAMIC_DISPATCH(VarianceFusedTarget)(v, p, layout, guide, signal0, signal1, split, rows);
 }
 
 }  // namespace loom::svgf::simd

@@ -14,7 +14,11 @@
 //
 // The vector path performs the reference's float operations in the reference's order (the build does not contract
 // a * b + c into FMAs, and max / min follow maxf / minf), so its results are bit-identical to temporalPixel's;
-// tests/integration/test_svgf.cpp checks that on a moving scene against the reference stage (`referenceTemporal`).
+// tests/integration/test_svgf.cpp checks that on a moving scene against the reference stages (`referenceStages`).
+//
+// varianceFused does the same for stage 2: the 7x7 spatial variance estimate of the pixels whose history is short
+// (every pixel of the first frames and after a camera cut, disoccluded ones later), vector for vector, with the
+// reference's weight (varianceWeight in SVGFKernels.h, written in operations both sides perform identically).
 #include <cstdint>
 
 #include "AtrousSimd.h"
@@ -28,9 +32,9 @@ struct TemporalOutputs {
     GuidePlanes guide;                    ///< the à-trous guides of this frame
     SignalPlanes signal;                  ///< the à-trous input: integrated colour, a = temporal variance
     SignalPlanes signal1;                 ///< the split's second à-trous input (indirect)
-    ImageView<glm::vec4> estimate;   ///< signal 0 as an image (the variance stage overwrites short histories)
-    ImageView<glm::vec4> estimate1;  ///< signal 1 (indirect) as an image, split only
-    ImageView<float> variance;       ///< optional debug output: the temporal variance (split: summed)
+    ImageView<glm::vec4> estimate;        ///< signal 0 as an image (the variance stage overwrites short histories)
+    ImageView<glm::vec4> estimate1;       ///< signal 1 (indirect) as an image, split only
+    ImageView<float> variance;            ///< optional debug output: the temporal variance (split: summed)
 };
 
 /// Pixel counts of one frame of the fused stage.
@@ -42,6 +46,20 @@ struct TemporalCounts {
 /// Stage 1 over the whole frame, in bands of `rows` whole rows: the combined signal, or with p.split direct and
 /// indirect.
 TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, const TemporalOutputs& out,
-                                uint32_t rows);
+                             uint32_t rows);
+
+/// Pixel counts of one frame of the fused variance stage.
+struct VarianceCounts {
+    uint64_t spatial = 0;    ///< pixels that took the spatial estimate (history shorter than kSpatialVarianceFrames)
+    uint64_t reference = 0;  ///< of those, pixels that ran varianceEstimatePixel rather than the vector path
+};
+
+/// Stage 2 of the fused path, after temporalFused packed the à-trous planes (layout, guide, signal0 and with
+/// split signal1): varianceEstimatePixel for every pixel whose history is short, vectorised where all 7x7 taps lie
+/// in the frame's columns (the reference's operations in its order: bit-identical), then those pixels' à-trous
+/// input planes repacked. Requires the series form of the weight (varianceScales(p).series); rows: band height.
+VarianceCounts varianceFused(const VarianceViews& v, const AtrousParams& p, const PlaneLayout& layout,
+                             const GuidePlanes& guide, const SignalPlanes& signal0, const SignalPlanes& signal1,
+                             bool split, uint32_t rows);
 
 }  // namespace loom::svgf::simd

@@ -607,6 +607,9 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
             EXPECT_EQ(ref.stat("temporal.referenceShare"), 1.0);
             // The vector path did most of the work (the frame border, the pan's edge and the bad sample did not).
             EXPECT_LT(fast.stat("temporal.referenceShare"), 0.5) << what << "frame " << frame;
+            // Likewise the spatial variance of the first frames (short history everywhere; later, the pan's edge).
+            if (frame == 0) EXPECT_EQ(fast.stat("variance.spatialPixels"), 48.0 * 37.0) << what;  // sky: 3 rows
+            if (frame < 3) EXPECT_LT(fast.stat("variance.referenceShare"), 0.5) << what << "frame " << frame;
             expectSameOutput(fast.field("filtered"), ref.field("filtered"), what + "frame " + std::to_string(frame));
             for (const char* name : {"variance", "historyLength", "estimate", "prevMeshId"})
                 EXPECT_TRUE(fast.field(name).samePixels(ref.field(name))) << what << name << " frame " << frame;
