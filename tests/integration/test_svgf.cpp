@@ -2,7 +2,8 @@
 // box at 1 spp the error against a converged reference falls over frames and ends far below the input's;
 // disoccluded pixels restart their history while visible ones keep it; non-finite input never reaches an output
 // or the history; the feedback tap selects exactly which level becomes history; without `temporal` frames are
-// independent; the direct/indirect split agrees with the combined signal; any thread count gives the same bits.
+// independent; the direct/indirect split agrees with the combined signal; any thread count gives the same bits;
+// the spatial variance weight matches its closed form.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -15,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "../../passes/SVGF/SVGFKernels.h"
 #include "TestUtil.h"
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
@@ -608,8 +610,12 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
             // The vector path did most of the work (the frame border, the pan's edge and the bad sample did not).
             EXPECT_LT(fast.stat("temporal.referenceShare"), 0.5) << what << "frame " << frame;
             // Likewise the spatial variance of the first frames (short history everywhere; later, the pan's edge).
-            if (frame == 0) EXPECT_EQ(fast.stat("variance.spatialPixels"), 48.0 * 37.0) << what;  // sky: 3 rows
-            if (frame < 3) EXPECT_LT(fast.stat("variance.referenceShare"), 0.5) << what << "frame " << frame;
+            if (frame == 0) {
+                EXPECT_EQ(fast.stat("variance.spatialPixels"), 48.0 * 37.0) << what;  // sky: 3 rows
+            }
+            if (frame < 3) {
+                EXPECT_LT(fast.stat("variance.referenceShare"), 0.5) << what << "frame " << frame;
+            }
             expectSameOutput(fast.field("filtered"), ref.field("filtered"), what + "frame " + std::to_string(frame));
             for (const char* name : {"variance", "historyLength", "estimate", "prevMeshId"})
                 EXPECT_TRUE(fast.field(name).samePixels(ref.field(name))) << what << name << " frame " << frame;
@@ -632,4 +638,48 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
         return p;
     };
     compareRuns(splitFn, true);
+}
+
+// The spatial variance estimate's weight, spelt for identical scalar and vector evaluation, against the closed
+// form it stands for, exp(-|dl| / phiColor - |dz| invDepth) * max(0, cos)^phiNormal: within the documented
+// bounds (series <= 3.2e-6 absolute, exponential 2.6e-6 relative, plus float rounding) over a sweep of normals,
+// luminance and depth differences, exactly 0 for normals 90 degrees or more apart, and the clamp at 2^-100.
+TEST(SVGF, VarianceWeightMatchesItsClosedForm) {
+    using namespace loom::svgf;
+    for (float t = 0.f; t <= 100.f; t += 0.0137f) {
+        const double expected = std::exp2(-double(t));
+        ASSERT_NEAR(varianceExp2Neg(t), expected, 3e-6 * expected) << "2^-" << t;
+    }
+    // Beyond 100 the exponent stays at 100: a small normal float, never 0 or a denormal.
+    EXPECT_NEAR(varianceExp2Neg(1e6f), std::ldexp(1.0, -100), 3e-6 * std::ldexp(1.0, -100));
+    EXPECT_EQ(varianceExp2Neg(1e6f), varianceExp2Neg(100.f));
+    double worst = 0.0;
+    for (float phi : {32.f, 64.f, 128.f, 300.f}) {
+        AtrousParams p;
+        p.phiNormal = phi;
+        p.phiColor = 10.f;
+        const VarianceScales s = varianceScales(p);
+        ASSERT_TRUE(s.series);
+        const glm::vec3 n(0.f, 0.f, 1.f);
+        for (float angle = 0.f; angle < 1.6f; angle += 0.003f) {
+            const glm::vec3 m(std::sin(angle), 0.f, std::cos(angle));
+            const float cosine = (n.x * m.x + n.y * m.y) + n.z * m.z;
+            for (float dl : {0.f, 0.5f, 3.f, 40.f})
+                for (float dz : {0.f, 0.01f, 0.2f}) {
+                    const float w = varianceWeight(dz, 10.f, n, m, 1.f, 1.f + dl, s);
+                    if (cosine <= 0.f) {
+                        ASSERT_EQ(w, 0.f);
+                        continue;
+                    }
+                    const double closed = std::exp(-double(dl) / 10.0 - double(dz) * 10.0) *
+                                          std::pow(double(std::min(cosine, 1.f)), double(phi));
+                    worst = std::max(worst, std::fabs(w - closed));
+                    ASSERT_NEAR(w, closed, 4e-6 + 4e-6 * closed) << "phi " << phi << " angle " << angle;
+                }
+        }
+        // Orthogonal and opposite normals: no weight.
+        EXPECT_EQ(varianceWeight(0.f, 1.f, n, glm::vec3(1.f, 0.f, 0.f), 1.f, 1.f, s), 0.f);
+        EXPECT_EQ(varianceWeight(0.f, 1.f, n, -n, 1.f, 1.f, s), 0.f);
+    }
+    EXPECT_GT(worst, 0.0);  // the sweep compared real weights
 }
