@@ -16,12 +16,6 @@ namespace loom::svgf::simd::detail {
 // Tiles of 64 x 64 pixels: with the taps' rows and columns around them, a level's ten planes stay in L2 for steps
 // up to 8.
 constexpr uint32_t kTileSize = 64;
-constexpr float kLog2e = 1.44269504088896341f;
-// Weights below 2^-kMaxExponent are treated as 2^-kMaxExponent; the product p(f) * 2^-t stays a normal float.
-constexpr float kMaxExponent = 100.f;
-// Degree-4 minimax fit of 2^f on [-0.5, 0.5] (relative error 2.6e-6), lowest degree first.
-constexpr float kExp2Poly[5] = {0.9999992614457146f, 0.6931218147367706f, 0.2402474482794381f, 0.05591786031930501f,
-                                0.009570101908089415f};
 // The B3 weights b(0), b(1), b(2) = 6/16, 4/16, 1/16 as exponents, -log2 b: the tap weight h(i, j) = b(i) b(j)
 // joins the edge-stopping exponent as kB3Exponent[|i|] + kB3Exponent[|j|] (an addend of an FMA, free).
 constexpr float kB3Exponent[3] = {1.4150374992788438f, 2.f, 4.f};
@@ -43,7 +37,7 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
     c.phiColor = std::max(0.f, p.phiColor);
     c.phiDepthStep = std::max(0.f, p.phiDepth) * float(step);
     c.phiNormal = std::max(0.f, p.phiNormal);
-    for (int k = 0; k < 4; ++k) c.series[k] = c.phiNormal * kLog2e / float(k + 1);
+    for (int k = 0; k < 4; ++k) c.series[k] = c.phiNormal * kWeightLog2e / float(k + 1);
     return c;
 }
 
@@ -70,18 +64,18 @@ using D = hn::ScalableTag<float>;
 using DI = hn::RebindToSigned<D>;
 using V = hn::Vec<D>;
 
-/// 2^-t for t >= -126 (t above kMaxExponent is clamped), relative error <= 2.6e-6.
+/// 2^-t for t >= -126 (t above kWeightMaxExponent is clamped), relative error <= 2.6e-6.
 HWY_INLINE V exp2Neg(D d, V t) {
     const DI di;
     const V magic = hn::Set(d, 12582912.f);  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
-    t = hn::Min(t, hn::Set(d, kMaxExponent));
+    t = hn::Min(t, hn::Set(d, kWeightMaxExponent));
     const V r = hn::Add(t, magic);
     const V n = hn::Sub(r, magic);
     const V f = hn::Sub(n, t);  // in [-0.5, 0.5]
-    V p = hn::MulAdd(hn::Set(d, kExp2Poly[4]), f, hn::Set(d, kExp2Poly[3]));
-    p = hn::MulAdd(p, f, hn::Set(d, kExp2Poly[2]));
-    p = hn::MulAdd(p, f, hn::Set(d, kExp2Poly[1]));
-    p = hn::MulAdd(p, f, hn::Set(d, kExp2Poly[0]));
+    V p = hn::MulAdd(hn::Set(d, kWeightExp2C4), f, hn::Set(d, kWeightExp2C3));
+    p = hn::MulAdd(p, f, hn::Set(d, kWeightExp2C2));
+    p = hn::MulAdd(p, f, hn::Set(d, kWeightExp2C1));
+    p = hn::MulAdd(p, f, hn::Set(d, kWeightExp2C0));
     // The low bits of r hold round(t); shifting by 23 drops everything else and lands it on the exponent field.
     const auto e = hn::ShiftLeft<23>(hn::BitCast(di, r));
     return hn::BitCast(d, hn::Sub(hn::BitCast(di, p), e));
@@ -264,7 +258,7 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
                 }
                 const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
                 const V sigma = hn::Sqrt(hn::Max(blurred, zero));
-                const V log2e = hn::Set(d, kLog2e);
+                const V log2e = hn::Set(d, kWeightLog2e);
                 const V eps = hn::Set(d, kAtrousEpsilon);
                 // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
                 const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, c.phiColor), sigma, eps));

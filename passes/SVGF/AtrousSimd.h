@@ -38,7 +38,7 @@ namespace loom::svgf::simd {
 /// Widest vector the planes are padded for (AVX-512: 16 floats).
 inline constexpr uint32_t kMaxLanes = 16;
 /// phiNormal from which the series form of the normal weight is used (see the bound above).
-inline constexpr float kSeriesMinPhi = 32.f;
+inline constexpr float kSeriesMinPhi = kWeightSeriesMinPhi;
 
 /// Shape of every plane: pixel (x, y) at y * stride + margin + x. The margin (left; the right one is margin +
 /// kMaxLanes) covers taps up to `margin` columns off-frame; taps further out are off-frame for every pixel of the
@@ -118,8 +118,8 @@ struct Remodulation {
 };
 
 /// Where one level writes: its planes (skipped when planes.r is null), up to two rgb + variance images, and the
-/// remodulated result (skipped when modulate.views.dst is null). variance = false: nobody reads the level's variance, so it
-/// is not propagated (planes and images then receive 0 in its place).
+/// remodulated result (skipped when modulate.views.dst is null). variance = false: nobody reads the level's variance,
+/// so it is not propagated (planes and images then receive 0 in its place).
 struct LevelOutputs {
     SignalPlanes planes;
     ImageView<glm::vec4> image[2];

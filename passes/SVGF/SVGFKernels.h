@@ -248,18 +248,19 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 /// sums without contraction, a polynomial exponential), so the vectorised variance stage (TemporalSimd.cpp)
 /// reproduces it bit for bit. It is Falcor's computeWeight, exp(-|dl| / phiColor - |dz| / (phiDepth |(i, j)|)) *
 /// max(0, n.n')^phiNormal (paper eq. 3-5 without the variance in the luminance term), as one power of two:
-/// - the normal power, for phiNormal >= kVarianceSeriesMinPhi, as exp(-phi (d + d^2/2 + d^3/3 + d^4/4)) with
+/// - the normal power, for phiNormal >= kWeightSeriesMinPhi, as exp(-phi (d + d^2/2 + d^3/3 + d^4/4)) with
 ///   d = 1 - n.n' in [0, 1) (the first terms of -ln(1 - d); absolute error <= 3.2e-6 for phi >= 32); below that,
 ///   powf;
 /// - 2^-t = 2^-round(t) p(t - round(t)), p a degree-4 fit of 2^f on [-0.5, 0.5] (relative error <= 2.6e-6), t
 ///   clamped to 100 (weights below 2^-100 stay there).
-inline constexpr float kVarianceSeriesMinPhi = 32.f;
-inline constexpr float kVarianceLog2e = 1.44269504088896341f;
-inline constexpr float kVarianceMaxExponent = 100.f;
+/// The à-trous fast path (AtrousSimd.cpp) builds its weights from the same constants.
+inline constexpr float kWeightSeriesMinPhi = 32.f;
+inline constexpr float kWeightLog2e = 1.44269504088896341f;
+inline constexpr float kWeightMaxExponent = 100.f;
 /// p(f), lowest degree first (scalars, not an array: device code reads them as constants).
-inline constexpr float kVarianceExp2C0 = 0.9999992614457146f, kVarianceExp2C1 = 0.6931218147367706f,
-                       kVarianceExp2C2 = 0.2402474482794381f, kVarianceExp2C3 = 0.05591786031930501f,
-                       kVarianceExp2C4 = 0.009570101908089415f;
+inline constexpr float kWeightExp2C0 = 0.9999992614457146f, kWeightExp2C1 = 0.6931218147367706f,
+                       kWeightExp2C2 = 0.2402474482794381f, kWeightExp2C3 = 0.05591786031930501f,
+                       kWeightExp2C4 = 0.009570101908089415f;
 
 /// 1 / |(i, j)| for tap (i, j) of the 7x7 footprint (|i|, |j| <= 3); 0 for the centre, whose depth term is 0.
 LOOM_HD inline float varianceInvDistance(int i, int j) {
@@ -290,13 +291,13 @@ LOOM_HD inline float varianceInvDistance(int i, int j) {
 /// 2^-t for t >= 0 (see above): the operations of the vector stage, lane for lane.
 LOOM_HD inline float varianceExp2Neg(float t) {
     const float magic = 12582912.f;  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
-    t = minf(t, kVarianceMaxExponent);
+    t = minf(t, kWeightMaxExponent);
     const float r = t + magic;
     const float f = (r - magic) - t;  // in [-0.5, 0.5]
-    float q = kVarianceExp2C4 * f + kVarianceExp2C3;
-    q = q * f + kVarianceExp2C2;
-    q = q * f + kVarianceExp2C1;
-    q = q * f + kVarianceExp2C0;
+    float q = kWeightExp2C4 * f + kWeightExp2C3;
+    q = q * f + kWeightExp2C2;
+    q = q * f + kWeightExp2C1;
+    q = q * f + kWeightExp2C0;
     return bitsToFloat(floatBits(q) - (floatBits(r) << 23));
 }
 
@@ -304,7 +305,7 @@ LOOM_HD inline float varianceExp2Neg(float t) {
 struct VarianceScales {
     float invPhiL;    ///< 1 / phiColor (1e30 for phiColor <= 0)
     float phiNormal;  ///< the normal power
-    bool series;      ///< phiNormal >= kVarianceSeriesMinPhi: the series form
+    bool series;      ///< phiNormal >= kWeightSeriesMinPhi: the series form
     float terms[4];   ///< phi log2(e) / k, k = 1..4
 };
 
@@ -312,8 +313,8 @@ LOOM_HD inline VarianceScales varianceScales(const AtrousParams& p) {
     VarianceScales s{};
     s.invPhiL = p.phiColor > 0.f ? 1.f / p.phiColor : 1e30f;
     s.phiNormal = maxf(p.phiNormal, 0.f);
-    s.series = s.phiNormal >= kVarianceSeriesMinPhi;
-    for (int k = 0; k < 4; ++k) s.terms[k] = s.phiNormal * kVarianceLog2e / float(k + 1);
+    s.series = s.phiNormal >= kWeightSeriesMinPhi;
+    for (int k = 0; k < 4; ++k) s.terms[k] = s.phiNormal * kWeightLog2e / float(k + 1);
     return s;
 }
 
@@ -330,7 +331,7 @@ LOOM_HD inline float varianceWeight(float dz, float invDepth, const glm::vec3& n
     }
     const float d = maxf(1.f - cosine, 0.f);
     const float normal = d * (s.terms[0] + d * (s.terms[1] + d * (s.terms[2] + d * s.terms[3])));
-    return varianceExp2Neg(linear * kVarianceLog2e + normal);
+    return varianceExp2Neg(linear * kWeightLog2e + normal);
 }
 
 /// Views of the variance stage: integrated signals and moments in, à-trous input out.

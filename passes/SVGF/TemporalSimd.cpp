@@ -299,13 +299,13 @@ TemporalCounts TemporalFusedTarget(const TemporalViews& v, const TemporalParams&
 HWY_INLINE V exp2NegOf(D d, V t) {
     const DI di;
     const V magic = hn::Set(d, 12582912.f);
-    t = minOf(t, hn::Set(d, kVarianceMaxExponent));
+    t = minOf(t, hn::Set(d, kWeightMaxExponent));
     const V r = hn::Add(t, magic);
     const V f = hn::Sub(hn::Sub(r, magic), t);
-    V q = hn::Add(hn::Mul(hn::Set(d, kVarianceExp2C4), f), hn::Set(d, kVarianceExp2C3));
-    q = hn::Add(hn::Mul(q, f), hn::Set(d, kVarianceExp2C2));
-    q = hn::Add(hn::Mul(q, f), hn::Set(d, kVarianceExp2C1));
-    q = hn::Add(hn::Mul(q, f), hn::Set(d, kVarianceExp2C0));
+    V q = hn::Add(hn::Mul(hn::Set(d, kWeightExp2C4), f), hn::Set(d, kWeightExp2C3));
+    q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C2));
+    q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C1));
+    q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C0));
     return hn::BitCast(d, hn::Sub(hn::BitCast(di, q), hn::ShiftLeft<23>(hn::BitCast(di, r))));
 }
 
@@ -373,7 +373,7 @@ bool varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
     if constexpr (kSplit) hn::LoadInterleaved4(d, &v.integrated1.at(x, y).x, kr, kg, kb, ka);
     const V lc0 = luminanceExact(d, ir, ig, ib), lc1 = luminanceExact(d, kr, kg, kb);
     const V invPhiDepth = hn::Div(one, hn::Mul(maxOf(dzc, hn::Set(d, 1e-8f)), hn::Set(d, 3.f)));
-    const V invPhiL = hn::Set(d, j.s.invPhiL), log2e = hn::Set(d, kVarianceLog2e);
+    const V invPhiL = hn::Set(d, j.s.invPhiL), log2e = hn::Set(d, kWeightLog2e);
     const V t0 = hn::Set(d, j.s.terms[0]), t1 = hn::Set(d, j.s.terms[1]), t2 = hn::Set(d, j.s.terms[2]),
             t3 = hn::Set(d, j.s.terms[3]);
     VarianceSums s0{zero, zero, zero, zero, zero, zero}, s1 = s0;
