@@ -683,3 +683,19 @@ TEST(SVGF, VarianceWeightMatchesItsClosedForm) {
     }
     EXPECT_GT(worst, 0.0);  // the sweep compared real weights
 }
+
+// The edge-stopping parameters at the ends of their ranges (0: every luminance, normal or depth difference
+// stops the filter, or none does) keep every output and history finite, through the spatial variance of the
+// first frames and the temporal one after, on the vector stages and the reference ones.
+TEST(SVGF, ExtremeEdgeStoppingParametersStayFinite) {
+    for (const char* phi : {"phiColor", "phiNormal", "phiDepth"})
+        for (bool reference : {false, true}) {
+            Harness h({{phi, 0.0}, {"referenceStages", reference}}, noisyPixel, false, 40, 24);
+            for (int frame = 0; frame < 6; ++frame) {
+                h.run();
+                for (const char* out : {"filtered", "variance", "estimate"})
+                    EXPECT_TRUE(allFinite(h.field(out))) << phi << " reference " << reference << " " << out;
+                for (const char* hist : kHistoryFields) EXPECT_TRUE(allFinite(h.field(hist))) << phi << " " << hist;
+            }
+        }
+}
