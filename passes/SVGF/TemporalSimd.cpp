@@ -38,6 +38,12 @@ HWY_INLINE V mixOf(D d, V a, V b, V t) {
     return hn::Add(hn::Mul(a, hn::Sub(hn::Set(d, 1.f), t)), hn::Mul(b, t));
 }
 
+/// luminance() lane-wise (the same operations).
+HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
+    return hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
+                   hn::Mul(hn::Set(d, 0.0722f), b));
+}
+
 /// Non-temporal stores of whole cache lines that this frame does not read again soon (history for the next frame,
 /// the integrated and estimate images): no read-for-ownership of the destination, which halves their memory traffic.
 /// dst is 32-byte aligned (the x of a vector group is a multiple of N, rows are 64-byte aligned).
@@ -208,13 +214,10 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         return minOf(maxOf(hn::Div(hn::Sub(c, e), a), zero), maxIllum);
     };
     const V lr = demodulate(cr, er, ar), lg = demodulate(cg, eg, ag), lb = demodulate(cb, eb, ab);
-    const V lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), lr), hn::Mul(hn::Set(d, 0.7152f), lg)),
-                          hn::Mul(hn::Set(d, 0.0722f), lb));
+    const V lum = luminanceExact(d, lr, lg, lb);
     // Signal 1 (split): divided by the albedo, no emission (that is part of direct).
     const V kr = demodulate(dr, zero, ar), kg = demodulate(dg, zero, ag), kb = demodulate(db, zero, ab);
-    const V lum1 = split ? hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), kr), hn::Mul(hn::Set(d, 0.7152f), kg)),
-                                   hn::Mul(hn::Set(d, 0.0722f), kb))
-                         : zero;
+    const V lum1 = split ? luminanceExact(d, kr, kg, kb) : zero;
     const V moments[4] = {lum, hn::Mul(lum, lum), lum1, hn::Mul(lum1, lum1)};
 
     // Temporal accumulation (paper eq. 1 with Falcor's max(alpha, 1 / n)).
@@ -307,12 +310,6 @@ HWY_INLINE V exp2NegOf(D d, V t) {
     q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C1));
     q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C0));
     return hn::BitCast(d, hn::Sub(hn::BitCast(di, q), hn::ShiftLeft<23>(hn::BitCast(di, r))));
-}
-
-/// luminance() lane-wise (the same operations).
-HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
-    return hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
-                   hn::Mul(hn::Set(d, 0.0722f), b));
 }
 
 struct VarianceJob {
