@@ -123,6 +123,9 @@ struct ClipBox {
     glm::vec4 lo{0.f}, hi{0.f};
     glm::vec4 mean{0.f};
     uint32_t finiteCount = 0;
+    /// One value in the neighbourhood (minimum = maximum in every channel): clipping would pin any history to
+    /// it, so the resolve is the current colour, history unread (a black sky, a constant image).
+    bool flat = false;
 };
 
 /// Box from the running sums of n finite samples (mean and variance as the
@@ -138,6 +141,7 @@ LOOM_HD inline ClipBox makeClipBox(const glm::vec4& sum, const glm::vec4& sumSq,
     const glm::vec4 dev = sigma * glm::sqrt(var);
     b.lo = glm::clamp(b.mean - dev, mn, mx);
     b.hi = glm::clamp(b.mean + dev, mn, mx);
+    b.flat = mn == mx;
     return b;
 }
 
@@ -279,6 +283,7 @@ LOOM_HD inline glm::vec4 resolveWithBox(const TaaInputs& in, const TaaParams& p,
         flags |= kNoHistory;
         return current;
     }
+    if (box.flat) return current;  // the clip would pin the history to the one value (ClipBox::flat)
     glm::vec4 history = sampleHistory(in.history, pos);
     glm::vec4 historyYCoCg = toYCoCg(history);
     if (clipToBox(box, historyYCoCg)) {

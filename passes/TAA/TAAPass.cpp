@@ -249,7 +249,6 @@ HWY_INLINE void storeInterleaved(const FloatVec (&v)[4], glm::vec4* p, uint32_t 
     std::memcpy(o, packed, sizeof(glm::vec4) * n);
 }
 
-
 /// How many region rows ahead the load asks for.
 constexpr uint32_t kPrefetchRows = 3;
 
@@ -422,52 +421,19 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 hn::And(hn::And(hn::Ge(px, hn::Set(d, -0.5f)), hn::Le(px, hn::Set(d, float(W) - 0.5f))),
                         hn::And(hn::Ge(pyv, hn::Set(d, -0.5f)), hn::Le(pyv, hn::Set(d, float(H) - 0.5f))));
             useHistory = in.historyValid ? hn::And(useHistory, valid) : hn::Not(hn::FirstN(d, N));
-            // Bicubic history: floor, fractions and weights on vectors, the taps per pixel.
-            const FloatVec fx0 = hn::Floor(px), fy0 = hn::Floor(pyv);
-            FloatVec wxv[4], wyv[4];
-            catmullRomVec(d, hn::Sub(px, fx0), wxv);
-            catmullRomVec(d, hn::Sub(pyv, fy0), wyv);
-            const auto ixv = hn::ConvertTo(di, fx0), iyv = hn::ConvertTo(di, fy0);
-            const auto interior =
-                hn::And(hn::And(hn::Gt(ixv, hn::Zero(di)), hn::Gt(iyv, hn::Zero(di))),
-                        hn::And(hn::Lt(ixv, hn::Set(di, int32_t(W) - 2)), hn::Lt(iyv, hn::Set(di, int32_t(H) - 2))));
-            auto kind = hn::IfThenElse(interior, hn::Set(di, kInterior), hn::Set(di, kEdge));
-            // An integer position (a static camera): the bicubic sum would give its texel exactly; read just that.
-            const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(pyv, fy0));
-            kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, kInteger), kind);
-            kind = hn::IfThenElseZero(hn::RebindMask(di, useHistory), kind);
-            hn::Store(kind, di, kinds);
-            hn::Store(ixv, di, ixs);
-            hn::Store(iyv, di, iys);
-            transposeWeights(wxv, wx);
-            for (int k = 0; k < 4; ++k) hn::Store(wyv[k], d, wy[k]);
-            if (kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < int32_t(H) && y + 1 < h) {
-                // The next tile row reads one history row more (iy + 3 here): ask for it now, a tile row ahead.
-                const auto* first =
-                    historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[0] - 1);
-                const auto* last =
-                    historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[N - 1] + 3);
-                if (last > first && last - first < 512) prefetchRange(first, size_t(last - first));
+            // A neighbourhood of one value (ClipBox::flat: minimum = maximum in every channel) resolves to the
+            // current colour: its history is not read.
+            FloatMask flat = hn::FirstN(d, N);
+            for (int ch = 0; ch < (alphaConstant ? 3 : 4); ++ch) {
+                FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
+                for (uint32_t r = y + 1; r < y + 3; ++r) {
+                    mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);
+                    mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
+                }
+                flat = hn::And(flat, hn::Eq(mn, mx));
             }
-            const auto sample = [&](uint32_t i) -> Float4 {
-                if (kinds[i] == kInterior)
-                    return bicubicBlock(
-                        historyData + historyPitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1),
-                        historyPitch, wx + weightRecord(i), wy, i);
-                if (kinds[i] == kInteger)
-                    return hn::LoadU(Float4Tag(), reinterpret_cast<const float*>(&in.history.at(ixs[i], iys[i])));
-                if (kinds[i] == kUnused) return hn::Zero(Float4Tag());
-                // Near the frame's edge: the clamped taps, then the same arithmetic.
-                alignas(64) glm::vec4 block[4][4];
-                for (int j = 0; j < 4; ++j)
-                    for (int k = 0; k < 4; ++k) block[j][k] = in.history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
-                return bicubicBlock(reinterpret_cast<const unsigned char*>(block), sizeof(block[0]),
-                                    wx + weightRecord(i), wy, i);
-            };
-            const Float4 sampled[kLanes] = {sample(0), sample(1), sample(2), sample(3),
-                                            sample(4), sample(5), sample(6), sample(7)};
-            FloatVec hr, hg, hb, ha, cr, cgr, cb, ca;
-            transpose8(sampled, hr, hg, hb, ha);
+            const FloatMask resolveHistory = hn::AndNot(flat, useHistory);
+            FloatVec cr, cgr, cb, ca;
             const glm::vec4* currentPixels = colorRow + t.x0 + x;
             if (n < N) {  // the end of a partial tile: do not read past the row
                 for (uint32_t i = 0; i < N; ++i) current[i] = currentPixels[std::min(i, n - 1)];
@@ -477,74 +443,125 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             // The linear input, kept for the output; the resolve runs on the compressed colour.
             const FloatVec lr = cr, lg = cgr, lb = cb;
             if (in.compress) compressVec(d, cr, cgr, cb);
-            // The box (makeClipBox with n = 9) channel by channel, each clipped at once (clipToBox): the exact test
-            // "outside", the ratio by the refined reciprocal. Formed after the sampling, so that few vectors are live
-            // across it.
-            FloatVec hv[4];
-            toYCoCgVec(d, hr, hg, hb, hv[0], hv[1], hv[2]);
-            hv[3] = ha;
-            FloatVec unit = zero, delta[4], center[4];
-            for (int ch = 0; ch < 4; ++ch) {
-                FloatVec lo, hi;
-                if (ch == 3 && alphaConstant) {
-                    lo = hi = hn::Set(d, alpha0);
-                } else {
-                    FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
-                    FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
-                    for (uint32_t r = y + 1; r < y + 3; ++r) {
-                        sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
-                        sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
-                        mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);
-                        mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
-                    }
-                    const FloatVec mean = hn::Mul(sum, ninth);
-                    const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
-                    const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
-                    lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
-                    hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
+            // The resolved (compressed) colour: the current one unless the history takes part.
+            FloatVec orr = cr, og = cgr, ob = cb, oa = ca;
+            FloatMask clipped = hn::FirstN(d, 0);
+            if (!hn::AllTrue(d, flat)) {
+                // Bicubic history: floor, fractions and weights on vectors, the taps per pixel.
+                const FloatVec fx0 = hn::Floor(px), fy0 = hn::Floor(pyv);
+                FloatVec wxv[4], wyv[4];
+                catmullRomVec(d, hn::Sub(px, fx0), wxv);
+                catmullRomVec(d, hn::Sub(pyv, fy0), wyv);
+                const auto ixv = hn::ConvertTo(di, fx0), iyv = hn::ConvertTo(di, fy0);
+                const auto interior = hn::And(
+                    hn::And(hn::Gt(ixv, hn::Zero(di)), hn::Gt(iyv, hn::Zero(di))),
+                    hn::And(hn::Lt(ixv, hn::Set(di, int32_t(W) - 2)), hn::Lt(iyv, hn::Set(di, int32_t(H) - 2))));
+                auto kind = hn::IfThenElse(interior, hn::Set(di, kInterior), hn::Set(di, kEdge));
+                // An integer position (a static camera): the bicubic sum would give its texel exactly; read just that.
+                const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(pyv, fy0));
+                kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, kInteger), kind);
+                kind = hn::IfThenElseZero(hn::RebindMask(di, resolveHistory), kind);
+                hn::Store(kind, di, kinds);
+                hn::Store(ixv, di, ixs);
+                hn::Store(iyv, di, iys);
+                transposeWeights(wxv, wx);
+                for (int k = 0; k < 4; ++k) hn::Store(wyv[k], d, wy[k]);
+                if (kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < int32_t(H) && y + 1 < h) {
+                    // The next tile row reads one history row more (iy + 3 here): ask for it now, a tile row ahead.
+                    const auto* first =
+                        historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[0] - 1);
+                    const auto* last =
+                        historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[N - 1] + 3);
+                    if (last > first && last - first < 512) prefetchRange(first, size_t(last - first));
                 }
-                center[ch] = hn::Mul(half, hn::Add(lo, hi));
-                const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
-                delta[ch] = hn::Sub(hv[ch], center[ch]);
-                const FloatVec a = hn::Abs(delta[ch]);
-                const FloatMask outside = hn::Gt(a, extent);
-                // A flat channel (extent 0) gives an infinite unit, which pulls the point exactly onto the centre.
-                const FloatVec ratio =
-                    ch == 3 && alphaConstant
-                        ? infinity
-                        : hn::IfThenElse(hn::Gt(extent, zero), hn::Mul(a, reciprocal(d, extent)), infinity);
-                unit = hn::IfThenElse(outside, hn::Max(unit, ratio), unit);
+                const auto sample = [&](uint32_t i) -> Float4 {
+                    if (kinds[i] == kInterior)
+                        return bicubicBlock(
+                            historyData + historyPitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1),
+                            historyPitch, wx + weightRecord(i), wy, i);
+                    if (kinds[i] == kInteger)
+                        return hn::LoadU(Float4Tag(), reinterpret_cast<const float*>(&in.history.at(ixs[i], iys[i])));
+                    if (kinds[i] == kUnused) return hn::Zero(Float4Tag());
+                    // Near the frame's edge: the clamped taps, then the same arithmetic.
+                    alignas(64) glm::vec4 block[4][4];
+                    for (int j = 0; j < 4; ++j)
+                        for (int k = 0; k < 4; ++k) block[j][k] = in.history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
+                    return bicubicBlock(reinterpret_cast<const unsigned char*>(block), sizeof(block[0]),
+                                        wx + weightRecord(i), wy, i);
+                };
+                const Float4 sampled[kLanes] = {sample(0), sample(1), sample(2), sample(3),
+                                                sample(4), sample(5), sample(6), sample(7)};
+                FloatVec hr, hg, hb, ha;
+                transpose8(sampled, hr, hg, hb, ha);
+                // The box (makeClipBox with n = 9) channel by channel, each clipped at once (clipToBox): the exact test
+                // "outside", the ratio by the refined reciprocal. Formed after the sampling, so that few vectors are
+                // live across it.
+                FloatVec hv[4];
+                toYCoCgVec(d, hr, hg, hb, hv[0], hv[1], hv[2]);
+                hv[3] = ha;
+                FloatVec unit = zero, delta[4], center[4];
+                for (int ch = 0; ch < 4; ++ch) {
+                    FloatVec lo, hi;
+                    if (ch == 3 && alphaConstant) {
+                        lo = hi = hn::Set(d, alpha0);
+                    } else {
+                        FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
+                        FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
+                        for (uint32_t r = y + 1; r < y + 3; ++r) {
+                            sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
+                            sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
+                            mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);
+                            mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
+                        }
+                        const FloatVec mean = hn::Mul(sum, ninth);
+                        const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
+                        const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
+                        lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
+                        hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
+                    }
+                    center[ch] = hn::Mul(half, hn::Add(lo, hi));
+                    const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
+                    delta[ch] = hn::Sub(hv[ch], center[ch]);
+                    const FloatVec a = hn::Abs(delta[ch]);
+                    const FloatMask outside = hn::Gt(a, extent);
+                    // A flat channel (extent 0) gives an infinite unit, which pulls the point exactly onto the centre.
+                    const FloatVec ratio =
+                        ch == 3 && alphaConstant
+                            ? infinity
+                            : hn::IfThenElse(hn::Gt(extent, zero), hn::Mul(a, reciprocal(d, extent)), infinity);
+                    unit = hn::IfThenElse(outside, hn::Max(unit, ratio), unit);
+                }
+                clipped = hn::And(resolveHistory, hn::Gt(unit, zero));
+                const FloatVec inv = hn::IfThenElseZero(hn::Lt(unit, infinity), reciprocal(d, unit));
+                FloatVec cv[4];
+                for (int ch = 0; ch < 4; ++ch)
+                    cv[ch] = hn::IfThenElse(clipped, hn::MulAdd(delta[ch], inv, center[ch]), hv[ch]);
+                // fromYCoCg where clipped; the sampled RGB elsewhere.
+                hr = hn::IfThenElse(clipped, hn::Sub(hn::Add(cv[0], cv[1]), cv[2]), hr);
+                hg = hn::IfThenElse(clipped, hn::Add(cv[0], cv[2]), hg);
+                hb = hn::IfThenElse(clipped, hn::Sub(hn::Sub(cv[0], cv[1]), cv[2]), hb);
+                ha = hn::IfThenElse(clipped, cv[3], ha);
+                // Blend with anti-flicker: c + k (h - c), so h == c gives exactly c.
+                FloatVec wc = hn::Set(d, p.alpha), wh = hn::Set(d, 1.f - p.alpha);
+                if (p.antiFlicker) {
+                    FloatVec yc, coc, cgc;
+                    toYCoCgVec(d, cr, cgr, cb, yc, coc, cgc);
+                    wc = hn::Mul(wc, hn::Add(one, hn::Max(cv[0], zero)));
+                    wh = hn::Mul(wh, hn::Add(one, hn::Max(yc, zero)));
+                }
+                const FloatVec wsum = hn::Add(wc, wh);
+                const FloatVec k = hn::IfThenElseZero(hn::Gt(wsum, zero), hn::Mul(wh, reciprocal(d, wsum)));
+                orr = hn::MulAdd(k, hn::Sub(hr, cr), cr);
+                og = hn::MulAdd(k, hn::Sub(hg, cgr), cgr);
+                ob = hn::MulAdd(k, hn::Sub(hb, cb), cb);
+                oa = hn::MulAdd(k, hn::Sub(ha, ca), ca);
+                const FloatMask keep = hn::And(resolveHistory, hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)),
+                                                                       hn::And(finiteVec(d, ob), finiteVec(d, oa))));
+                orr = hn::IfThenElse(keep, orr, cr);
+                og = hn::IfThenElse(keep, og, cgr);
+                ob = hn::IfThenElse(keep, ob, cb);
+                oa = hn::IfThenElse(keep, oa, ca);
             }
-            const FloatMask clipped = hn::And(useHistory, hn::Gt(unit, zero));
-            const FloatVec inv = hn::IfThenElseZero(hn::Lt(unit, infinity), reciprocal(d, unit));
-            FloatVec cv[4];
-            for (int ch = 0; ch < 4; ++ch)
-                cv[ch] = hn::IfThenElse(clipped, hn::MulAdd(delta[ch], inv, center[ch]), hv[ch]);
-            // fromYCoCg where clipped; the sampled RGB elsewhere.
-            hr = hn::IfThenElse(clipped, hn::Sub(hn::Add(cv[0], cv[1]), cv[2]), hr);
-            hg = hn::IfThenElse(clipped, hn::Add(cv[0], cv[2]), hg);
-            hb = hn::IfThenElse(clipped, hn::Sub(hn::Sub(cv[0], cv[1]), cv[2]), hb);
-            ha = hn::IfThenElse(clipped, cv[3], ha);
-            // Blend with anti-flicker: c + k (h - c), so h == c gives exactly c.
-            FloatVec wc = hn::Set(d, p.alpha), wh = hn::Set(d, 1.f - p.alpha);
-            if (p.antiFlicker) {
-                FloatVec yc, coc, cgc;
-                toYCoCgVec(d, cr, cgr, cb, yc, coc, cgc);
-                wc = hn::Mul(wc, hn::Add(one, hn::Max(cv[0], zero)));
-                wh = hn::Mul(wh, hn::Add(one, hn::Max(yc, zero)));
-            }
-            const FloatVec wsum = hn::Add(wc, wh);
-            const FloatVec k = hn::IfThenElseZero(hn::Gt(wsum, zero), hn::Mul(wh, reciprocal(d, wsum)));
-            FloatVec orr = hn::MulAdd(k, hn::Sub(hr, cr), cr);
-            FloatVec og = hn::MulAdd(k, hn::Sub(hg, cgr), cgr);
-            FloatVec ob = hn::MulAdd(k, hn::Sub(hb, cb), cb);
-            FloatVec oa = hn::MulAdd(k, hn::Sub(ha, ca), ca);
-            const FloatMask keep = hn::And(useHistory, hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)),
-                                                               hn::And(finiteVec(d, ob), finiteVec(d, oa))));
-            orr = hn::IfThenElse(keep, orr, cr);
-            og = hn::IfThenElse(keep, og, cgr);
-            ob = hn::IfThenElse(keep, ob, cb);
-            oa = hn::IfThenElse(keep, oa, ca);
             FloatVec packed[4];
             interleavePixels(orr, og, ob, oa, packed);
             // History streams: it is read again only next frame, long after it has left the caches, and streaming
@@ -552,11 +569,11 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             storeInterleaved(packed, historyRow + t.x0 + x, n, true);
             if (in.compress) {
                 // outputColor(): the linear input where the resolve returned the compressed input, else expanded.
-                const FloatMask same = hn::And(hn::And(hn::Eq(orr, cr), hn::Eq(og, cgr)),
-                                               hn::And(hn::Eq(ob, cb), hn::Eq(oa, ca)));
+                const FloatMask same =
+                    hn::And(hn::And(hn::Eq(orr, cr), hn::Eq(og, cgr)), hn::And(hn::Eq(ob, cb), hn::Eq(oa, ca)));
                 expandVec(d, orr, og, ob);
-                const FloatMask finiteOut = hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)),
-                                                    hn::And(finiteVec(d, ob), finiteVec(d, oa)));
+                const FloatMask finiteOut =
+                    hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)), hn::And(finiteVec(d, ob), finiteVec(d, oa)));
                 orr = hn::IfThenElse(same, lr, hn::IfThenElseZero(finiteOut, orr));
                 og = hn::IfThenElse(same, lg, hn::IfThenElseZero(finiteOut, og));
                 ob = hn::IfThenElse(same, lb, hn::IfThenElseZero(finiteOut, ob));
@@ -647,6 +664,7 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "TAAPass",
         "Temporal anti-aliasing: 3x3 YCoCg variance clipping, motion dilation (longest vector of the 3x3), "
         "Catmull-Rom history, luminance-weighted blend against flicker; history in a graph field. Non-finite input "
-        "pixels are replaced by the neighbourhood mean. Stats: nonFinite (input pixels replaced), noHistory (pixels "
-        "that used the current colour alone), clipped (pixels whose history was clipped).");
+        "pixels are replaced by the neighbourhood mean; a neighbourhood of one colour (a black sky) resolves to it "
+        "without reading the history. Stats: nonFinite (input pixels replaced), noHistory (pixels without usable "
+        "history), clipped (pixels whose history was clipped; not those of one-colour neighbourhoods).");
 }

@@ -357,6 +357,42 @@ TEST(TAAPass, ClippingBoundsGhostingAfterASuddenChange) {
     }
 }
 
+// A 3x3 neighbourhood of one colour pins any history to that colour (the clip box is a point), so the resolve is
+// the current colour, exactly and without reading the history; such pixels do not count as clipped. A bright
+// square moves across a grey background with zero motion vectors, so the history under its trail differs.
+TEST(TAAPass, AFlatNeighbourhoodResolvesToTheCurrentColourExactly) {
+    for (bool reference : {false, true}) {
+        Harness h(nlohmann::json{{"reference", reference}}, 70, 40);  // partial tiles
+        const glm::vec4 grey(0.3f, 0.25f, 0.2f, 1.f), bright(6.f, 5.f, 4.f, 1.f);
+        auto inSquare = [](uint64_t f, int x, int y) {
+            const int x0 = 5 + 3 * int(f);
+            return x >= x0 && x < x0 + 8 && y >= 12 && y < 20;
+        };
+        h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
+            return inSquare(f, int(x), int(y)) ? bright : grey;
+        };
+        for (int f = 0; f < 12; ++f) {
+            h.run();
+            const uint64_t frame = h.frame - 1;
+            uint64_t flat = 0;
+            for (int y = 0; y < 40; ++y)
+                for (int x = 0; x < 70; ++x) {
+                    bool one = true;  // every neighbour (edges repeated) grey
+                    for (int dy = -1; dy <= 1; ++dy)
+                        for (int dx = -1; dx <= 1; ++dx)
+                            one = one && !inSquare(frame, std::clamp(x + dx, 0, 69), std::clamp(y + dy, 0, 39));
+                    if (!one) continue;
+                    ++flat;
+                    ASSERT_EQ(h.out(uint32_t(x), uint32_t(y)), grey)
+                        << "reference " << reference << " frame " << f << " pixel " << x << "," << y;
+                }
+            EXPECT_LE(h.stat("clipped"), double(70 * 40 - flat)) << "reference " << reference << " frame " << f;
+        }
+        // The trail really held other history: the last frame's square left it 33 columns back.
+        EXPECT_GT(h.stat("clipped"), 0.0);
+    }
+}
+
 TEST(TAAPass, NonFiniteInputNeverReachesOutputOrHistory) {
     const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
     for (bool reference : {false, true}) {
