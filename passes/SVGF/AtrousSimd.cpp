@@ -37,7 +37,7 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
     c.phiColor = std::max(0.f, p.phiColor);
     c.phiDepthStep = std::max(0.f, p.phiDepth) * float(step);
     c.phiNormal = std::max(0.f, p.phiNormal);
-    for (int k = 0; k < 4; ++k) c.series[k] = c.phiNormal * kWeightLog2e / float(k + 1);
+    normalSeriesTerms(c.phiNormal, c.series);
     return c;
 }
 
@@ -210,6 +210,62 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& modulation, uint32_t x0
                           hn::IfThenElse(hn::IsFinite(ca), ca, one), d, &m.dst.at(x0, y).x);
 }
 
+/// One level's result r, g, b, v for a centre vector (rc .. lc: its planes) that has a hit among its lanes: the
+/// blurred variance's edge-stopping scales, the 25 taps, the normalised sums; miss lanes, and pixels whose every
+/// weight vanished (degenerate normal), keep their input.
+template <bool kSeries, bool kVariance>
+HWY_INLINE void weighCentre(D d, const TapContext& t, V zc, V dzc, V ncx, V ncy, V ncz, V rc, V gc, V bc, V vc, V lc,
+                            V& r, V& g, V& b, V& v) {
+    const V zero = hn::Zero(d);
+    constexpr float blurKernel[2][2] = {{1.f / 4.f, 1.f / 8.f}, {1.f / 8.f, 1.f / 16.f}};
+    // 3x3 Gaussian of the variance over in-frame, non-miss pixels (off-frame columns are misses).
+    V num = zero, den = zero;
+    for (int j = -1; j <= 1; ++j) {
+        const int qy = t.y + j;
+        if (qy < 0 || qy >= t.H) continue;
+        for (int i = -1; i <= 1; ++i) {
+            const ptrdiff_t q = t.o + j * t.stride + i;
+            const auto m = hn::Ge(hn::LoadU(d, t.G.z + q), zero);
+            const V k = hn::Set(d, blurKernel[i < 0 ? -i : i][j < 0 ? -j : j]);
+            num = hn::MulAdd(k, hn::IfThenElseZero(m, hn::LoadU(d, t.in.v + q)), num);
+            den = hn::Add(den, hn::IfThenElseZero(m, k));
+        }
+    }
+    const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
+    const V sigma = hn::Sqrt(hn::Max(blurred, zero));
+    const V log2e = hn::Set(d, kWeightLog2e);
+    const V eps = hn::Set(d, kAtrousEpsilon);
+    // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
+    const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, t.c.phiColor), sigma, eps));
+    const V phiZ = hn::Mul(hn::Set(d, t.c.phiDepthStep), dzc);
+    // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five.
+    // They differ by eps (1 - |(i, j)|) / (|(i, j)| (phiZ + eps)) relative, below 1e-6 for phiZ >= 1e-4;
+    // only phiZ ~ eps (a zero depth derivative) moves the already enormous exponent of a depth step.
+    const V invPhiZ1 = hn::Div(log2e, hn::Add(phiZ, eps));
+    V invPhiZ[5];
+    for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Mul(invPhiZ1, hn::Set(d, 1.f / kTapDistance[k]));
+
+    // Centre tap: no depth or luminance difference, only its normal with itself.
+    const V w =
+        exp2Neg(d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx, ncy, ncz, t.c));
+
+    // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
+    const Centre centre{zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
+    Sums sums{hn::Mul(w, rc), hn::Mul(w, gc), hn::Mul(w, bc), hn::Mul(hn::Mul(w, w), vc), w};
+    accumulateRow<kSeries, kVariance, -2>(d, t, centre, sums);
+    accumulateRow<kSeries, kVariance, -1>(d, t, centre, sums);
+    accumulateRow<kSeries, kVariance, 0>(d, t, centre, sums);
+    accumulateRow<kSeries, kVariance, 1>(d, t, centre, sums);
+    accumulateRow<kSeries, kVariance, 2>(d, t, centre, sums);
+    // Miss centres, and pixels whose every weight vanished (degenerate normal), keep their input.
+    const auto keep = hn::Or(hn::Lt(zc, zero), hn::Not(hn::Gt(sums.w, hn::Set(d, 1e-30f))));
+    const V inv = hn::Div(hn::Set(d, 1.f), hn::Max(sums.w, hn::Set(d, 1e-30f)));
+    r = hn::IfThenElse(keep, rc, hn::Mul(sums.r, inv));
+    g = hn::IfThenElse(keep, gc, hn::Mul(sums.g, inv));
+    b = hn::IfThenElse(keep, bc, hn::Mul(sums.b, inv));
+    if constexpr (kVariance) v = hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sums.v, inv), inv));
+}
+
 template <bool kSeries, bool kVariance>
 void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out,
                 const LevelConstants& c, const Tile& t) {
@@ -218,7 +274,6 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
     const int W = int(L.width), H = int(L.height);
     const ptrdiff_t stride = ptrdiff_t(L.stride);
     const V zero = hn::Zero(d);
-    const float blurKernel[2][2] = {{1.f / 4.f, 1.f / 8.f}, {1.f / 8.f, 1.f / 16.f}};
 
     for (uint32_t y = t.y0; y < t.y1; ++y) {
         // The remodulation's inputs are read once, in short row segments of a tile: prefetch the next row's while
@@ -240,66 +295,11 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             const V vc = hn::LoadU(d, in.v + o), lc = hn::LoadU(d, in.l + o);
 
             // A vector of misses only (sky, or the margin past the frame's right edge) keeps its input, as every
-            // miss centre does below: nothing to weigh.
+            // miss centre does in weighCentre: nothing to weigh.
             V r = rc, g = gc, b = bc, v = kVariance ? vc : zero;
-            if (!hn::AllTrue(d, hn::Lt(zc, zero))) {
-                // 3x3 Gaussian of the variance over in-frame, non-miss pixels (off-frame columns are misses).
-                V num = zero, den = zero;
-                for (int j = -1; j <= 1; ++j) {
-                    const int qy = int(y) + j;
-                    if (qy < 0 || qy >= H) continue;
-                    for (int i = -1; i <= 1; ++i) {
-                        const ptrdiff_t q = ptrdiff_t(o) + j * stride + i;
-                        const auto m = hn::Ge(hn::LoadU(d, G.z + q), zero);
-                        const V k = hn::Set(d, blurKernel[i < 0 ? -i : i][j < 0 ? -j : j]);
-                        num = hn::MulAdd(k, hn::IfThenElseZero(m, hn::LoadU(d, in.v + q)), num);
-                        den = hn::Add(den, hn::IfThenElseZero(m, k));
-                    }
-                }
-                const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
-                const V sigma = hn::Sqrt(hn::Max(blurred, zero));
-                const V log2e = hn::Set(d, kWeightLog2e);
-                const V eps = hn::Set(d, kAtrousEpsilon);
-                // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
-                const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, c.phiColor), sigma, eps));
-                const V phiZ = hn::Mul(hn::Set(d, c.phiDepthStep), dzc);
-                // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five.
-                // They differ by eps (1 - |(i, j)|) / (|(i, j)| (phiZ + eps)) relative, below 1e-6 for phiZ >= 1e-4;
-                // only phiZ ~ eps (a zero depth derivative) moves the already enormous exponent of a depth step.
-                const V invPhiZ1 = hn::Div(log2e, hn::Add(phiZ, eps));
-                V invPhiZ[5];
-                for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Mul(invPhiZ1, hn::Set(d, 1.f / kTapDistance[k]));
-
-                // Centre tap: no depth or luminance difference, only its normal with itself.
-                V w = exp2Neg(d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx,
-                                                            ncy, ncz, c));
-                V sumR = hn::Mul(w, rc), sumG = hn::Mul(w, gc), sumB = hn::Mul(w, bc);
-                V sumW = w, sumV = hn::Mul(hn::Mul(w, w), vc);
-
-                // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
-                const Centre centre{
-                    zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
-                Sums sums{sumR, sumG, sumB, sumV, sumW};
-                const TapContext ctx{G, in, c, W, H, int(y), ptrdiff_t(o), stride};
-                accumulateRow<kSeries, kVariance, -2>(d, ctx, centre, sums);
-                accumulateRow<kSeries, kVariance, -1>(d, ctx, centre, sums);
-                accumulateRow<kSeries, kVariance, 0>(d, ctx, centre, sums);
-                accumulateRow<kSeries, kVariance, 1>(d, ctx, centre, sums);
-                accumulateRow<kSeries, kVariance, 2>(d, ctx, centre, sums);
-                sumR = sums.r;
-                sumG = sums.g;
-                sumB = sums.b;
-                sumV = sums.v;
-                sumW = sums.w;
-
-                // Miss centres, and pixels whose every weight vanished (degenerate normal), keep their input.
-                const auto keep = hn::Or(hn::Lt(zc, zero), hn::Not(hn::Gt(sumW, hn::Set(d, 1e-30f))));
-                const V inv = hn::Div(hn::Set(d, 1.f), hn::Max(sumW, hn::Set(d, 1e-30f)));
-                r = hn::IfThenElse(keep, rc, hn::Mul(sumR, inv));
-                g = hn::IfThenElse(keep, gc, hn::Mul(sumG, inv));
-                b = hn::IfThenElse(keep, bc, hn::Mul(sumB, inv));
-                if constexpr (kVariance) v = hn::IfThenElse(keep, vc, hn::Mul(hn::Mul(sumV, inv), inv));
-            }
+            if (!hn::AllTrue(d, hn::Lt(zc, zero)))
+                weighCentre<kSeries, kVariance>(d, TapContext{G, in, c, W, H, int(y), ptrdiff_t(o), stride}, zc, dzc,
+                                                ncx, ncy, ncz, rc, gc, bc, vc, lc, r, g, b, v);
 
             if (out.planes.r) {
                 // Lanes past the frame's right edge have miss centres: they store the margin's zeros back.
@@ -389,7 +389,7 @@ void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, cons
 void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out,
                        int step, const AtrousParams& params) {
     const LevelConstants c = makeConstants(step, params);
-    const bool series = c.phiNormal >= kSeriesMinPhi;
+    const bool series = c.phiNormal >= kWeightSeriesMinPhi;
     // One pointer captured: the std::function holds it without allocating.
     const struct {
         const PlaneLayout& L;

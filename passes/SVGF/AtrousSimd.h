@@ -11,7 +11,7 @@
 //   error <= 2.6e-6), the exponent built in the float's bits. t is clamped to 100: a weight the reference makes
 //   smaller than 2^-100 (8e-31) stays at that, invisible unless a neighbour is brighter than ~1e25. Miss and
 //   off-frame taps are masked to exactly 0.
-// - the normal weight max(0, n_p.n_q)^phi, for phi >= kSeriesMinPhi: exp(-phi * (d + d^2/2 + d^3/3 + d^4/4)),
+// - the normal weight max(0, n_p.n_q)^phi, for phi >= kWeightSeriesMinPhi: exp(-phi * (d + d^2/2 + d^3/3 + d^4/4)),
 //   d = 1 - n_p.n_q, the first four terms of -ln(1 - d); its absolute error is <= 3.2e-6 over d in [0, 2] for
 //   phi >= 32 (<= 1.5e-8 at the default 128). The dot product is rounded exactly as the reference rounds it.
 //   Smaller phi use exp2(phi * log2(max(dot, 1e-30))) with Highway's log2 (a few ulp).
@@ -37,8 +37,6 @@ namespace loom::svgf::simd {
 
 /// Widest vector the planes are padded for (AVX-512: 16 floats).
 inline constexpr uint32_t kMaxLanes = 16;
-/// phiNormal from which the series form of the normal weight is used (see the bound above).
-inline constexpr float kSeriesMinPhi = kWeightSeriesMinPhi;
 
 /// Shape of every plane: pixel (x, y) at y * stride + margin + x. The margin (left; the right one is margin +
 /// kMaxLanes) covers taps up to `margin` columns off-frame; taps further out are off-frame for every pixel of the

@@ -309,12 +309,18 @@ struct VarianceScales {
     float terms[4];   ///< phi log2(e) / k, k = 1..4
 };
 
+/// The series form's coefficients phi log2(e) / k, k = 1..4: the normal weight's exponent in powers of two (the
+/// à-trous fast path's too).
+LOOM_HD inline void normalSeriesTerms(float phi, float terms[4]) {
+    for (int k = 0; k < 4; ++k) terms[k] = phi * kWeightLog2e / float(k + 1);
+}
+
 LOOM_HD inline VarianceScales varianceScales(const AtrousParams& p) {
     VarianceScales s{};
     s.invPhiL = p.phiColor > 0.f ? 1.f / p.phiColor : 1e30f;
     s.phiNormal = maxf(p.phiNormal, 0.f);
     s.series = s.phiNormal >= kWeightSeriesMinPhi;
-    for (int k = 0; k < 4; ++k) s.terms[k] = s.phiNormal * kWeightLog2e / float(k + 1);
+    normalSeriesTerms(s.phiNormal, s.terms);
     return s;
 }
 
@@ -343,15 +349,21 @@ struct VarianceViews {
     ImageView<float> variance;  // optional debug output: the estimate's variance (both signals summed)
 };
 
+/// Whether a pixel at depth z with history `length` takes the spatial estimate: a hit whose history is short.
+LOOM_HD inline bool needsSpatialVariance(float z, float length) {
+    return z >= 0.f && !(length >= kSpatialVarianceFrames);
+}
+
 /// Stage 2 for pixel (x, y): the temporal variance where history is long enough; else a 7x7 edge-aware filter of
-/// the integrated colour and the moments whose variance is boosted by 4 / n for the first frames (Falcor).
-LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, uint32_t y, const AtrousParams& p,
+/// the integrated colour and the moments whose variance is boosted by 4 / n for the first frames (Falcor), with
+/// the weights' scales s (varianceScales).
+LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, uint32_t y, const VarianceScales& s,
                                           bool split) {
     const glm::vec4 i0 = v.integrated0.at(x, y);
     const glm::vec4 i1 = split ? v.integrated1.at(x, y) : glm::vec4(0.f);
     const float length = v.length.at(x, y);
     const glm::vec2 z = v.linearZ.at(x, y);
-    if (!(z.x >= 0.f) || length >= kSpatialVarianceFrames) {
+    if (!needsSpatialVariance(z.x, length)) {
         v.estimate0.at(x, y) = i0;
         if (split) v.estimate1.at(x, y) = i1;
         if (v.variance.data) v.variance.at(x, y) = i0.a + i1.a;
@@ -360,7 +372,6 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
     const glm::vec3 n = finiteOrZero(glm::vec3(v.normW.at(x, y)));
     const float l0 = luminance(glm::vec3(i0)), l1 = luminance(glm::vec3(i1));
     const float invPhiDepth = 1.f / (maxf(z.y, 1e-8f) * 3.f);
-    const VarianceScales scales = varianceScales(p);
     glm::vec3 sum0(0.f), sum1(0.f);
     glm::vec4 sumMoments(0.f);
     float sumW0 = 0.f, sumW1 = 0.f;
@@ -378,7 +389,7 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
             const glm::vec4 mq = v.moments.at(uint32_t(qx), uint32_t(qy));
             const float invDepth = invPhiDepth * varianceInvDistance(i, j);
             const float dz = z.x - zq.x;
-            const float w0 = varianceWeight(dz, invDepth, n, nq, l0, luminance(glm::vec3(q0)), scales);
+            const float w0 = varianceWeight(dz, invDepth, n, nq, l0, luminance(glm::vec3(q0)), s);
             sum0.x += w0 * q0.x;
             sum0.y += w0 * q0.y;
             sum0.z += w0 * q0.z;
@@ -387,7 +398,7 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
             sumW0 += w0;
             if (split) {
                 const glm::vec4 q1 = v.integrated1.at(uint32_t(qx), uint32_t(qy));
-                const float w1 = varianceWeight(dz, invDepth, n, nq, l1, luminance(glm::vec3(q1)), scales);
+                const float w1 = varianceWeight(dz, invDepth, n, nq, l1, luminance(glm::vec3(q1)), s);
                 sum1.x += w1 * q1.x;
                 sum1.y += w1 * q1.y;
                 sum1.z += w1 * q1.z;

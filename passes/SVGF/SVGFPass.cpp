@@ -257,12 +257,13 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
     vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
-    double spatialPixels = -1.0, varianceReference = 1.0;  // -1: not counted (the scalar stages)
-    if (fused && varianceScales(ap).series) {
-        const simd::VarianceCounts counts = simd::varianceFused(vv, ap, *planes.layout, planes.guide, planes.signal,
+    const VarianceScales scales = varianceScales(ap);
+    stats.set(kStatVarianceReference, 1.0);  // the scalar stages; the vector one counts
+    if (fused && scales.series) {
+        const simd::VarianceCounts counts = simd::varianceFused(vv, scales, *planes.layout, planes.guide, planes.signal,
                                                                 planes.signal1, split, kTemporalBandRows);
-        spatialPixels = double(counts.spatial);
-        varianceReference = counts.spatial ? double(counts.reference) / double(counts.spatial) : 0.0;
+        stats.set(kStatSpatialPixels, double(counts.spatial));
+        stats.set(kStatVarianceReference, counts.spatial ? double(counts.reference) / double(counts.spatial) : 0.0);
     } else if (fusedTemporal) {
         // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate. Bands of
         // whole rows, as stage 1: the scan of the lengths is a plain stream.
@@ -271,8 +272,8 @@ void SVGFPass::execute(PassContext& ctx) {
             [&](const Tile& band) {
                 for (uint32_t y = band.y0; y < band.y1; ++y)
                     for (uint32_t x = 0; x < w; ++x) {
-                        if (vv.length.at(x, y) >= kSpatialVarianceFrames || !(vv.linearZ.at(x, y).x >= 0.f)) continue;
-                        varianceEstimatePixel(vv, x, y, ap, split);
+                        if (!needsSpatialVariance(vv.linearZ.at(x, y).x, vv.length.at(x, y))) continue;
+                        varianceEstimatePixel(vv, x, y, scales, split);
                         if (!fused) continue;
                         simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
                         if (split) simd::packSignalPixel(*planes.layout, planes.signal1, x, y, vv.estimate1.at(x, y));
@@ -281,11 +282,9 @@ void SVGFPass::execute(PassContext& ctx) {
             kTemporalBandRows);
     } else {
         parallelForPixels(
-            w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, ap, split); }, kStreamTileSize);
+            w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, scales, split); }, kStreamTileSize);
     }
     stats.set(kStatVariance, msSince(t0));
-    if (spatialPixels >= 0.0) stats.set(kStatSpatialPixels, spatialPixels);
-    stats.set(kStatVarianceReference, varianceReference);
 
     // Stage 3: à-trous levels; the integrated fields are free now and take the filtered signals.
     t0 = Clock::now();

@@ -351,15 +351,17 @@ HWY_INLINE V storeEstimate(D d, const VarianceSums& s, V ir, V ig, V ib, V ia, V
 
 /// varianceEstimatePixel (series normal weight) for the N pixels from x on row y, all of whose taps lie inside the
 /// frame's columns: the reference's operations in the reference's order, taps read from the à-trous planes stage 1
-/// packed (the same values, sanitised as the reference sanitises them) and from the moments. False: no lane short.
+/// packed (the same values, sanitised as the reference sanitises them) and from the moments. Returns the number
+/// of short lanes (0: nothing written).
 template <bool kSplit>
-bool varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
+size_t varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
     const VarianceViews& v = j.v;
     const D d;
     const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
     V zc, dzc;
     const M isShort = shortHistory(d, v, x, y, zc, dzc);
-    if (hn::AllFalse(d, isShort)) return false;
+    const size_t count = hn::CountTrue(d, isShort);
+    if (count == 0) return 0;
     const size_t o = j.L.offset(x, y);
     const ptrdiff_t stride = ptrdiff_t(j.L.stride);
     const GuidePlanes& G = j.G;
@@ -368,7 +370,7 @@ bool varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
     V ir, ig, ib, ia, kr = zero, kg = zero, kb = zero, ka = zero;
     hn::LoadInterleaved4(d, &v.integrated0.at(x, y).x, ir, ig, ib, ia);
     if constexpr (kSplit) hn::LoadInterleaved4(d, &v.integrated1.at(x, y).x, kr, kg, kb, ka);
-    const V lc0 = luminanceExact(d, ir, ig, ib), lc1 = luminanceExact(d, kr, kg, kb);
+    const V lc0 = luminanceExact(d, ir, ig, ib), lc1 = kSplit ? luminanceExact(d, kr, kg, kb) : zero;
     const V invPhiDepth = hn::Div(one, hn::Mul(maxOf(dzc, hn::Set(d, 1e-8f)), hn::Set(d, 3.f)));
     const V invPhiL = hn::Set(d, j.s.invPhiL), log2e = hn::Set(d, kWeightLog2e);
     const V t0 = hn::Set(d, j.s.terms[0]), t1 = hn::Set(d, j.s.terms[1]), t2 = hn::Set(d, j.s.terms[2]),
@@ -418,40 +420,33 @@ bool varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
         float* variance = &v.variance.at(x, y);
         hn::StoreU(hn::IfThenElse(isShort, hn::Add(ea0, ea1), hn::LoadU(d, variance)), d, variance);
     }
-    return true;
+    return count;
 }
 
-VarianceCounts VarianceFusedTarget(const VarianceViews& v, const AtrousParams& p, const PlaneLayout& L,
+VarianceCounts VarianceFusedTarget(const VarianceViews& v, const VarianceScales& scales, const PlaneLayout& L,
                                    const GuidePlanes& G, const SignalPlanes& S0, const SignalPlanes& S1, bool split,
                                    uint32_t rows) {
-    const VarianceScales scales = varianceScales(p);
     const VarianceJob job{v, scales, L, G, S0, S1};
     const uint32_t W = v.integrated0.width, H = v.integrated0.height;
     const uint32_t N = uint32_t(hn::Lanes(D()));
     auto isShort = [&v](uint32_t x, uint32_t y) {
-        return v.linearZ.at(x, y).x >= 0.f && !(v.length.at(x, y) >= kSpatialVarianceFrames);
+        return needsSpatialVariance(v.linearZ.at(x, y).x, v.length.at(x, y));
     };
     std::atomic<uint64_t> spatial{0}, reference{0};
     // The estimates. The planes are read as taps here, so they are repacked only once every estimate is done.
     parallelFor2D(
         1, H,
         [&](const Tile& band) {
-            const D d;
             uint64_t vectorCount = 0, scalarCount = 0;
             for (uint32_t y = band.y0; y < band.y1; ++y)
                 for (uint32_t x = 0; x < W;) {
                     if (x >= 3 && x + N + 3 <= W) {
-                        V z, dz;
-                        vectorCount += hn::CountTrue(d, shortHistory(d, v, x, y, z, dz));
-                        if (split)
-                            varianceVector<true>(job, x, y);
-                        else
-                            varianceVector<false>(job, x, y);
+                        vectorCount += split ? varianceVector<true>(job, x, y) : varianceVector<false>(job, x, y);
                         x += N;
                         continue;
                     }
                     if (isShort(x, y)) {
-                        varianceEstimatePixel(v, x, y, p, split);
+                        varianceEstimatePixel(v, x, y, scales, split);
                         ++scalarCount;
                     }
                     ++x;
@@ -503,10 +498,10 @@ TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, co
     return HWY_DYNAMIC_DISPATCH(TemporalFusedTarget)(v, p, out, rows);
 }
 
-VarianceCounts varianceFused(const VarianceViews& v, const AtrousParams& p, const PlaneLayout& layout,
+VarianceCounts varianceFused(const VarianceViews& v, const VarianceScales& scales, const PlaneLayout& layout,
                              const GuidePlanes& guide, const SignalPlanes& signal0, const SignalPlanes& signal1,
                              bool split, uint32_t rows) {
-    return HWY_DYNAMIC_DISPATCH(VarianceFusedTarget)(v, p, layout, guide, signal0, signal1, split, rows);
+    return HWY_DYNAMIC_DISPATCH(VarianceFusedTarget)(v, scales, layout, guide, signal0, signal1, split, rows);
 }
 
 }  // namespace loom::svgf::simd

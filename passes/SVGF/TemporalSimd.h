@@ -57,8 +57,8 @@ struct VarianceCounts {
 /// Stage 2 of the fused path, after temporalFused packed the à-trous planes (layout, guide, signal0 and with
 /// split signal1): varianceEstimatePixel for every pixel whose history is short, vectorised where all 7x7 taps lie
 /// in the frame's columns (the reference's operations in its order: bit-identical), then those pixels' à-trous
-/// input planes repacked. Requires the series form of the weight (varianceScales(p).series); rows: band height.
-VarianceCounts varianceFused(const VarianceViews& v, const AtrousParams& p, const PlaneLayout& layout,
+/// input planes repacked. Requires the series form of the weight (scales.series); rows: band height.
+VarianceCounts varianceFused(const VarianceViews& v, const VarianceScales& scales, const PlaneLayout& layout,
                              const GuidePlanes& guide, const SignalPlanes& signal0, const SignalPlanes& signal1,
                              bool split, uint32_t rows);
 

@@ -423,7 +423,9 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             useHistory = in.historyValid ? hn::And(useHistory, valid) : hn::Not(hn::FirstN(d, N));
             // A neighbourhood of one value (ClipBox::flat: minimum = maximum in every channel) resolves to the
             // current colour: its history is not read.
+            // The minima and maxima serve the clip box below too.
             FloatMask flat = hn::FirstN(d, N);
+            FloatVec boxMin[4], boxMax[4];
             for (int ch = 0; ch < (alphaConstant ? 3 : 4); ++ch) {
                 FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
                 for (uint32_t r = y + 1; r < y + 3; ++r) {
@@ -431,6 +433,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                     mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
                 }
                 flat = hn::And(flat, hn::Eq(mn, mx));
+                boxMin[ch] = mn;
+                boxMax[ch] = mx;
             }
             const FloatMask resolveHistory = hn::AndNot(flat, useHistory);
             FloatVec cr, cgr, cb, ca;
@@ -506,13 +510,11 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                         lo = hi = hn::Set(d, alpha0);
                     } else {
                         FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
-                        FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
                         for (uint32_t r = y + 1; r < y + 3; ++r) {
                             sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
                             sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
-                            mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);
-                            mx = hn::Max(hn::LoadU(d, &s.rowMax[ch][r][x]), mx);
                         }
+                        const FloatVec mn = boxMin[ch], mx = boxMax[ch];
                         const FloatVec mean = hn::Mul(sum, ninth);
                         const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
                         const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));

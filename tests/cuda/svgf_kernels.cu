@@ -6,7 +6,7 @@ __global__ void svgfTemporal(loom::svgf::TemporalViews tv, loom::svgf::TemporalP
 }
 
 __global__ void svgfVariance(loom::svgf::VarianceViews vv, loom::svgf::AtrousParams ap) {
-    loom::svgf::varianceEstimatePixel(vv, threadIdx.x, blockIdx.x, ap, true);
+    loom::svgf::varianceEstimatePixel(vv, threadIdx.x, blockIdx.x, loom::svgf::varianceScales(ap), true);
 }
 
 __global__ void svgfModulate(loom::svgf::ModulateViews mv) {
