@@ -1,7 +1,6 @@
 #include "loom/RenderGraph.h"
 
 #include <fnmatch.h>
-#include <sys/mman.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -14,6 +13,7 @@
 #include <spdlog/spdlog.h>
 
 #include "loom/Error.h"
+#include "loom/PageMemory.h"
 
 namespace loom {
 
@@ -25,35 +25,26 @@ bool globMatch(const std::string& pattern, const std::string& text) {
 
 namespace {
 
-/// Memory for transient fields. Anonymous mmap gives page-aligned memory
-/// that the kernel zeroes lazily, so a large arena costs nothing until
+/// Memory for transient fields: PageMemory, which the kernel zeroes lazily and
+/// backs with huge pages where it can, so a large arena costs nothing until
 /// touched; a recompile that fits in the current arena keeps it.
 class Arena {
 public:
-    Arena() = default;
-    Arena(const Arena&) = delete;
-    Arena& operator=(const Arena&) = delete;
-    ~Arena() { release(); }
     bool reserve(size_t bytes) {
-        if (bytes <= mCapacity && bytes * 2 >= mCapacity) return true;
-        release();
+        if (bytes <= mMemory.size() && bytes * 2 >= mMemory.size()) return true;
+        mMemory.release();
         if (bytes == 0) return true;
-        void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-        if (p == MAP_FAILED) return false;
-        mData = static_cast<std::byte*>(p);
-        mCapacity = bytes;
+        try {
+            mMemory = PageMemory(bytes);
+        } catch (const std::bad_alloc&) {
+            return false;
+        }
         return true;
     }
-    void release() {
-        if (mData) munmap(mData, mCapacity);
-        mData = nullptr;
-        mCapacity = 0;
-    }
-    std::byte* data() const { return mData; }
+    std::byte* data() const { return mMemory.data(); }
 
 private:
-    std::byte* mData = nullptr;
-    size_t mCapacity = 0;
+    PageMemory mMemory;
 };
 
 std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }

@@ -1,5 +1,7 @@
 #include "loom/Texture.h"
 
+#include "loom/PageMemory.h"
+
 #include <algorithm>
 #include <bit>
 #include <cstring>
@@ -27,11 +29,10 @@ Texture::Texture(uint32_t width, uint32_t height, Format format)
       mRowPitch(alignUp(size_t(width) * formatInfo(format).bytesPerPixel, kRowAlignment)) {
     size_t bytes = mRowPitch * mHeight;
     if (bytes == 0) return;  // a 0-sized texture holds no memory and is empty()
-    auto* memory = static_cast<std::byte*>(::operator new(bytes, std::align_val_t(kRowAlignment)));
-    std::memset(memory, 0, bytes);
-    mOwner = std::shared_ptr<std::byte>(
-        memory, [](std::byte* p) { ::operator delete(p, std::align_val_t(kRowAlignment)); });
-    mData = memory;
+    static_assert(kRowAlignment <= 64, "PageMemory aligns to 64 bytes at least");
+    auto memory = std::make_shared<PageMemory>(bytes);
+    mData = memory->data();
+    mOwner = std::shared_ptr<std::byte>(memory, mData);  // shares the buffer's ownership
 }
 
 Texture Texture::wrap(std::byte* memory, uint32_t width, uint32_t height, Format format) {
