@@ -2,9 +2,12 @@
 
 #include <sys/mman.h>
 
+#include <atomic>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <new>
+#include <string_view>
 #include <utility>
 
 namespace loom {
@@ -22,6 +25,14 @@ constexpr bool kAddressSanitizer = false;
 
 size_t roundUp(size_t v, size_t a) {
     return (v + a - 1) / a * a;
+}
+
+std::atomic<bool>& hugePagesFlag() {
+    static std::atomic<bool> flag{[] {
+        const char* e = std::getenv("LOOM_HUGE_PAGES");
+        return !(e && std::string_view(e) == "0");
+    }()};
+    return flag;
 }
 
 }  // namespace
@@ -44,8 +55,9 @@ PageMemory::PageMemory(size_t bytes) {
     const size_t head = size_t(aligned - begin), tail = reserve - head - size;
     if (head) munmap(begin, head);
     if (tail) munmap(aligned + size, tail);
-#ifdef MADV_HUGEPAGE
-    madvise(aligned, size, MADV_HUGEPAGE);  // advice: where transparent huge pages are off, nothing changes
+#if defined(MADV_HUGEPAGE) && defined(MADV_NOHUGEPAGE)
+    // Advice: where the kernel has no transparent huge pages, nothing changes.
+    madvise(aligned, size, hugePagesFlag().load() ? MADV_HUGEPAGE : MADV_NOHUGEPAGE);
 #endif
     mData = aligned;
     mSize = size;
@@ -60,6 +72,14 @@ PageMemory& PageMemory::operator=(PageMemory&& o) noexcept {
         mMapped = std::exchange(o.mMapped, false);
     }
     return *this;
+}
+
+void PageMemory::setHugePages(bool on) {
+    hugePagesFlag().store(on);
+}
+
+bool PageMemory::hugePages() {
+    return hugePagesFlag().load();
 }
 
 void PageMemory::release() {

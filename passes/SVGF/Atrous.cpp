@@ -38,11 +38,10 @@ bool AtrousFilter::ensureLayout(int maxStep) {
         return false;
     mLayout = want;
     const size_t plane = mLayout.planeSize();
-    const size_t alignFloats = kRowAlignment / sizeof(float);
     const int count = kGuidePlanes + 2 * kSignalPlanes * mSlots;
-    mPlaneStorage.assign(plane * size_t(count) + alignFloats, 0.f);
-    float* base = mPlaneStorage.data();
-    base += (alignFloats - (reinterpret_cast<uintptr_t>(base) / sizeof(float)) % alignFloats) % alignFloats;
+    mPlaneStorage.release();  // before the new allocation: the two need not fit at once
+    mPlaneStorage = PageMemory(plane * size_t(count) * sizeof(float));  // zeroed, 64-byte aligned at least
+    float* base = reinterpret_cast<float*>(mPlaneStorage.data());
     auto planeAt = [&](int i) { return base + plane * size_t(i); };
     mGuide = {planeAt(0), planeAt(1), planeAt(2), planeAt(3), planeAt(4)};
     for (int slot = 0; slot < 2; ++slot)

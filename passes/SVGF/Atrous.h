@@ -9,6 +9,7 @@
 
 #include "AtrousKernels.h"
 #include "AtrousSimd.h"
+#include "loom/PageMemory.h"
 #include "loom/Texture.h"
 
 namespace loom::svgf {
@@ -61,7 +62,7 @@ private:
     Texture mPing, mPong;
     // The fast path's planes: the guide and two signals, in one allocation.
     simd::PlaneLayout mLayout;
-    std::vector<float> mPlaneStorage;
+    PageMemory mPlaneStorage;  // huge pages where the system allows: each plane row is a 4 KiB page otherwise
     simd::GuidePlanes mGuide;
     simd::SignalPlanes mSignal[2][2];  // [slot][ping-pong]
     int mSlots = 1;  // signals laid out (mSignal[1] is allocated when 2)

@@ -81,6 +81,20 @@ TEST(PageMemory, LargeBuffersAreAdvisedAsHugePagesWhereTheKernelHasThem) {
     EXPECT_EQ(flags.find(" hg") != std::string::npos, kernelHasThem) << flags;
 }
 
+TEST(PageMemory, TheAdviceCanBeTurnedAgainstHugePages) {
+    if (!kLargeMapped || !std::filesystem::exists("/sys/kernel/mm/transparent_hugepage/enabled"))
+        GTEST_SKIP() << "no transparent huge pages in this build or kernel";
+    ASSERT_TRUE(PageMemory::hugePages());  // the default (LOOM_HUGE_PAGES unset)
+    PageMemory::setHugePages(false);
+    PageMemory off(size_t(8) << 20);
+    PageMemory::setHugePages(true);
+    PageMemory on(size_t(8) << 20);
+    const std::string offFlags = vmFlagsOf(off.data()), onFlags = vmFlagsOf(on.data());
+    EXPECT_NE(offFlags.find(" nh"), std::string::npos) << offFlags;  // MADV_NOHUGEPAGE
+    EXPECT_EQ(offFlags.find(" hg"), std::string::npos) << offFlags;
+    EXPECT_NE(onFlags.find(" hg"), std::string::npos) << onFlags;
+}
+
 TEST(PageMemory, MovesTransferOwnershipAndReleaseEmpties) {
     PageMemory a(size_t(4) << 20);
     std::byte* p = a.data();

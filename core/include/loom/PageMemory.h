@@ -37,6 +37,12 @@ public:
     /// Frees the memory; the buffer becomes empty.
     void release();
 
+    /// Whether buffers mapped from now on are advised as huge pages (MADV_HUGEPAGE) or advised against them
+    /// (MADV_NOHUGEPAGE, also where the system's setting is "always"). On by default; the environment variable
+    /// LOOM_HUGE_PAGES=0 turns it off. For measuring what huge pages buy, and for systems where they hurt.
+    static void setHugePages(bool on);
+    static bool hugePages();
+
 private:
     std::byte* mData = nullptr;
     size_t mSize = 0;
