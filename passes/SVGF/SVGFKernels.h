@@ -185,10 +185,12 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
     const glm::vec2 z = v.linearZ.at(x, y);
     const glm::vec4 normal = v.normW.at(x, y);
     const uint32_t mesh = v.meshId.data ? v.meshId.at(x, y) : 0u;
-    // Guides for next frame's tests.
-    v.curLinearZ.at(x, y) = z;
-    v.curNormW.at(x, y) = normal;
-    v.curMeshId.at(x, y) = mesh;
+    // Guides for next frame's tests (unless the graph keeps last frame's G-buffer: no views then).
+    if (v.curLinearZ.data) {
+        v.curLinearZ.at(x, y) = z;
+        v.curNormW.at(x, y) = normal;
+        v.curMeshId.at(x, y) = mesh;
+    }
 
     const glm::vec4 c0 = p.split ? v.direct.at(x, y) : v.color.at(x, y);
     const glm::vec4 c1 = p.split ? v.indirect.at(x, y) : glm::vec4(0.f);

@@ -23,6 +23,10 @@ const char kLinearZ[] = "linearZ";
 const char kNormW[] = "normW";
 const char kMvec[] = "mvec";
 const char kMeshId[] = "meshId";
+// Last frame's guides from the G-buffer's @prev edges (optional: without them SVGF keeps its own copies).
+const char kLinearZPrev[] = "linearZPrev";
+const char kNormWPrev[] = "normWPrev";
+const char kMeshIdPrev[] = "meshIdPrev";
 // Outputs.
 const char kFiltered[] = "filtered";
 const char kVariance[] = "variance";
@@ -44,6 +48,7 @@ const char kEstimateIndirect[] = "estimateIndirect";
 // Frame stats.
 const char kStatNonFinite[] = "nonFinite";
 const char kStatSplit[] = "split";
+const char kStatSharedGuides[] = "sharedPrevGuides";
 const char kStatReferencePixels[] = "temporal.referenceShare";
 const char kStatSpatialPixels[] = "variance.spatialPixels";
 const char kStatVarianceReference[] = "variance.referenceShare";
@@ -96,6 +101,14 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo&) const {
     r.input(kNormW, Format::RGBA32F).doc("shading normal, world space");
     r.input(kMvec, Format::RG32F).doc("uvPrev - uvCur, for reprojection");
     r.input(kMeshId, Format::R32U).optional().doc("mesh/instance id for the disocclusion test (skipped if absent)");
+    r.input(kLinearZPrev, Format::RG32F)
+        .optional()
+        .doc(
+            "last frame's linearZ, from an edge \"GBuffer.linearZ@prev\": with normWPrev (and meshIdPrev when meshId "
+            "is connected) SVGF reads last frame's guides there instead of copying them into prevLinearZ, prevNormW "
+            "and prevMeshId");
+    r.input(kNormWPrev, Format::RGBA32F).optional().doc("last frame's normW (\"GBuffer.normW@prev\"); see linearZPrev");
+    r.input(kMeshIdPrev, Format::R32U).optional().doc("last frame's meshId (\"GBuffer.meshId@prev\"); see linearZPrev");
 
     r.output(kFiltered, Format::RGBA32F).doc("filtered radiance");
     r.output(kVariance, Format::R32F)
@@ -109,9 +122,12 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo&) const {
     r.history(kMomentsHistory, Format::RGBA32F)
         .doc("luminance moments m1, m2 of colour (split: direct) in xy, of indirect in zw");
     r.history(kLengthHistory, Format::R32F).doc("history length in frames, capped at maxHistory; 0: no history");
-    r.history(kPrevLinearZ, Format::RG32F).doc("linearZ of the frame, for next frame's disocclusion test");
-    r.history(kPrevNormW, Format::RGBA32F).doc("normW of the frame, for next frame's disocclusion test");
-    r.history(kPrevMeshId, Format::R32U).doc("meshId of the frame, for next frame's disocclusion test");
+    r.history(kPrevLinearZ, Format::RG32F)
+        .doc("linearZ of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
+    r.history(kPrevNormW, Format::RGBA32F)
+        .doc("normW of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
+    r.history(kPrevMeshId, Format::R32U)
+        .doc("meshId of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
 
     r.internal(kIntegrated, Format::RGBA32F)
         .doc("colour (split: direct) after temporal accumulation, a = temporal variance; then the filtered result");
@@ -188,16 +204,28 @@ void SVGFPass::execute(PassContext& ctx) {
     if (split) tv.prevIllum1 = ctx.historyPrev(kIndirectHistory).view<glm::vec4>();
     tv.prevMoments = ctx.historyPrev(kMomentsHistory).view<glm::vec4>();
     tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
-    tv.prevLinearZ = ctx.historyPrev(kPrevLinearZ).view<glm::vec2>();
-    tv.prevNormW = ctx.historyPrev(kPrevNormW).view<glm::vec4>();
-    tv.prevMeshId = ctx.historyPrev(kPrevMeshId).view<uint32_t>();
+    // Last frame's guides: the G-buffer's own previous outputs when the graph feeds them (@prev edges), else the
+    // copies this pass keeps.
+    const bool sharedGuides =
+        ctx.input(kLinearZPrev) && ctx.input(kNormWPrev) && (!tv.meshId.data || ctx.input(kMeshIdPrev));
+    if (sharedGuides) {
+        tv.prevLinearZ = inputView<glm::vec2>(ctx, kLinearZPrev);
+        tv.prevNormW = inputView<glm::vec4>(ctx, kNormWPrev);
+        tv.prevMeshId = inputView<uint32_t>(ctx, kMeshIdPrev);
+    } else {
+        tv.prevLinearZ = ctx.historyPrev(kPrevLinearZ).view<glm::vec2>();
+        tv.prevNormW = ctx.historyPrev(kPrevNormW).view<glm::vec4>();
+        tv.prevMeshId = ctx.historyPrev(kPrevMeshId).view<uint32_t>();
+    }
     tv.integrated0 = ctx.internal(kIntegrated)->view<glm::vec4>();
     tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
     tv.curMoments = ctx.historyCur(kMomentsHistory).view<glm::vec4>();
     tv.curLength = ctx.historyCur(kLengthHistory).view<float>();
-    tv.curLinearZ = ctx.historyCur(kPrevLinearZ).view<glm::vec2>();
-    tv.curNormW = ctx.historyCur(kPrevNormW).view<glm::vec4>();
-    tv.curMeshId = ctx.historyCur(kPrevMeshId).view<uint32_t>();
+    if (!sharedGuides) {  // else left empty: nothing is copied
+        tv.curLinearZ = ctx.historyCur(kPrevLinearZ).view<glm::vec2>();
+        tv.curNormW = ctx.historyCur(kPrevNormW).view<glm::vec4>();
+        tv.curMeshId = ctx.historyCur(kPrevMeshId).view<uint32_t>();
+    }
 
     TemporalParams tp;
     tp.alpha = mAlpha;
@@ -342,6 +370,7 @@ void SVGFPass::execute(PassContext& ctx) {
     stats.set(kStatNonFinite, double(nonFinite.load()));
     stats.set(kStatReferencePixels, double(referencePixels) / (double(w) * h));
     stats.set(kStatSplit, split ? 1 : 0);
+    stats.set(kStatSharedGuides, sharedGuides ? 1 : 0);
 }
 
 }  // namespace loom
@@ -352,7 +381,11 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "Spatiotemporal variance-guided filtering (Schied et al. 2017) with Falcor's defaults: demodulation, "
         "reprojection with disocclusion tests, moments, spatial variance while history is short, a-trous levels "
         "with feedback, remodulation; direct and indirect filtered separately when both are connected. History in "
-        "graph fields. Stats: nonFinite (colour samples rejected), split, temporal.referenceShare (fraction of pixels "
+        "graph fields; last frame's guides from the G-buffer's @prev outputs when the graph connects linearZPrev, "
+        "normWPrev "
+        "(and meshIdPrev), else copied into its own history. Stats: nonFinite (colour samples rejected), split, "
+        "sharedPrevGuides (1 when last frame's guides come from @prev inputs), temporal.referenceShare (fraction of "
+        "pixels "
         "the temporal stage ran through the scalar reference kernel rather than the vector path), "
         "variance.spatialPixels (pixels given the spatial variance estimate; fused path only), "
         "variance.referenceShare (fraction of those through the scalar kernel), ms.reproject, "

@@ -11,7 +11,9 @@
 //   illuminationIndirect  RGBA32F  indirect history (split only), same layout
 //   moments               RGBA32F  luminance moments: (m1, m2) of colour/direct, (m1, m2) of indirect
 //   length                R32F     history length in frames (capped at maxHistory); 0: no history there
-//   prevLinearZ, prevNormW, prevMeshId   this frame's guides, for next frame's disocclusion tests
+//   prevLinearZ, prevNormW, prevMeshId   this frame's guides, for next frame's disocclusion tests; not written when
+//                         the graph feeds last frame's G-buffer outputs instead (inputs linearZPrev, normWPrev,
+//                         meshIdPrev from "GBuffer.linearZ@prev" ... edges: no copy, as the shipped graphs do)
 // The pass object holds only parameters and the à-trous scratch.
 #include "Atrous.h"
 #include "SVGFKernels.h"

@@ -245,9 +245,11 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     streamInterleaved4(d, ir, ig, ib, ia, &v.integrated0.at(x, y).x);
     streamInterleaved4(d, m[0], m[1], m[2], m[3], &v.curMoments.at(x, y).x);
     hn::StoreU(hn::IfThenElseZero(hit, length), d, &v.curLength.at(x, y));  // read again by the variance stage
-    streamCopy(d, &v.linearZ.at(x, y).x, &v.curLinearZ.at(x, y).x, 2 * N);
-    streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
-    hn::Stream(hn::BitCast(d, mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
+    if (v.curLinearZ.data) {  // the guides for next frame, unless the graph keeps last frame's G-buffer
+        streamCopy(d, &v.linearZ.at(x, y).x, &v.curLinearZ.at(x, y).x, 2 * N);
+        streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
+        hn::Stream(hn::BitCast(d, mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
+    }
     streamInterleaved4(d, ir, ig, ib, ia, &j.out.estimate.at(x, y).x);
     if (split) {
         streamInterleaved4(d, jr, jg, jb, ja, &v.integrated1.at(x, y).x);

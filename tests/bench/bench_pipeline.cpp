@@ -3,6 +3,7 @@
 // stats ("ms.*"). The graph files are the ones users run, so the figures are what `loom render` would show.
 #include <benchmark/benchmark.h>
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -27,11 +28,14 @@ struct Pipeline {
     std::unique_ptr<RenderGraph> graph;
     uint64_t frame = 0;
 
-    Pipeline(const std::string& graphName, uint32_t width, uint32_t height) {
+    /// The shipped graph file graphName; `edit`, when given, changes its description first.
+    Pipeline(const std::string& graphName, uint32_t width, uint32_t height,
+             const std::function<void(GraphDesc&)>& edit = {}) {
         scene = Scene::load(std::string(LOOM_SOURCE_DIR) + "/data/scenes/cornell_dynamic.gltf");
         scene->camera.jitterPattern = JitterPattern::Halton;
-        graph = std::make_unique<RenderGraph>(
-            loadGraph(std::string(LOOM_SOURCE_DIR) + "/graphs/" + graphName + ".json"), registry());
+        GraphDesc desc = loadGraph(std::string(LOOM_SOURCE_DIR) + "/graphs/" + graphName + ".json");
+        if (edit) edit(desc);
+        graph = std::make_unique<RenderGraph>(std::move(desc), registry());
         graph->setScene(scene);
         CompileOptions o;
         o.width = width;
@@ -81,6 +85,27 @@ void runGraph(benchmark::State& state, const std::string& graphName, uint32_t wi
     for (const auto& [name, ms] : stageMs) state.counters[name] = ms / double(timed);
 }
 
+/// Per-pass times of two pipelines stepped alternately frame by frame (so both see the same minutes of the machine),
+/// as "<pass> a", "<pass> b" and "<pass> b/a", and the SVGF stages' ratios.
+void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b) {
+    std::map<std::string, double> aMs, bMs, aStages, bStages;
+    uint64_t timed = 0;
+    for (auto _ : state) {
+        a.step();
+        addTimes(a, aMs, aStages);
+        b.step();
+        addTimes(b, bMs, bStages);
+        ++timed;
+    }
+    for (const auto& [name, ms] : aMs) {
+        state.counters[name + " a"] = ms / double(timed);
+        state.counters[name + " b"] = bMs[name] / double(timed);
+        state.counters[name + " b/a"] = bMs[name] / ms;
+    }
+    for (const char* stage : {"SVGF.ms.reproject", "SVGF.ms.atrous"})
+        state.counters[std::string(stage) + " b/a"] = bStages[stage] / aStages[stage];
+}
+
 /// The default graph twice in one process, memory advised against huge pages in one and for them in the other
 /// (PageMemory), frames alternating between the two: per-pass times of each ("off" / "on") and their ratio.
 void BM_PathTracerSVGFHugePages(benchmark::State& state) {
@@ -93,22 +118,19 @@ void BM_PathTracerSVGFHugePages(benchmark::State& state) {
     Pipeline on("PathTracerSVGF", 1280, 720);
     on.warmUp();
     PageMemory::setHugePages(saved);
-    std::map<std::string, double> offMs, onMs, offStages, onStages;
-    uint64_t timed = 0;
-    for (auto _ : state) {
-        off.step();
-        addTimes(off, offMs, offStages);
-        on.step();
-        addTimes(on, onMs, onStages);
-        ++timed;
-    }
-    for (const auto& [name, ms] : offMs) {
-        state.counters[name + " off"] = ms / double(timed);
-        state.counters[name + " on"] = onMs[name] / double(timed);
-        state.counters[name + " on/off"] = onMs[name] / ms;
-    }
-    for (const char* stage : {"SVGF.ms.reproject", "SVGF.ms.atrous"})
-        state.counters[std::string(stage) + " on/off"] = onStages[stage] / offStages[stage];
+    compareAlternating(state, off, on);  // a: without, b: with huge pages
+}
+
+/// The default graph as shipped (b: SVGF reads last frame's guides from the G-buffer's @prev outputs) against the
+/// same graph without those edges (a: SVGF copies the guides into its own history), frames alternating.
+void BM_PathTracerSVGFSharedGuides(benchmark::State& state) {
+    Pipeline copies("PathTracerSVGF", 1280, 720, [](GraphDesc& g) {
+        std::erase_if(g.edges, [](const EdgeDesc& e) { return e.src.prev && e.dst.pass == "SVGF"; });
+    });
+    copies.warmUp();
+    Pipeline shared("PathTracerSVGF", 1280, 720);
+    shared.warmUp();
+    compareAlternating(state, copies, shared);
 }
 
 void BM_PathTracerSVGF(benchmark::State& s) {
@@ -124,6 +146,7 @@ BENCHMARK(BM_PathTracerSVGF)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerSVGFDirectIndirect)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerATrous)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerSVGFHugePages)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PathTracerSVGFSharedGuides)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 

@@ -430,20 +430,26 @@ TEST(SVGF, DirectIndirectSplitAgreesWithCombined) {
 
 namespace {
 
-/// GBufferRT + PathTracer (1 spp) + SVGF on a data scene.
+/// GBufferRT + PathTracer (1 spp) + SVGF on a data scene. With prevEdges, SVGF reads last frame's guides from the
+/// G-buffer's @prev outputs (as the shipped graphs do); without, it keeps its own copies.
 std::unique_ptr<RenderGraph> sceneGraph(const std::shared_ptr<Scene>& scene, uint32_t w, uint32_t h,
-                                        const nlohmann::json& svgfParams) {
+                                        const nlohmann::json& svgfParams, bool prevEdges = false) {
+    auto edge = [](const std::string& a, const std::string& b) { return nlohmann::json::array({a, b}); };
+    // GBufferRT and the path tracer both offer albedo and emission: take the G-buffer's.
+    nlohmann::json edges =
+        nlohmann::json::array({edge("GBuffer.albedo", "SVGF.albedo"), edge("GBuffer.emission", "SVGF.emission"),
+                               edge("GBuffer.vbuffer", "PT.vbuffer")});
+    if (prevEdges)
+        for (const std::string c : {"linearZ", "normW", "meshId"})
+            edges.push_back(edge("GBuffer." + c + "@prev", "SVGF." + c + "Prev"));
     nlohmann::json g = {{"loom_graph", 1},
                         {"name", "svgf_scene"},
                         {"passes",
                          {{{"name", "GBuffer"}, {"type", "GBufferRT"}},
                           {{"name", "PT"}, {"type", "PathTracer"}},
                           {{"name", "SVGF"}, {"type", "SVGFPass"}, {"params", svgfParams}}}},
-                        // GBufferRT and the path tracer both offer albedo and emission: take the G-buffer's.
-                        {"edges", nlohmann::json::array({nlohmann::json::array({"GBuffer.albedo", "SVGF.albedo"}),
-                                                         nlohmann::json::array({"GBuffer.emission", "SVGF.emission"}),
-                                                         nlohmann::json::array({"GBuffer.vbuffer", "PT.vbuffer"})})},
-                        {"outputs", {"SVGF.filtered", "PT.color"}}};
+                        {"edges", edges},
+                        {"outputs", {"SVGF.filtered", "SVGF.historyLength", "PT.color"}}};
     auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), registry());
     graph->setScene(scene);
     CompileOptions o;
@@ -638,6 +644,44 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
         return p;
     };
     compareRuns(splitFn, true);
+}
+
+// With the G-buffer's @prev outputs connected, SVGF reads last frame's depth, normal and mesh id there instead of
+// copying them into its own history: the same disocclusion decisions, so every output and history field is the same
+// bit for bit as with its own copies, on a scene whose moving objects uncover and cover pixels; its copies are then
+// never written.
+TEST(SVGF, PrevGuidesFromTheGBufferMatchItsOwnCopies) {
+    const uint32_t W = 64, H = 64;
+    auto sceneA = Scene::load(test::dataScene("cornell_dynamic.gltf"));
+    auto sceneB = Scene::load(test::dataScene("cornell_dynamic.gltf"));
+    auto copies = sceneGraph(sceneA, W, H, nlohmann::json::object(), false);
+    auto shared = sceneGraph(sceneB, W, H, nlohmann::json::object(), true);
+    bool sawRestart = false, sawLongHistory = false;
+    for (int f = 0; f < 8; ++f) {
+        const double time = 0.5 + f / 10.0;  // fast motion: disocclusions every frame
+        renderFrame(*copies, *sceneA, uint64_t(f), time, W, H);
+        renderFrame(*shared, *sceneB, uint64_t(f), time, W, H);
+        EXPECT_EQ(copies->lastStats().at("SVGF").at("sharedPrevGuides"), 0.0);
+        EXPECT_EQ(shared->lastStats().at("SVGF").at("sharedPrevGuides"), 1.0);
+        for (const char* field : {"filtered", "historyLength", "illumination", "moments", "length"})
+            EXPECT_TRUE(copies->fieldTexture(std::string("SVGF.") + field)
+                            ->samePixels(*shared->fieldTexture(std::string("SVGF.") + field)))
+                << field << " frame " << f;
+        const Texture& length = *shared->fieldTexture("SVGF.historyLength");
+        for (uint32_t y = 0; y < H; ++y)
+            for (uint32_t x = 0; x < W; ++x) {
+                const float n = length.texel(x, y, 0);
+                sawRestart |= f > 0 && n == 1.f;
+                sawLongHistory |= n >= float(f + 1) && f >= 4;
+            }
+        // The pass's own copies: written in one graph, left alone in the other.
+        const Texture& ownCopy = *copies->fieldTexture("SVGF.prevLinearZ");
+        const Texture zero(W, H, ownCopy.format());
+        EXPECT_FALSE(ownCopy.samePixels(zero)) << "frame " << f;
+        EXPECT_TRUE(shared->fieldTexture("SVGF.prevLinearZ")->samePixels(zero)) << "frame " << f;
+    }
+    EXPECT_TRUE(sawRestart) << "no disocclusion: the test would not tell last frame's guides from this frame's";
+    EXPECT_TRUE(sawLongHistory);
 }
 
 // The spatial variance estimate's weight, spelt for identical scalar and vector evaluation, against the closed
