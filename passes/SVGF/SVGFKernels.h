@@ -92,13 +92,13 @@ struct TemporalViews {
     ImageView<const glm::vec2> linearZ, mvec;
     ImageView<const uint32_t> meshId;  // optional: without it the mesh test is skipped
     // Last frame's history.
-    ImageView<const glm::vec4> prevIllum0, prevIllum1, prevMoments, prevNormW;
-    ImageView<const glm::vec2> prevLinearZ;
+    ImageView<const glm::vec4> prevIllum0, prevIllum1, prevNormW;
+    ImageView<const glm::vec2> prevMoments0, prevMoments1, prevLinearZ;  // moments: (m1, m2) of each signal
     ImageView<const float> prevLength;
     ImageView<const uint32_t> prevMeshId;
     // This frame's history (moments, length, guides) and the integrated signals (rgb, a = temporal variance).
-    ImageView<glm::vec4> integrated0, integrated1, curMoments, curNormW;
-    ImageView<glm::vec2> curLinearZ;
+    ImageView<glm::vec4> integrated0, integrated1, curNormW;
+    ImageView<glm::vec2> curMoments0, curMoments1, curLinearZ;  // moments1: split only
     ImageView<float> curLength;
     ImageView<uint32_t> curMeshId;
 };
@@ -125,10 +125,23 @@ struct Reprojected {
     bool valid = false;
 };
 
+/// The moments of both signals at (x, y) as (m1, m2) of signal 0 and of signal 1 (zero without its field).
+LOOM_HD inline glm::vec4 momentsAt(ImageView<const glm::vec2> m0, ImageView<const glm::vec2> m1, uint32_t x,
+                                   uint32_t y) {
+    return glm::vec4(m0.at(x, y), m1.data ? m1.at(x, y) : glm::vec2(0.f));
+}
+
+/// Stores moments (m1, m2 of signal 0, of signal 1) into the two fields (the second only when present).
+LOOM_HD inline void storeMoments(ImageView<glm::vec2> m0, ImageView<glm::vec2> m1, uint32_t x, uint32_t y,
+                                 const glm::vec4& m) {
+    m0.at(x, y) = glm::vec2(m.x, m.y);
+    if (m1.data) m1.at(x, y) = glm::vec2(m.z, m.w);
+}
+
 LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, uint32_t y, float w) {
     r.illum0 += w * v.prevIllum0.at(x, y);
     if (v.prevIllum1.data) r.illum1 += w * v.prevIllum1.at(x, y);
-    r.moments += w * v.prevMoments.at(x, y);
+    r.moments += w * momentsAt(v.prevMoments0, v.prevMoments1, x, y);
     r.length += w * v.prevLength.at(x, y);
 }
 
@@ -199,7 +212,7 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         // Miss: passed through by the modulation stage; no history.
         v.integrated0.at(x, y) = glm::vec4(0.f);
         if (p.split) v.integrated1.at(x, y) = glm::vec4(0.f);
-        v.curMoments.at(x, y) = glm::vec4(0.f);
+        storeMoments(v.curMoments0, v.curMoments1, x, y, glm::vec4(0.f));
         v.curLength.at(x, y) = 0.f;
         return !sampleFinite;
     }
@@ -241,7 +254,7 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
     i1.a = maxf(0.f, m.w - m.z * m.z);
     v.integrated0.at(x, y) = i0;
     if (p.split) v.integrated1.at(x, y) = i1;
-    v.curMoments.at(x, y) = m;
+    storeMoments(v.curMoments0, v.curMoments1, x, y, m);
     v.curLength.at(x, y) = length;
     return !sampleFinite;
 }
@@ -344,7 +357,8 @@ LOOM_HD inline float varianceWeight(float dz, float invDepth, const glm::vec3& n
 
 /// Views of the variance stage: integrated signals and moments in, à-trous input out.
 struct VarianceViews {
-    ImageView<const glm::vec4> integrated0, integrated1, moments, normW;
+    ImageView<const glm::vec4> integrated0, integrated1, normW;
+    ImageView<const glm::vec2> moments0, moments1;  // (m1, m2) of each signal; moments1 split only
     ImageView<const glm::vec2> linearZ;
     ImageView<const float> length;
     ImageView<glm::vec4> estimate0, estimate1;
@@ -388,7 +402,7 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
             if (!(zq.x >= 0.f) || !isFiniteBits(zq.x)) continue;  // misses and non-finite depths
             const glm::vec3 nq = finiteOrZero(glm::vec3(v.normW.at(uint32_t(qx), uint32_t(qy))));
             const glm::vec4 q0 = v.integrated0.at(uint32_t(qx), uint32_t(qy));
-            const glm::vec4 mq = v.moments.at(uint32_t(qx), uint32_t(qy));
+            const glm::vec4 mq = momentsAt(v.moments0, v.moments1, uint32_t(qx), uint32_t(qy));
             const float invDepth = invPhiDepth * varianceInvDistance(i, j);
             const float dz = z.x - zq.x;
             const float w0 = varianceWeight(dz, invDepth, n, nq, l0, luminance(glm::vec3(q0)), s);

@@ -35,6 +35,7 @@ const char kHistoryLength[] = "historyLength";
 const char kIllumHistory[] = "illumination";
 const char kIndirectHistory[] = "illuminationIndirect";
 const char kMomentsHistory[] = "moments";
+const char kIndirectMomentsHistory[] = "momentsIndirect";
 const char kLengthHistory[] = "length";
 const char kPrevLinearZ[] = "prevLinearZ";
 const char kPrevNormW[] = "prevNormW";
@@ -119,8 +120,8 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo&) const {
     r.history(kIllumHistory, Format::RGBA32F)
         .doc("colour (split: direct) history, demodulated rgb and variance: the output of level feedbackTap");
     r.history(kIndirectHistory, Format::RGBA32F).doc("indirect history (split only), as illumination");
-    r.history(kMomentsHistory, Format::RGBA32F)
-        .doc("luminance moments m1, m2 of colour (split: direct) in xy, of indirect in zw");
+    r.history(kMomentsHistory, Format::RG32F).doc("luminance moments m1, m2 of colour (split: direct)");
+    r.history(kIndirectMomentsHistory, Format::RG32F).doc("luminance moments m1, m2 of indirect (split only)");
     r.history(kLengthHistory, Format::R32F).doc("history length in frames, capped at maxHistory; 0: no history");
     r.history(kPrevLinearZ, Format::RG32F)
         .doc("linearZ of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
@@ -202,7 +203,8 @@ void SVGFPass::execute(PassContext& ctx) {
     tv.meshId = inputView<uint32_t>(ctx, kMeshId);
     tv.prevIllum0 = ctx.historyPrev(kIllumHistory).view<glm::vec4>();
     if (split) tv.prevIllum1 = ctx.historyPrev(kIndirectHistory).view<glm::vec4>();
-    tv.prevMoments = ctx.historyPrev(kMomentsHistory).view<glm::vec4>();
+    tv.prevMoments0 = ctx.historyPrev(kMomentsHistory).view<glm::vec2>();
+    if (split) tv.prevMoments1 = ctx.historyPrev(kIndirectMomentsHistory).view<glm::vec2>();
     tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
     // Last frame's guides: the G-buffer's own previous outputs when the graph feeds them (@prev edges), else the
     // copies this pass keeps.
@@ -219,7 +221,8 @@ void SVGFPass::execute(PassContext& ctx) {
     }
     tv.integrated0 = ctx.internal(kIntegrated)->view<glm::vec4>();
     tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
-    tv.curMoments = ctx.historyCur(kMomentsHistory).view<glm::vec4>();
+    tv.curMoments0 = ctx.historyCur(kMomentsHistory).view<glm::vec2>();
+    if (split) tv.curMoments1 = ctx.historyCur(kIndirectMomentsHistory).view<glm::vec2>();
     tv.curLength = ctx.historyCur(kLengthHistory).view<float>();
     if (!sharedGuides) {  // else left empty: nothing is copied
         tv.curLinearZ = ctx.historyCur(kPrevLinearZ).view<glm::vec2>();
@@ -278,7 +281,8 @@ void SVGFPass::execute(PassContext& ctx) {
     VarianceViews vv;
     vv.integrated0 = asConst(tv.integrated0);
     vv.integrated1 = asConst(tv.integrated1);
-    vv.moments = asConst(tv.curMoments);
+    vv.moments0 = asConst(tv.curMoments0);
+    vv.moments1 = asConst(tv.curMoments1);
     vv.normW = tv.normW;
     vv.linearZ = tv.linearZ;
     vv.length = asConst(tv.curLength);

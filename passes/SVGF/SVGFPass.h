@@ -9,7 +9,8 @@
 // All state lives in graph history fields, so it can be dumped and survives recompiles:
 //   illumination          RGBA32F  colour (or direct) history: demodulated rgb, a = variance (feedback tap)
 //   illuminationIndirect  RGBA32F  indirect history (split only), same layout
-//   moments               RGBA32F  luminance moments: (m1, m2) of colour/direct, (m1, m2) of indirect
+//   moments               RG32F    luminance moments (m1, m2) of colour/direct
+//   momentsIndirect       RG32F    luminance moments (m1, m2) of indirect (split only)
 //   length                R32F     history length in frames (capped at maxHistory); 0: no history there
 //   prevLinearZ, prevNormW, prevMeshId   this frame's guides, for next frame's disocclusion tests; not written when
 //                         the graph feeds last frame's G-buffer outputs instead (inputs linearZPrev, normWPrev,

@@ -54,6 +54,14 @@ HWY_INLINE void streamInterleaved4(D d, V a, V b, V c, V e, float* dst) {
     for (size_t i = 0; i < 4; ++i) hn::Stream(hn::Load(d, lanes + i * N), d, dst + i * N);
 }
 
+/// streamInterleaved4 for two channels.
+HWY_INLINE void streamInterleaved2(D d, V a, V b, float* dst) {
+    const size_t N = hn::Lanes(d);
+    HWY_ALIGN float lanes[2 * kMaxLanes];
+    hn::StoreInterleaved2(a, b, d, lanes);
+    for (size_t i = 0; i < 2; ++i) hn::Stream(hn::Load(d, lanes + i * N), d, dst + i * N);
+}
+
 /// Streams n floats (a multiple of N) from src to dst (as streamInterleaved4).
 HWY_INLINE void streamCopy(D d, const float* src, float* dst, size_t n) {
     for (size_t i = 0; i < n; i += hn::Lanes(d)) hn::Stream(hn::LoadU(d, src + i), d, dst + i);
@@ -157,9 +165,9 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             if (hn::AllFalse(d, tapValid[k])) continue;
             const uint32_t qx = c0 + uint32_t(k & 1), qy = r0 + uint32_t(k >> 1);
             const M m = tapValid[k];
-            V ir, ig, ib, ia, m0, m1, m2, m3;
+            V ir, ig, ib, ia, m0, m1;
             hn::LoadInterleaved4(d, &v.prevIllum0.at(qx, qy).x, ir, ig, ib, ia);
-            hn::LoadInterleaved4(d, &v.prevMoments.at(qx, qy).x, m0, m1, m2, m3);
+            hn::LoadInterleaved2(d, &v.prevMoments0.at(qx, qy).x, m0, m1);
             const V w = bw[k];
             rr = hn::Add(rr, hn::IfThenElseZero(m, hn::Mul(w, ir)));
             rg = hn::Add(rg, hn::IfThenElseZero(m, hn::Mul(w, ig)));
@@ -167,11 +175,12 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             ra = hn::Add(ra, hn::IfThenElseZero(m, hn::Mul(w, ia)));
             rm[0] = hn::Add(rm[0], hn::IfThenElseZero(m, hn::Mul(w, m0)));
             rm[1] = hn::Add(rm[1], hn::IfThenElseZero(m, hn::Mul(w, m1)));
-            rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, m2)));
-            rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, m3)));
             rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, hn::LoadU(d, &v.prevLength.at(qx, qy)))));
-            if (split) {
-                V jr, jg, jb, ja;
+            if (split) {  // unsplit, signal 1's sums stay zero, as the reference's sums of zero fields do
+                V jr, jg, jb, ja, m2, m3;
+                hn::LoadInterleaved2(d, &v.prevMoments1.at(qx, qy).x, m2, m3);
+                rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, m2)));
+                rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, m3)));
                 hn::LoadInterleaved4(d, &v.prevIllum1.at(qx, qy).x, jr, jg, jb, ja);
                 sr = hn::Add(sr, hn::IfThenElseZero(m, hn::Mul(w, jr)));
                 sg = hn::Add(sg, hn::IfThenElseZero(m, hn::Mul(w, jg)));
@@ -243,7 +252,8 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
 
     // Everything is decided: write.
     streamInterleaved4(d, ir, ig, ib, ia, &v.integrated0.at(x, y).x);
-    streamInterleaved4(d, m[0], m[1], m[2], m[3], &v.curMoments.at(x, y).x);
+    streamInterleaved2(d, m[0], m[1], &v.curMoments0.at(x, y).x);
+    if (split) streamInterleaved2(d, m[2], m[3], &v.curMoments1.at(x, y).x);
     hn::StoreU(hn::IfThenElseZero(hit, length), d, &v.curLength.at(x, y));  // read again by the variance stage
     if (v.curLinearZ.data) {  // the guides for next frame, unless the graph keeps last frame's G-buffer
         streamCopy(d, &v.linearZ.at(x, y).x, &v.curLinearZ.at(x, y).x, 2 * N);
@@ -383,7 +393,8 @@ size_t varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
         const int qy = int(y) + jy;
         if (qy < 0 || qy >= H) continue;
         const ptrdiff_t row = ptrdiff_t(o) + jy * stride;
-        const glm::vec4* moments = v.moments.row(uint32_t(qy)) + x;
+        const glm::vec2* moments0 = v.moments0.row(uint32_t(qy)) + x;
+        const glm::vec2* moments1 = kSplit ? v.moments1.row(uint32_t(qy)) + x : nullptr;
         for (int ix = -3; ix <= 3; ++ix) {
             const ptrdiff_t q = row + ix;
             const V zq = hn::LoadU(d, G.z + q);
@@ -396,8 +407,9 @@ size_t varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
             const V dd = maxOf(hn::Sub(one, cosine), zero);
             const V normal =
                 hn::Mul(dd, hn::Add(t0, hn::Mul(dd, hn::Add(t1, hn::Mul(dd, hn::Add(t2, hn::Mul(dd, t3)))))));
-            V m0, m1, m2, m3;
-            hn::LoadInterleaved4(d, &moments[ix].x, m0, m1, m2, m3);
+            V m0, m1, m2 = zero, m3 = zero;
+            hn::LoadInterleaved2(d, &moments0[ix].x, m0, m1);
+            if constexpr (kSplit) hn::LoadInterleaved2(d, &moments1[ix].x, m2, m3);
             // varianceWeight and the sums of one signal.
             auto accumulate = [&](const SignalPlanes& P, V lc, V ma, V mb, VarianceSums& s) HWY_ATTR {
                 const V rq = hn::LoadU(d, P.r + q), gq = hn::LoadU(d, P.g + q), bq = hn::LoadU(d, P.b + q);

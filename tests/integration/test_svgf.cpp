@@ -90,7 +90,7 @@ PluginRegistry& registry() {
     return test::pluginRegistry();
 }
 
-const char* const kHistoryFields[] = {"illumination", "illuminationIndirect", "moments",
+const char* const kHistoryFields[] = {"illumination", "illuminationIndirect", "moments",  "momentsIndirect",
                                       "length",       "prevLinearZ",          "prevNormW"};
 
 /// Source -> SVGF on synthetic inputs, run frame by frame.
