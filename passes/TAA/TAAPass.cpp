@@ -284,8 +284,12 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     // (and the padding of a partial tile) by scalar code.
     const uint32_t vx0 = t.x0 == 0 ? 1 : 0, vx1 = std::min(rw, W + 1 - t.x0);
     const bool byVectors = vx1 >= vx0 + N;
-    const float alpha0 = in.color.at(int(t.x0), int(t.y0)).w;
+    const glm::vec4 color0 = in.color.at(int(t.x0), int(t.y0));
+    const float alpha0 = color0.w;
     bool alphaConstant = true;
+    // A region of one colour (a tile of black sky, a constant image): every pixel's neighbourhood is flat, so no
+    // statistics are needed at all.
+    bool colorConstant = true;
     for (uint32_t ry = 0; ry < rh; ++ry) {
         const uint32_t sy = clampIndex(int(t.y0 + ry) - 1, H);
         const glm::vec4* colorRow = &in.color.at(0, int(sy));
@@ -303,6 +307,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             const glm::vec2 m = mvecRow[sx];
             finite &= taa::isFinite(c) & taa::isFinite(m);
             alphaConstant &= c.w == alpha0;
+            colorConstant &= in.color.at(int(sx), int(sy)) == color0;
             const glm::vec4 v = taa::toYCoCg(c);
             for (int ch = 0; ch < 4; ++ch) s.v[ch][ry][rx] = v[ch];
             s.mvx[ry][rx] = m.x;
@@ -315,14 +320,16 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
         }
         for (uint32_t rx = 0; rx < vx0; ++rx) scalarColumn(rx);
         for (uint32_t rx = vx1; rx < rw; ++rx) scalarColumn(rx);
-        FloatMask ok = hn::FirstN(d, N);
+        FloatMask ok = hn::FirstN(d, N), same = ok;
         const FloatVec a0 = hn::Set(d, alpha0);
+        const FloatVec r0 = hn::Set(d, color0.x), g0 = hn::Set(d, color0.y), b0 = hn::Set(d, color0.z);
         const glm::vec4* colorBase = colorRow + t.x0 - 1;
         const glm::vec2* mvecBase = mvecRow + t.x0 - 1;
         for (uint32_t rx = vx0; rx < vx1; rx += N) {
             rx = std::min(rx, vx1 - N);  // the last vector overlaps the one before
             FloatVec r, g, b, a, mx, my, y, co, cg;
             hn::LoadInterleaved4(d, reinterpret_cast<const float*>(colorBase + rx), r, g, b, a);
+            same = hn::And(same, hn::And(hn::Eq(r, r0), hn::And(hn::Eq(g, g0), hn::Eq(b, b0))));
             if (in.compress) compressVec(d, r, g, b);  // finite colours stay finite, non-finite ones non-finite
             hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecBase + rx), mx, my);
             ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
@@ -337,6 +344,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             hn::StoreU(my, d, &s.mvy[ry][rx]);
             hn::StoreU(hn::Add(hn::Mul(mx, mx), hn::Mul(my, my)), d, &s.mvLen[ry][rx]);
         }
+        colorConstant &= hn::AllTrue(d, same);
         if (!hn::AllTrue(d, ok)) {
             // Not all finite, or alpha varies: tell the two apart.
             for (uint32_t rx = vx0; rx < vx1; ++rx) {
@@ -355,7 +363,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     // x + 1 and x + 2 of the last vector stay in the region). A constant alpha needs no statistics: its box is
     // [alpha0, alpha0] (what the general formulas give too: the clamp to min / max).
     const FloatVec huge = hn::Set(d, taa::kHuge), negHuge = hn::Set(d, -taa::kHuge);
-    const int channels = alphaConstant ? 3 : 4;  // of the horizontal statistics
+    const bool regionFlat = colorConstant && alphaConstant;
+    const int channels = regionFlat ? 0 : alphaConstant ? 3 : 4;  // of the horizontal statistics
     for (uint32_t ry = 0; ry < rh; ++ry) {
         for (int ch = 0; ch < channels; ++ch) {
             const float* v = s.v[ch][ry];
@@ -426,7 +435,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             // The minima and maxima serve the clip box below too.
             FloatMask flat = hn::FirstN(d, N);
             FloatVec boxMin[4], boxMax[4];
-            for (int ch = 0; ch < (alphaConstant ? 3 : 4); ++ch) {
+            for (int ch = 0; ch < channels; ++ch) {  // a one-colour region: flat everywhere
                 FloatVec mn = hn::LoadU(d, &s.rowMin[ch][y][x]), mx = hn::LoadU(d, &s.rowMax[ch][y][x]);
                 for (uint32_t r = y + 1; r < y + 3; ++r) {
                     mn = hn::Min(hn::LoadU(d, &s.rowMin[ch][r][x]), mn);

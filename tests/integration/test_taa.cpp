@@ -393,6 +393,47 @@ TEST(TAAPass, AFlatNeighbourhoodResolvesToTheCurrentColourExactly) {
     }
 }
 
+// Tiles of one colour (a black sky) skip the neighbourhood statistics; they still follow the motion, so the pixels
+// whose history comes from outside the frame are counted as before, and a single pixel of another colour brings the
+// statistics back for its tile: output, history and counts as the reference kernel's.
+TEST(TAAPass, OneColourTilesSkipTheStatisticsButNotTheMotion) {
+    const uint32_t W = 300, H = 40;  // three tile columns, the last partial
+    const glm::vec4 sky(0.02f, 0.03f, 0.05f, 1.f), odd(0.9f, 0.1f, 0.1f, 1.f);
+    std::unique_ptr<Texture> out[2], history[2];
+    double noHistory[2], clipped[2];
+    for (int run = 0; run < 2; ++run) {
+        Harness h(nlohmann::json{{"reference", run == 1}}, W, H);
+        h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) { return f >= 2 && x == 200 && y == 7 ? odd : sky; };
+        // Everything moves 5 pixels left from frame 3 on: the 5 rightmost columns come from outside the frame.
+        h.source->motion = [](uint64_t f, uint32_t, uint32_t) { return glm::vec2(f >= 3 ? 5.f / 300.f : 0.f, 0.f); };
+        h.run(5);
+        out[run] = copyOf(h.field("colorOut"));
+        history[run] = copyOf(h.field("colorHistory"));
+        noHistory[run] = h.stat("noHistory");
+        clipped[run] = h.stat("clipped");
+        for (uint32_t y = 0; y < H; ++y)
+            for (uint32_t x = 0; x < W; ++x) {
+                const bool nearOdd = x + 1 >= 200 && x <= 201 && y + 1 >= 7 && y <= 8;
+                if (!nearOdd) ASSERT_EQ(h.out(x, y), sky) << "run " << run << " pixel " << x << "," << y;
+            }
+    }
+    EXPECT_EQ(noHistory[0], 5.0 * H);
+    EXPECT_EQ(noHistory[0], noHistory[1]);
+    EXPECT_EQ(clipped[0], clipped[1]);
+    const auto fast = out[0]->view<glm::vec4>(), reference = out[1]->view<glm::vec4>();
+    const auto fastHistory = history[0]->view<glm::vec4>(), referenceHistory = history[1]->view<glm::vec4>();
+    for (uint32_t y = 0; y < H; ++y)
+        for (uint32_t x = 0; x < W; ++x)
+            for (int c = 0; c < 4; ++c) {
+                ASSERT_NEAR(fast.at(x, y)[c], reference.at(x, y)[c], 1e-4f * std::max(1.f, reference.at(x, y)[c]))
+                    << x << "," << y;
+                ASSERT_NEAR(fastHistory.at(x, y)[c], referenceHistory.at(x, y)[c], 1e-6f) << x << "," << y;
+            }
+    // The odd pixel went through the statistics and the history: a blend, neither its own colour nor the sky.
+    EXPECT_NE(fast.at(200, 7), odd);
+    EXPECT_NE(fast.at(200, 7), sky);
+}
+
 TEST(TAAPass, NonFiniteInputNeverReachesOutputOrHistory) {
     const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
     for (bool reference : {false, true}) {
