@@ -89,6 +89,47 @@ bool scalarPixel(const RowJob& j, uint32_t x, uint32_t y) {
     return rejected;
 }
 
+/// What the temporal stage writes for N pixels: the integrated signals (a = temporal variance), the moments, the
+/// history length.
+struct Results {
+    V i[4], j[4], m[4], length;
+};
+/// This frame's guides of the N pixels.
+struct Guides {
+    V z, dz, nx, ny, nz;
+    hn::Vec<DU> mesh;
+};
+
+/// Stores N pixels' results: history, estimate, à-trous planes, debug variance.
+HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Results& r, const Guides& g) {
+    const TemporalViews& v = j.v;
+    const D d;
+    const size_t N = hn::Lanes(d);
+    const bool split = j.p.split;
+    streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &v.integrated0.at(x, y).x);
+    streamInterleaved2(d, r.m[0], r.m[1], &v.curMoments0.at(x, y).x);
+    if (split) streamInterleaved2(d, r.m[2], r.m[3], &v.curMoments1.at(x, y).x);
+    hn::StoreU(r.length, d, &v.curLength.at(x, y));  // read again by the variance stage
+    if (v.curLinearZ.data) {  // the guides for next frame, unless the graph keeps last frame's G-buffer
+        streamCopy(d, &v.linearZ.at(x, y).x, &v.curLinearZ.at(x, y).x, 2 * N);
+        streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
+        hn::Stream(hn::BitCast(d, g.mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
+    }
+    streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &j.out.estimate.at(x, y).x);
+    if (split) {
+        streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &v.integrated1.at(x, y).x);
+        streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &j.out.estimate1.at(x, y).x);
+    }
+    if (j.out.layout) {
+        const size_t o = j.out.layout->offset(x, y);
+        storeSignal<true>(d, j.out.signal, o, r.i[0], r.i[1], r.i[2], r.i[3]);
+        if (split) storeSignal<true>(d, j.out.signal1, o, r.j[0], r.j[1], r.j[2], r.j[3]);
+        storeGuide<true>(d, j.out.guide, o, g.z, g.dz, g.nx, g.ny, g.nz);
+    }
+    // As the variance stage: the two signals' variances summed (signal 1 is zero unsplit).
+    if (j.out.variance.data) hn::StoreU(hn::Add(r.i[3], split ? r.j[3] : hn::Zero(d)), d, &j.out.variance.at(x, y));
+}
+
 /// N pixels from x on row y in the vector path; false (nothing written) when they need the reference.
 bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     const TemporalViews& v = j.v;
@@ -114,6 +155,13 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     V nx, ny, nz, nw;
     hn::LoadInterleaved4(d, &v.normW.at(x, y).x, nx, ny, nz, nw);
     const auto mesh = v.meshId.data ? hn::LoadU(du, &v.meshId.at(x, y)) : hn::Zero(du);
+    if (hn::AllFalse(d, hit)) {
+        // Misses only (sky): no history, zero signal, as below, without reading albedo, emission or motion.
+        writePixels(j, x, y,
+                    Results{{zero, zero, zero, zero}, {zero, zero, zero, zero}, {zero, zero, zero, zero}, zero},
+                    Guides{z, dz, nx, ny, nz, mesh});
+        return true;
+    }
 
     // Reprojection (reproject() of SVGFKernels.h) for footprints with one integer offset, all inside the frame.
     M valid = hn::FirstN(d, 0);
@@ -250,29 +298,9 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     ia = hn::IfThenElseZero(hit, ia);
     for (V& c : m) c = hn::IfThenElseZero(hit, c);
 
-    // Everything is decided: write.
-    streamInterleaved4(d, ir, ig, ib, ia, &v.integrated0.at(x, y).x);
-    streamInterleaved2(d, m[0], m[1], &v.curMoments0.at(x, y).x);
-    if (split) streamInterleaved2(d, m[2], m[3], &v.curMoments1.at(x, y).x);
-    hn::StoreU(hn::IfThenElseZero(hit, length), d, &v.curLength.at(x, y));  // read again by the variance stage
-    if (v.curLinearZ.data) {  // the guides for next frame, unless the graph keeps last frame's G-buffer
-        streamCopy(d, &v.linearZ.at(x, y).x, &v.curLinearZ.at(x, y).x, 2 * N);
-        streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
-        hn::Stream(hn::BitCast(d, mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
-    }
-    streamInterleaved4(d, ir, ig, ib, ia, &j.out.estimate.at(x, y).x);
-    if (split) {
-        streamInterleaved4(d, jr, jg, jb, ja, &v.integrated1.at(x, y).x);
-        streamInterleaved4(d, jr, jg, jb, ja, &j.out.estimate1.at(x, y).x);
-    }
-    if (j.out.layout) {
-        const size_t o = j.out.layout->offset(x, y);
-        storeSignal<true>(d, j.out.signal, o, ir, ig, ib, ia);
-        if (split) storeSignal<true>(d, j.out.signal1, o, jr, jg, jb, ja);
-        storeGuide<true>(d, j.out.guide, o, z, dz, nx, ny, nz);
-    }
-    // As the variance stage: the two signals' variances summed (signal 1 is zero unsplit).
-    if (j.out.variance.data) hn::StoreU(hn::Add(ia, split ? ja : zero), d, &j.out.variance.at(x, y));
+    writePixels(j, x, y,
+                Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
+                Guides{z, dz, nx, ny, nz, mesh});
     return true;
 }
 
