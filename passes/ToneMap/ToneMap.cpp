@@ -86,11 +86,15 @@ HWY_INLINE FloatVec operatorVec(FloatTag d, FloatVec v, const ToneMapParams& p) 
     }
 }
 
-/// encodeSrgb8 on a vector of saturated values: one gather per vector.
+/// encodeSrgb8 on a vector of saturated values: one gather per vector, none when every lane is black (code 0:
+/// below the first bucket) or white (255), as a sky or a blown-out light is.
 HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const tonemap::SrgbEncodeTable& t, FloatVec v) {
     using Table = tonemap::SrgbEncodeTable;
     const IntTag di;
     const IntVec bits = hn::BitCast(di, v);
+    const auto white = hn::RebindMask(di, hn::Ge(v, hn::Set(d, 1.f)));
+    if (hn::AllTrue(di, hn::Or(hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits))), white)))
+        return hn::IfThenElseZero(white, hn::Set(di, 255));
     IntVec index =
         hn::Sub(hn::ShiftRight<Table::kShift>(bits), hn::Set(di, int32_t(Table::kFirstBits >> Table::kShift)));
     index = hn::Min(hn::Max(index, hn::Zero(di)), hn::Set(di, int32_t(Table::kBuckets - 1)));  // lanes below are masked
@@ -100,7 +104,7 @@ HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const tonemap::SrgbEncodeTable& t, F
     const auto reached = hn::Not(hn::Lt(offset, hn::ShiftRight<8>(entry)));
     IntVec code = hn::Add(hn::And(entry, hn::Set(di, 255)), hn::IfThenElseZero(reached, hn::Set(di, 1)));
     code = hn::IfThenZeroElse(hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits))), code);
-    return hn::IfThenElse(hn::RebindMask(di, hn::Ge(v, hn::Set(d, 1.f))), hn::Set(di, 255), code);
+    return hn::IfThenElse(white, hn::Set(di, 255), code);
 }
 
 /// Lanes with a non-finite value.
