@@ -10,6 +10,8 @@
 #include <string_view>
 #include <utility>
 
+#include "loom/Texture.h"  // alignUp
+
 namespace loom {
 
 namespace {
@@ -22,10 +24,6 @@ constexpr bool kAddressSanitizer = true;
 #else
 constexpr bool kAddressSanitizer = false;
 #endif
-
-size_t roundUp(size_t v, size_t a) {
-    return (v + a - 1) / a * a;
-}
 
 std::atomic<bool>& hugePagesFlag() {
     static std::atomic<bool> flag{[] {
@@ -46,12 +44,12 @@ PageMemory::PageMemory(size_t bytes) {
         return;
     }
     // Map a huge page more than asked, keep the 2 MiB-aligned part: only whole aligned 2 MiB ranges can be huge pages.
-    const size_t size = roundUp(bytes, kPageSize);
+    const size_t size = alignUp(bytes, kPageSize);
     const size_t reserve = size + kHugePageSize;
     void* p = mmap(nullptr, reserve, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (p == MAP_FAILED) throw std::bad_alloc();
     auto* begin = static_cast<std::byte*>(p);
-    auto* aligned = reinterpret_cast<std::byte*>(roundUp(reinterpret_cast<uintptr_t>(begin), kHugePageSize));
+    auto* aligned = reinterpret_cast<std::byte*>(alignUp(reinterpret_cast<uintptr_t>(begin), kHugePageSize));
     const size_t head = size_t(aligned - begin), tail = reserve - head - size;
     if (head) munmap(begin, head);
     if (tail) munmap(aligned + size, tail);

@@ -44,27 +44,26 @@ HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
                    hn::Mul(hn::Set(d, 0.0722f), b));
 }
 
-/// Non-temporal stores of whole cache lines that this frame does not read again soon (history for the next frame,
-/// the integrated and estimate images): no read-for-ownership of the destination, which halves their memory traffic.
-/// dst is 32-byte aligned (the x of a vector group is a multiple of N, rows are 64-byte aligned).
-HWY_INLINE void streamInterleaved4(D d, V a, V b, V c, V e, float* dst) {
-    const size_t N = hn::Lanes(d);
-    HWY_ALIGN float lanes[4 * kMaxLanes];
-    hn::StoreInterleaved4(a, b, c, e, d, lanes);
-    for (size_t i = 0; i < 4; ++i) hn::Stream(hn::Load(d, lanes + i * N), d, dst + i * N);
-}
-
-/// streamInterleaved4 for two channels.
-HWY_INLINE void streamInterleaved2(D d, V a, V b, float* dst) {
-    const size_t N = hn::Lanes(d);
-    HWY_ALIGN float lanes[2 * kMaxLanes];
-    hn::StoreInterleaved2(a, b, d, lanes);
-    for (size_t i = 0; i < 2; ++i) hn::Stream(hn::Load(d, lanes + i * N), d, dst + i * N);
-}
-
-/// Streams n floats (a multiple of N) from src to dst (as streamInterleaved4).
+/// Non-temporal stores of n floats (a multiple of N) from src to dst, whole cache lines that this frame does not read
+/// again soon (history for the next frame, the integrated and estimate images): no read-for-ownership of the
+/// destination, which halves their memory traffic. dst is 32-byte aligned (the x of a vector group is a multiple of
+/// N, rows are 64-byte aligned).
 HWY_INLINE void streamCopy(D d, const float* src, float* dst, size_t n) {
     for (size_t i = 0; i < n; i += hn::Lanes(d)) hn::Stream(hn::LoadU(d, src + i), d, dst + i);
+}
+
+/// Four channels of N pixels streamed to dst as interleaved RGBA.
+HWY_INLINE void streamInterleaved4(D d, V a, V b, V c, V e, float* dst) {
+    HWY_ALIGN float lanes[4 * kMaxLanes];
+    hn::StoreInterleaved4(a, b, c, e, d, lanes);
+    streamCopy(d, lanes, dst, 4 * hn::Lanes(d));
+}
+
+/// Two channels of N pixels streamed to dst as interleaved pairs.
+HWY_INLINE void streamInterleaved2(D d, V a, V b, float* dst) {
+    HWY_ALIGN float lanes[2 * kMaxLanes];
+    hn::StoreInterleaved2(a, b, d, lanes);
+    streamCopy(d, lanes, dst, 2 * hn::Lanes(d));
 }
 
 struct RowJob {
@@ -272,10 +271,16 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     };
     const V lr = demodulate(cr, er, ar), lg = demodulate(cg, eg, ag), lb = demodulate(cb, eb, ab);
     const V lum = luminanceExact(d, lr, lg, lb);
-    // Signal 1 (split): divided by the albedo, no emission (that is part of direct).
-    const V kr = demodulate(dr, zero, ar), kg = demodulate(dg, zero, ag), kb = demodulate(db, zero, ab);
-    const V lum1 = split ? luminanceExact(d, kr, kg, kb) : zero;
+    // Signal 1 (split): divided by the albedo, no emission (that is part of direct). Unsplit it is zero throughout.
+    V kr = zero, kg = zero, kb = zero, lum1 = zero;
+    if (split) {
+        kr = demodulate(dr, zero, ar);
+        kg = demodulate(dg, zero, ag);
+        kb = demodulate(db, zero, ab);
+        lum1 = luminanceExact(d, kr, kg, kb);
+    }
     const V moments[4] = {lum, hn::Mul(lum, lum), lum1, hn::Mul(lum1, lum1)};
+    const int momentCount = split ? 4 : 2;
 
     // Temporal accumulation (paper eq. 1 with Falcor's max(alpha, 1 / n)).
     const V length = hn::IfThenElse(valid, minOf(hn::Add(rl, one), hn::Set(d, p.maxHistory)), one);
@@ -284,13 +289,16 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     V ir = hn::IfThenElse(valid, mixOf(d, rr, lr, a), lr);
     V ig = hn::IfThenElse(valid, mixOf(d, rg, lg, a), lg);
     V ib = hn::IfThenElse(valid, mixOf(d, rb, lb, a), lb);
-    V m[4];
-    for (int c = 0; c < 4; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], moments[c], am), moments[c]);
+    V m[4] = {zero, zero, zero, zero};
+    for (int c = 0; c < momentCount; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], moments[c], am), moments[c]);
     V ia = maxOf(zero, hn::Sub(m[1], hn::Mul(m[0], m[0])));
-    V jr = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sr, kr, a), kr));
-    V jg = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sg, kg, a), kg));
-    V jb = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sb, kb, a), kb));
-    V ja = hn::IfThenElseZero(hit, maxOf(zero, hn::Sub(m[3], hn::Mul(m[2], m[2]))));
+    V jr = zero, jg = zero, jb = zero, ja = zero;
+    if (split) {
+        jr = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sr, kr, a), kr));
+        jg = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sg, kg, a), kg));
+        jb = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sb, kb, a), kb));
+        ja = hn::IfThenElseZero(hit, maxOf(zero, hn::Sub(m[3], hn::Mul(m[2], m[2]))));
+    }
     // Misses: no history, zero signal.
     ir = hn::IfThenElseZero(hit, ir);
     ig = hn::IfThenElseZero(hit, ig);

@@ -307,7 +307,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             const glm::vec2 m = mvecRow[sx];
             finite &= taa::isFinite(c) & taa::isFinite(m);
             alphaConstant &= c.w == alpha0;
-            colorConstant &= in.color.at(int(sx), int(sy)) == color0;
+            colorConstant &= glm::vec3(colorRow[sx]) == glm::vec3(color0);  // the input's rgb, as the vector loop
             const glm::vec4 v = taa::toYCoCg(c);
             for (int ch = 0; ch < 4; ++ch) s.v[ch][ry][rx] = v[ch];
             s.mvx[ry][rx] = m.x;

@@ -92,9 +92,9 @@ HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const tonemap::SrgbEncodeTable& t, F
     using Table = tonemap::SrgbEncodeTable;
     const IntTag di;
     const IntVec bits = hn::BitCast(di, v);
+    const auto black = hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits)));
     const auto white = hn::RebindMask(di, hn::Ge(v, hn::Set(d, 1.f)));
-    if (hn::AllTrue(di, hn::Or(hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits))), white)))
-        return hn::IfThenElseZero(white, hn::Set(di, 255));
+    if (hn::AllTrue(di, hn::Or(black, white))) return hn::IfThenElseZero(white, hn::Set(di, 255));
     IntVec index =
         hn::Sub(hn::ShiftRight<Table::kShift>(bits), hn::Set(di, int32_t(Table::kFirstBits >> Table::kShift)));
     index = hn::Min(hn::Max(index, hn::Zero(di)), hn::Set(di, int32_t(Table::kBuckets - 1)));  // lanes below are masked
@@ -103,7 +103,7 @@ HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const tonemap::SrgbEncodeTable& t, F
     // offset >= threshold offset, as "not less than" (both non-negative).
     const auto reached = hn::Not(hn::Lt(offset, hn::ShiftRight<8>(entry)));
     IntVec code = hn::Add(hn::And(entry, hn::Set(di, 255)), hn::IfThenElseZero(reached, hn::Set(di, 1)));
-    code = hn::IfThenZeroElse(hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits))), code);
+    code = hn::IfThenZeroElse(black, code);
     return hn::IfThenElse(white, hn::Set(di, 255), code);
 }
 
