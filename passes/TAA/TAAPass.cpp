@@ -259,6 +259,82 @@ HWY_INLINE void prefetchRange(const void* p, size_t bytes) {
     for (; b < e; b += 64) hwy::Prefetch(b);
 }
 
+/// Last frame's colour (compressed when the resolve is) at the texel-centre positions (px, py) of 8 pixels, by the
+/// Catmull-Rom filter of sampleHistory, in structure of arrays; lanes outside `wanted` are unspecified. Eight
+/// consecutive integer positions on one row (a static camera, an integer pan) are one interleaved load of the texels
+/// themselves (what the filter gives there, exactly); otherwise floor, fractions and weights are formed on vectors
+/// and the taps per pixel, lanes near the frame's edge reading clamped copies of their taps. `prefetchNext`: ask for
+/// the history row the next output row adds.
+HWY_INLINE void sampleHistoryVec(const taa::ClampedImage<glm::vec4>& history, FloatVec px, FloatVec py,
+                                 FloatMask wanted, bool prefetchNext, FloatVec& hr, FloatVec& hg, FloatVec& hb,
+                                 FloatVec& ha) {
+    const FloatTag d;
+    const hn::RebindToSigned<FloatTag> di;
+    const int32_t W = int32_t(history.width), H = int32_t(history.height), N = int32_t(kLanes);
+    const FloatVec fx0 = hn::Floor(px), fy0 = hn::Floor(py);
+    const auto ixv = hn::ConvertTo(di, fx0), iyv = hn::ConvertTo(di, fy0);
+    const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(py, fy0));
+    const int32_t ix0 = hn::GetLane(ixv), iy0 = hn::GetLane(iyv);
+    if (hn::AllTrue(d, integer) && ix0 >= 0 && ix0 + N <= W && iy0 >= 0 && iy0 < H &&
+        hn::AllTrue(di, hn::And(hn::Eq(ixv, hn::Iota(di, ix0)), hn::Eq(iyv, hn::Set(di, iy0))))) {
+        hn::LoadInterleaved4(d, reinterpret_cast<const float*>(&history.at(ix0, iy0)), hr, hg, hb, ha);
+        if (prefetchNext && iy0 + 1 < H) prefetchRange(&history.at(ix0, iy0 + 1), sizeof(glm::vec4) * kLanes);
+        return;
+    }
+    const size_t pitch = history.rowPitch;
+    const auto* data = reinterpret_cast<const unsigned char*>(history.data);
+    FloatVec wxv[4], wyv[4];
+    catmullRomVec(d, hn::Sub(px, fx0), wxv);
+    catmullRomVec(d, hn::Sub(py, fy0), wyv);
+    alignas(64) float wx[4 * kLanes], wy[4][kLanes];
+    alignas(64) int32_t kinds[kLanes], ixs[kLanes], iys[kLanes];
+    enum : int32_t { kUnused = 0, kInterior = 1, kEdge = 2, kInteger = 3 };
+    const auto interior = hn::And(hn::And(hn::Gt(ixv, hn::Zero(di)), hn::Gt(iyv, hn::Zero(di))),
+                                  hn::And(hn::Lt(ixv, hn::Set(di, W - 2)), hn::Lt(iyv, hn::Set(di, H - 2))));
+    auto kind = hn::IfThenElse(interior, hn::Set(di, kInterior), hn::Set(di, kEdge));
+    // An integer position: the bicubic sum would give its texel exactly; read just that.
+    kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, kInteger), kind);
+    kind = hn::IfThenElseZero(hn::RebindMask(di, wanted), kind);
+    hn::Store(kind, di, kinds);
+    hn::Store(ixv, di, ixs);
+    hn::Store(iyv, di, iys);
+    transposeWeights(wxv, wx);
+    for (int k = 0; k < 4; ++k) hn::Store(wyv[k], d, wy[k]);
+    // Texel (ix - 1, iy - 1), the corner of a pixel's 4 x 4 block.
+    const auto block = [&](uint32_t i) {
+        return data + pitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1);
+    };
+    if (prefetchNext && kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < H) {
+        // The next output row reads one history row more (iy + 3 here): ask for it now, a row ahead.
+        const auto* first = block(0) + 4 * pitch;
+        const auto* last = block(N - 1) + 4 * pitch + 4 * sizeof(glm::vec4);
+        if (last > first && last - first < 512) prefetchRange(first, size_t(last - first));
+    }
+    Float4 sampled[kLanes];
+    if (hn::AllTrue(di, hn::Eq(kind, hn::Set(di, kInterior)))) {
+        // Every lane reads its block in place (the common case under motion): no per-lane branches.
+        for (uint32_t i = 0; i < kLanes; ++i) sampled[i] = bicubicBlock(block(i), pitch, wx + weightRecord(i), wy, i);
+    } else {
+        for (uint32_t i = 0; i < kLanes; ++i) {
+            if (kinds[i] == kInterior) {
+                sampled[i] = bicubicBlock(block(i), pitch, wx + weightRecord(i), wy, i);
+            } else if (kinds[i] == kInteger) {
+                sampled[i] = hn::LoadU(Float4Tag(), reinterpret_cast<const float*>(&history.at(ixs[i], iys[i])));
+            } else if (kinds[i] == kUnused) {
+                sampled[i] = hn::Zero(Float4Tag());
+            } else {
+                // Near the frame's edge: the clamped taps, then the same arithmetic.
+                alignas(64) glm::vec4 clampedBlock[4][4];
+                for (int j = 0; j < 4; ++j)
+                    for (int k = 0; k < 4; ++k) clampedBlock[j][k] = history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
+                sampled[i] = bicubicBlock(reinterpret_cast<const unsigned char*>(clampedBlock), sizeof(clampedBlock[0]),
+                                          wx + weightRecord(i), wy, i);
+            }
+        }
+    }
+    transpose8(sampled, hr, hg, hb, ha);
+}
+
 /// The tiled path. The 3x3 statistics and the motion dilation are separable: each current pixel is converted to
 /// YCoCg once (not nine times), sums, minima, maxima and the longest vector are formed over rows, then over
 /// columns, and the rest runs on vectors of 8 pixels (Highway, AVX2). The bicubic history is fetched per pixel as
@@ -398,13 +474,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     const FloatVec zero = hn::Zero(d), one = hn::Set(d, 1.f), half = hn::Set(d, 0.5f);
     const FloatVec infinity = hn::Set(d, std::numeric_limits<float>::infinity());
     const FloatVec sigma = hn::Set(d, p.sigma), ninth = hn::Set(d, 1.f / 9.f);
-    const hn::RebindToSigned<FloatTag> di;
-    const size_t historyPitch = in.history.rowPitch;
-    const auto* historyData = reinterpret_cast<const unsigned char*>(in.history.data);
-    alignas(64) float wx[4 * kLanes], wy[4][kLanes];
-    alignas(64) int32_t kinds[kLanes], ixs[kLanes], iys[kLanes];
     alignas(64) glm::vec4 current[kLanes];
-    enum : int32_t { kUnused = 0, kInterior = 1, kEdge = 2, kInteger = 3 };
     for (uint32_t y = 0; y < h; ++y) {
         const uint32_t py = t.y0 + y;
         glm::vec4* outRow = out.row(py);
@@ -460,52 +530,8 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             FloatVec orr = cr, og = cgr, ob = cb, oa = ca;
             FloatMask clipped = hn::FirstN(d, 0);
             if (!hn::AllTrue(d, flat)) {
-                // Bicubic history: floor, fractions and weights on vectors, the taps per pixel.
-                const FloatVec fx0 = hn::Floor(px), fy0 = hn::Floor(pyv);
-                FloatVec wxv[4], wyv[4];
-                catmullRomVec(d, hn::Sub(px, fx0), wxv);
-                catmullRomVec(d, hn::Sub(pyv, fy0), wyv);
-                const auto ixv = hn::ConvertTo(di, fx0), iyv = hn::ConvertTo(di, fy0);
-                const auto interior = hn::And(
-                    hn::And(hn::Gt(ixv, hn::Zero(di)), hn::Gt(iyv, hn::Zero(di))),
-                    hn::And(hn::Lt(ixv, hn::Set(di, int32_t(W) - 2)), hn::Lt(iyv, hn::Set(di, int32_t(H) - 2))));
-                auto kind = hn::IfThenElse(interior, hn::Set(di, kInterior), hn::Set(di, kEdge));
-                // An integer position (a static camera): the bicubic sum would give its texel exactly; read just that.
-                const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(pyv, fy0));
-                kind = hn::IfThenElse(hn::RebindMask(di, integer), hn::Set(di, kInteger), kind);
-                kind = hn::IfThenElseZero(hn::RebindMask(di, resolveHistory), kind);
-                hn::Store(kind, di, kinds);
-                hn::Store(ixv, di, ixs);
-                hn::Store(iyv, di, iys);
-                transposeWeights(wxv, wx);
-                for (int k = 0; k < 4; ++k) hn::Store(wyv[k], d, wy[k]);
-                if (kinds[0] == kInterior && kinds[N - 1] == kInterior && iys[0] + 3 < int32_t(H) && y + 1 < h) {
-                    // The next tile row reads one history row more (iy + 3 here): ask for it now, a tile row ahead.
-                    const auto* first =
-                        historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[0] - 1);
-                    const auto* last =
-                        historyData + historyPitch * size_t(iys[0] + 3) + sizeof(glm::vec4) * size_t(ixs[N - 1] + 3);
-                    if (last > first && last - first < 512) prefetchRange(first, size_t(last - first));
-                }
-                const auto sample = [&](uint32_t i) -> Float4 {
-                    if (kinds[i] == kInterior)
-                        return bicubicBlock(
-                            historyData + historyPitch * size_t(iys[i] - 1) + sizeof(glm::vec4) * size_t(ixs[i] - 1),
-                            historyPitch, wx + weightRecord(i), wy, i);
-                    if (kinds[i] == kInteger)
-                        return hn::LoadU(Float4Tag(), reinterpret_cast<const float*>(&in.history.at(ixs[i], iys[i])));
-                    if (kinds[i] == kUnused) return hn::Zero(Float4Tag());
-                    // Near the frame's edge: the clamped taps, then the same arithmetic.
-                    alignas(64) glm::vec4 block[4][4];
-                    for (int j = 0; j < 4; ++j)
-                        for (int k = 0; k < 4; ++k) block[j][k] = in.history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
-                    return bicubicBlock(reinterpret_cast<const unsigned char*>(block), sizeof(block[0]),
-                                        wx + weightRecord(i), wy, i);
-                };
-                const Float4 sampled[kLanes] = {sample(0), sample(1), sample(2), sample(3),
-                                                sample(4), sample(5), sample(6), sample(7)};
                 FloatVec hr, hg, hb, ha;
-                transpose8(sampled, hr, hg, hb, ha);
+                sampleHistoryVec(in.history, px, pyv, resolveHistory, y + 1 < h, hr, hg, hb, ha);
                 // The box (makeClipBox with n = 9) channel by channel, each clipped at once (clipToBox): the exact test
                 // "outside", the ratio by the refined reciprocal. Formed after the sampling, so that few vectors are
                 // live across it.
