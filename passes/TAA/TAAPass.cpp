@@ -55,6 +55,11 @@ struct TileScratch {
     float rowSum[4][kR][kW], rowSumSq[4][kR][kW], rowMin[4][kR][kW], rowMax[4][kR][kW];
     float mvx[kR][kRW], mvy[kR][kRW], mvLen[kR][kRW];
     float rowMvx[kR][kW], rowMvy[kR][kW], rowMvLen[kR][kW];
+    // One output row between the three phases of the resolve: where last frame's pixel was, which lanes resolve
+    // against the history, the clipping box (centre, half extent and its inverse, YCoCg + alpha), the history.
+    alignas(64) float px[kW], py[kW], useHistory[kW], resolveHistory[kW];
+    alignas(64) float center[4][kW], extent[4][kW], invExtent[4][kW], history[4][kW];
+    bool anyHistory[kW];  // per vector (indexed by its first pixel): a lane resolves against the history
 };
 
 TileScratch& scratch() {
@@ -475,11 +480,16 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
     const FloatVec infinity = hn::Set(d, std::numeric_limits<float>::infinity());
     const FloatVec sigma = hn::Set(d, p.sigma), ninth = hn::Set(d, 1.f / 9.f);
     alignas(64) glm::vec4 current[kLanes];
+    // Each output row runs in three phases over its vectors, their results passed through the row scratch: the
+    // box and the motion, the history, the clip and blend. One vector's chain from its loads to its stores is long
+    // (square root, reciprocals, the bicubic taps, the blend); in shorter loops the processor overlaps consecutive
+    // vectors instead of waiting on each.
     for (uint32_t y = 0; y < h; ++y) {
         const uint32_t py = t.y0 + y;
         glm::vec4* outRow = out.row(py);
         glm::vec4* historyRow = history.row(py);
         const glm::vec4* colorRow = &in.color.at(0, int(py));
+        // Phase 1: dilated motion and previous position; the neighbourhood's box.
         for (uint32_t x = 0; x < wv; x += N) {
             const uint32_t n = std::min(N, w - x);
             const FloatMask valid = hn::FirstN(d, n);
@@ -501,8 +511,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                         hn::And(hn::Ge(pyv, hn::Set(d, -0.5f)), hn::Le(pyv, hn::Set(d, float(H) - 0.5f))));
             useHistory = in.historyValid ? hn::And(useHistory, valid) : hn::Not(hn::FirstN(d, N));
             // A neighbourhood of one value (ClipBox::flat: minimum = maximum in every channel) resolves to the
-            // current colour: its history is not read.
-            // The minima and maxima serve the clip box below too.
+            // current colour: its history is not read. The minima and maxima bound the box too.
             FloatMask flat = hn::FirstN(d, N);
             FloatVec boxMin[4], boxMax[4];
             for (int ch = 0; ch < channels; ++ch) {  // a one-colour region: flat everywhere
@@ -516,6 +525,53 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 boxMax[ch] = mx;
             }
             const FloatMask resolveHistory = hn::AndNot(flat, useHistory);
+            hn::Store(hn::VecFromMask(d, useHistory), d, &s.useHistory[x]);
+            hn::Store(hn::VecFromMask(d, resolveHistory), d, &s.resolveHistory[x]);
+            s.anyHistory[x] = !hn::AllTrue(d, flat);
+            if (!s.anyHistory[x]) continue;
+            hn::Store(px, d, &s.px[x]);
+            hn::Store(pyv, d, &s.py[x]);
+            // The box (makeClipBox with n = 9) channel by channel, as centre and half extent (clipToBox); the
+            // inverse extent for the ratio is the refined reciprocal, infinite for a flat channel, which pulls the
+            // point exactly onto the centre. A constant alpha is the box [alpha0, alpha0].
+            for (int ch = 0; ch < 4; ++ch) {
+                FloatVec lo, hi;
+                if (ch == 3 && alphaConstant) {
+                    lo = hi = hn::Set(d, alpha0);
+                } else {
+                    FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
+                    for (uint32_t r = y + 1; r < y + 3; ++r) {
+                        sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
+                        sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
+                    }
+                    const FloatVec mn = boxMin[ch], mx = boxMax[ch];
+                    const FloatVec mean = hn::Mul(sum, ninth);
+                    const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
+                    const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
+                    lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
+                    hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
+                }
+                const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
+                hn::Store(hn::Mul(half, hn::Add(lo, hi)), d, &s.center[ch][x]);
+                hn::Store(extent, d, &s.extent[ch][x]);
+                hn::Store(hn::IfThenElse(hn::Gt(extent, zero), reciprocal(d, extent), infinity), d,
+                          &s.invExtent[ch][x]);
+            }
+        }
+        // Phase 2: the history (compressed when the resolve is) where a lane resolves against it.
+        for (uint32_t x = 0; x < wv; x += N) {
+            if (!s.anyHistory[x]) continue;
+            FloatVec hr, hg, hb, ha;
+            sampleHistoryVec(in.history, hn::Load(d, &s.px[x]), hn::Load(d, &s.py[x]),
+                             hn::MaskFromVec(hn::Load(d, &s.resolveHistory[x])), y + 1 < h, hr, hg, hb, ha);
+            hn::Store(hr, d, &s.history[0][x]);
+            hn::Store(hg, d, &s.history[1][x]);
+            hn::Store(hb, d, &s.history[2][x]);
+            hn::Store(ha, d, &s.history[3][x]);
+        }
+        // Phase 3: clip, blend, store.
+        for (uint32_t x = 0; x < wv; x += N) {
+            const uint32_t n = std::min(N, w - x);
             FloatVec cr, cgr, cb, ca;
             const glm::vec4* currentPixels = colorRow + t.x0 + x;
             if (n < N) {  // the end of a partial tile: do not read past the row
@@ -529,44 +585,21 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
             // The resolved (compressed) colour: the current one unless the history takes part.
             FloatVec orr = cr, og = cgr, ob = cb, oa = ca;
             FloatMask clipped = hn::FirstN(d, 0);
-            if (!hn::AllTrue(d, flat)) {
-                FloatVec hr, hg, hb, ha;
-                sampleHistoryVec(in.history, px, pyv, resolveHistory, y + 1 < h, hr, hg, hb, ha);
-                // The box (makeClipBox with n = 9) channel by channel, each clipped at once (clipToBox): the exact test
-                // "outside", the ratio by the refined reciprocal. Formed after the sampling, so that few vectors are
-                // live across it.
+            if (s.anyHistory[x]) {
+                const FloatMask resolveHistory = hn::MaskFromVec(hn::Load(d, &s.resolveHistory[x]));
+                FloatVec hr = hn::Load(d, &s.history[0][x]), hg = hn::Load(d, &s.history[1][x]);
+                FloatVec hb = hn::Load(d, &s.history[2][x]), ha = hn::Load(d, &s.history[3][x]);
+                // clipToBox: the exact test "outside", the largest ratio of the channels outside.
                 FloatVec hv[4];
                 toYCoCgVec(d, hr, hg, hb, hv[0], hv[1], hv[2]);
                 hv[3] = ha;
                 FloatVec unit = zero, delta[4], center[4];
                 for (int ch = 0; ch < 4; ++ch) {
-                    FloatVec lo, hi;
-                    if (ch == 3 && alphaConstant) {
-                        lo = hi = hn::Set(d, alpha0);
-                    } else {
-                        FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
-                        for (uint32_t r = y + 1; r < y + 3; ++r) {
-                            sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
-                            sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
-                        }
-                        const FloatVec mn = boxMin[ch], mx = boxMax[ch];
-                        const FloatVec mean = hn::Mul(sum, ninth);
-                        const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
-                        const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
-                        lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
-                        hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
-                    }
-                    center[ch] = hn::Mul(half, hn::Add(lo, hi));
-                    const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
+                    center[ch] = hn::Load(d, &s.center[ch][x]);
                     delta[ch] = hn::Sub(hv[ch], center[ch]);
                     const FloatVec a = hn::Abs(delta[ch]);
-                    const FloatMask outside = hn::Gt(a, extent);
-                    // A flat channel (extent 0) gives an infinite unit, which pulls the point exactly onto the centre.
-                    const FloatVec ratio =
-                        ch == 3 && alphaConstant
-                            ? infinity
-                            : hn::IfThenElse(hn::Gt(extent, zero), hn::Mul(a, reciprocal(d, extent)), infinity);
-                    unit = hn::IfThenElse(outside, hn::Max(unit, ratio), unit);
+                    const FloatMask outside = hn::Gt(a, hn::Load(d, &s.extent[ch][x]));
+                    unit = hn::IfThenElse(outside, hn::Max(unit, hn::Mul(a, hn::Load(d, &s.invExtent[ch][x]))), unit);
                 }
                 clipped = hn::And(resolveHistory, hn::Gt(unit, zero));
                 const FloatVec inv = hn::IfThenElseZero(hn::Lt(unit, infinity), reciprocal(d, unit));
@@ -618,7 +651,7 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 interleavePixels(orr, og, ob, oa, packed);
             }
             storeInterleaved(packed, outRow + t.x0 + x, n, false);
-            counts.noHistory += n - hn::CountTrue(d, useHistory);
+            counts.noHistory += n - hn::CountTrue(d, hn::MaskFromVec(hn::Load(d, &s.useHistory[x])));
             counts.clipped += hn::CountTrue(d, clipped);
         }
     }
