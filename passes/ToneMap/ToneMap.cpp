@@ -3,6 +3,7 @@
 #include <hwy/cache_control.h>
 #include <hwy/highway.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <vector>
@@ -184,8 +185,13 @@ void logLuminanceRow(const glm::vec4* in, uint32_t x0, uint32_t x1, double& sum,
     finishLogLuminance(acc, finiteCount, in, x, x1, sum, count);
 }
 
-/// One row segment [x0, x1) through the operator: vectors of pixels, then the reference kernel for the rest.
-/// Returns the pixels with a non-finite channel.
+/// Pixels per chunk of mapRow: its mapped channels (4 x 2 KiB) stay in L1 next to the sRGB table (16 KiB).
+constexpr uint32_t kChunk = 128;
+
+/// One row segment [x0, x1) through the operator: chunks of whole vectors of pixels in two loops, the exposure and
+/// the operator into a small buffer, then the sRGB encoding and the stores (two short loops whose iterations the
+/// processor overlaps; one long one waits on each vector's divisions and table lookups in turn), then the reference
+/// kernel for the rest. Returns the pixels with a non-finite channel.
 /// With Measure, also sums the row's log-luminance terms into logSum / logCount from the same loads, with the same
 /// operations and order as logLuminanceRow (so the sums are the same bits).
 template <Operator Op, bool Measure>
@@ -198,26 +204,35 @@ uint64_t mapRow(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, c
     uint64_t nonFinite = 0;
     FloatVec logAcc = hn::Zero(d);
     IntVec logFinite = hn::Zero(di);
+    alignas(64) float mapped[4][kChunk];
     uint32_t x = x0;
-    for (; x + n <= x1; x += n) {
-        FloatVec r, g, b, a;
-        hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x), r, g, b, a);
-        if constexpr (Measure) logLuminanceVec(d, r, g, b, logAcc, logFinite);
-        nonFinite += hn::CountTrue(
-            di, hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), hn::Or(nonFiniteVec(b), nonFiniteVec(a))));
-        r = saturateVec(d, operatorVec<Op>(d, exposeVec(d, r, scale), p));
-        g = saturateVec(d, operatorVec<Op>(d, exposeVec(d, g, scale), p));
-        b = saturateVec(d, operatorVec<Op>(d, exposeVec(d, b, scale), p));
-        a = saturateVec(d, a);
-        if (outFloat) hn::StoreInterleaved4(r, g, b, a, d, reinterpret_cast<float*>(outFloat + x));
-        const IntVec alpha = hn::ConvertTo(di, hn::Add(hn::Mul(a, hn::Set(d, 255.f)), hn::Set(d, 0.5f)));
-        IntVec packed = encodeSrgbVec(d, table, r);
-        packed = hn::Or(packed, hn::ShiftLeft<8>(encodeSrgbVec(d, table, g)));
-        packed = hn::Or(packed, hn::ShiftLeft<16>(encodeSrgbVec(d, table, b)));
-        packed = hn::Or(packed, hn::ShiftLeft<24>(alpha));
-        // Rows start 64-byte aligned and x is a multiple of the vector: a streaming store, which skips reading the
-        // destination lines for ownership (a fifth of the pass's traffic).
-        hn::Stream(packed, di, reinterpret_cast<int32_t*>(out + x));
+    while (x + n <= x1) {
+        const uint32_t count = std::min(kChunk, (x1 - x) / n * n);
+        for (uint32_t i = 0; i < count; i += n) {
+            FloatVec r, g, b, a;
+            hn::LoadInterleaved4(d, reinterpret_cast<const float*>(in + x + i), r, g, b, a);
+            if constexpr (Measure) logLuminanceVec(d, r, g, b, logAcc, logFinite);
+            nonFinite += hn::CountTrue(
+                di, hn::Or(hn::Or(nonFiniteVec(r), nonFiniteVec(g)), hn::Or(nonFiniteVec(b), nonFiniteVec(a))));
+            hn::Store(saturateVec(d, operatorVec<Op>(d, exposeVec(d, r, scale), p)), d, mapped[0] + i);
+            hn::Store(saturateVec(d, operatorVec<Op>(d, exposeVec(d, g, scale), p)), d, mapped[1] + i);
+            hn::Store(saturateVec(d, operatorVec<Op>(d, exposeVec(d, b, scale), p)), d, mapped[2] + i);
+            hn::Store(saturateVec(d, a), d, mapped[3] + i);
+        }
+        for (uint32_t i = 0; i < count; i += n) {
+            const FloatVec r = hn::Load(d, mapped[0] + i), g = hn::Load(d, mapped[1] + i);
+            const FloatVec b = hn::Load(d, mapped[2] + i), a = hn::Load(d, mapped[3] + i);
+            if (outFloat) hn::StoreInterleaved4(r, g, b, a, d, reinterpret_cast<float*>(outFloat + x + i));
+            const IntVec alpha = hn::ConvertTo(di, hn::Add(hn::Mul(a, hn::Set(d, 255.f)), hn::Set(d, 0.5f)));
+            IntVec packed = encodeSrgbVec(d, table, r);
+            packed = hn::Or(packed, hn::ShiftLeft<8>(encodeSrgbVec(d, table, g)));
+            packed = hn::Or(packed, hn::ShiftLeft<16>(encodeSrgbVec(d, table, b)));
+            packed = hn::Or(packed, hn::ShiftLeft<24>(alpha));
+            // Rows start 64-byte aligned and x is a multiple of the vector: a streaming store, which skips reading
+            // the destination lines for ownership (a fifth of the pass's traffic).
+            hn::Stream(packed, di, reinterpret_cast<int32_t*>(out + x + i));
+        }
+        x += count;
     }
     if constexpr (Measure) finishLogLuminance(logAcc, logFinite, in, x, x1, logSum, logCount);
     ToneMapParams scalar = p;

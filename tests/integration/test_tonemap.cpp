@@ -413,7 +413,7 @@ TEST(ToneMap, VectorPathEqualsTheReferenceKernel) {
                                          {"exposure", 0.7f},
                                          {"autoExposure", autoExposure},
                                          {"reference", reference == 1}},
-                          true, 77, 41);  // rows that are not a multiple of the vector width
+                          true, 291, 41);  // rows of two 128-pixel chunks and a rest not a multiple of the vector
                 h.source->fn = input;
                 h.run();
                 measured[reference] = h.stat("measuredLuminance");
