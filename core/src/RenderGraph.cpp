@@ -1,6 +1,7 @@
 #include "loom/RenderGraph.h"
 
 #include <fnmatch.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -9,8 +10,6 @@
 #include <map>
 #include <set>
 #include <sstream>
-
-#include <spdlog/spdlog.h>
 
 #include "loom/Error.h"
 #include "loom/PageMemory.h"
@@ -47,7 +46,9 @@ private:
     PageMemory mMemory;
 };
 
-std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }
+std::string fieldKey(const std::string& pass, const std::string& field) {
+    return pass + "." + field;
+}
 
 std::string bytesText(size_t bytes) {
     if (bytes >= (size_t(1) << 20)) return fmt::format("{:.2f} MiB", bytes / double(1 << 20));
@@ -213,6 +214,31 @@ GraphDesc RenderGraph::desc() const {
     return d;
 }
 
+namespace {
+
+/// A pass's reflection must name each field once.
+void checkUniqueFields(const Reflection& r, const PassDesc& pass) {
+    std::set<std::string> seen;
+    for (const auto& f : r.fields())
+        if (!seen.insert(f.name).second)
+            throw Error(Error::Info{ErrorKind::Runtime,
+                                    {},
+                                    fieldKey(pass.name, f.name),
+                                    "pass type '" + pass.type + "' declares field '" + f.name + "' twice",
+                                    "unique field names",
+                                    "fix the pass's reflect()"});
+}
+
+/// The inputs and outputs of a reflection, in declaration order.
+std::vector<FieldDesc> portsOf(const Reflection& r) {
+    std::vector<FieldDesc> ports;
+    for (const auto& f : r.fields())
+        if (f.kind == FieldKind::Input || f.kind == FieldKind::Output) ports.push_back(f);
+    return ports;
+}
+
+}  // namespace
+
 void RenderGraph::compile(const CompileOptions& options) {
     Impl& m = *mImpl;
     const std::string file = m.desc.file.string();
@@ -234,12 +260,7 @@ void RenderGraph::compile(const CompileOptions& options) {
         info.frameWidth = options.width;
         info.frameHeight = options.height;
         n->pass->reflect(n->refl, info);
-        std::set<std::string> seen;
-        for (const auto& f : n->refl.fields())
-            if (!seen.insert(f.name).second)
-                throw Error(Error::Info{ErrorKind::Runtime, {}, fieldKey(n->desc.name, f.name),
-                                        "pass type '" + n->desc.type + "' declares field '" + f.name + "' twice",
-                                        "unique field names", "fix the pass's reflect()"});
+        checkUniqueFields(n->refl, n->desc);
     }
 
     auto fieldNames = [](const PassNode& n, FieldKind kind) { return n.refl.names(kind); };
@@ -255,10 +276,10 @@ void RenderGraph::compile(const CompileOptions& options) {
         const FieldDesc* f = n.refl.find(r.channel);
         if (!f || f->kind != kind) {
             auto names = fieldNames(n, kind);
-            std::string what = f ? fmt::format("'{}' is an {} of {}, not an {}", r.channel, fieldKindName(f->kind),
-                                               n.desc.type, fieldKindName(kind))
-                                 : fmt::format("unknown channel '{}' on pass '{}' ({})", r.channel, n.desc.name,
-                                               n.desc.type);
+            std::string what =
+                f ? fmt::format("'{}' is an {} of {}, not an {}", r.channel, fieldKindName(f->kind), n.desc.type,
+                                fieldKindName(kind))
+                  : fmt::format("unknown channel '{}' on pass '{}' ({})", r.channel, n.desc.name, n.desc.type);
             fail(where, what, fmt::format("an {} of {}: {}", fieldKindName(kind), n.desc.type, join(names)),
                  didYouMean(r.channel, names, std::string(fieldKindName(kind)) + "s"));
         }
@@ -276,8 +297,9 @@ void RenderGraph::compile(const CompileOptions& options) {
         const FieldDesc& sf = resolveField(*src, e.src, FieldKind::Output, where + "/0");
         const FieldDesc& df = resolveField(*dst, e.dst, FieldKind::Input, where + "/1");
         if (sf.format != df.format)
-            fail(where, fmt::format("wrong format on edge {} -> {}: the output is {} but the input is {}", e.src.str(),
-                                    e.dst.str(), formatName(sf.format), formatName(df.format)),
+            fail(where,
+                 fmt::format("wrong format on edge {} -> {}: the output is {} but the input is {}", e.src.str(),
+                             e.dst.str(), formatName(sf.format), formatName(df.format)),
                  fmt::format("an output of format {}", formatName(df.format)),
                  "connect a channel of the input's format, or put a conversion pass between them");
         std::string key = fieldKey(e.dst.pass, e.dst.channel);
@@ -296,8 +318,8 @@ void RenderGraph::compile(const CompileOptions& options) {
         for (size_t k = 0; k < pd.unconnected.size(); ++k) {
             const std::string where = fmt::format("/passes/{}/unconnected/{}", i, k);
             const std::string key = fieldKey(pd.name, pd.unconnected[k]);
-            const FieldDesc& f = resolveField(*n, ChannelRef{pd.name, pd.unconnected[k], false}, FieldKind::Input,
-                                              where);
+            const FieldDesc& f =
+                resolveField(*n, ChannelRef{pd.name, pd.unconnected[k], false}, FieldKind::Input, where);
             if (!f.optional)
                 fail(where, "input '" + key + "' is required and cannot be left unconnected",
                      "an optional input of " + pd.type, "remove it from \"unconnected\"");
@@ -349,8 +371,7 @@ void RenderGraph::compile(const CompileOptions& options) {
                 wiringProblems[n->desc.name] = where;
                 wiringDetail[n->desc.name] = {
                     "input '" + where + "' is ambiguous: several passes output '" + f.name + "': " + join(producers),
-                    "exactly one producer, or an explicit edge such as [\"" + producers[0] + "\", \"" + where +
-                        "\"]"};
+                    "exactly one producer, or an explicit edge such as [\"" + producers[0] + "\", \"" + where + "\"]"};
             }
         }
     }
@@ -477,6 +498,47 @@ void RenderGraph::compile(const CompileOptions& options) {
     for (const auto& k : marked) consumed.insert(k);
     for (const auto& k : observed) consumed.insert(k);
 
+    // 7b. What each live pass is connected to, and its second reflection (CompileInfo::wired): it may leave out
+    //     internal and history fields these connections do not use; its inputs and outputs must stay the same.
+    std::set<std::string> connected;
+    for (const auto& w : wires) connected.insert(fieldKey(w.dst.pass, w.dst.channel));
+    auto wiredInfo = [&](const PassNode& n) {
+        CompileInfo info;
+        info.frameWidth = options.width;
+        info.frameHeight = options.height;
+        info.wired = true;
+        for (const auto& f : n.refl.fields()) {
+            const std::string key = fieldKey(n.desc.name, f.name);
+            if (f.kind == FieldKind::Input && connected.count(key)) info.connectedInputs.push_back(f.name);
+            if (f.kind == FieldKind::Output && (consumed.count(key) || prevConsumed.count(key) || !f.optional))
+                info.consumedOutputs.push_back(f.name);
+        }
+        return info;
+    };
+    for (PassNode* n : order) {
+        Reflection wired;
+        n->pass->reflect(wired, wiredInfo(*n));
+        checkUniqueFields(wired, n->desc);
+        if (portsOf(wired) != portsOf(n->refl))
+            throw Error(Error::Info{
+                ErrorKind::Runtime,
+                {},
+                n->desc.name,
+                "pass type '" + n->desc.type + "' declares other inputs or outputs once its connections are known",
+                "the same inputs and outputs in both reflections (only internal and history "
+                "fields may depend on the connections)",
+                "fix the pass's reflect()"});
+        for (const auto& f : n->refl.fields()) {
+            const std::string key = fieldKey(n->desc.name, f.name);
+            if (observed.count(key) && !wired.find(f.name)) {
+                plan.warnings.push_back("'" + key + "' is not computed: " + n->desc.name +
+                                        " does not use it with these connections");
+                observed.erase(key);
+            }
+        }
+        n->refl = std::move(wired);
+    }
+
     // 8. Resources.
     struct Transient {
         ResourceInfo info;
@@ -555,8 +617,12 @@ void RenderGraph::compile(const CompileOptions& options) {
     m.transients.clear();
     m.fieldTextures.clear();
     if (!m.arena.reserve(peak))
-        throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
-                                {}, "render at a smaller size"});
+        throw Error(Error::Info{ErrorKind::Runtime,
+                                file,
+                                {},
+                                "out of memory for " + bytesText(peak) + " of frame data",
+                                {},
+                                "render at a smaller size"});
     for (const auto& t : transients) {
         auto tex = std::make_unique<Texture>(
             Texture::wrap(m.arena.data() + t.info.offset, t.info.width, t.info.height, t.info.format));
@@ -603,9 +669,7 @@ void RenderGraph::compile(const CompileOptions& options) {
         }
         n->ctx.mPassName = n->desc.name;
         n->ctx.mStats = &n->stats;
-        CompileInfo info;
-        info.frameWidth = options.width;
-        info.frameHeight = options.height;
+        const CompileInfo info = wiredInfo(*n);
         for (const auto& f : n->refl.fields()) {
             const std::string key = fieldKey(n->desc.name, f.name);
             BoundField b{f.name, f.kind};
@@ -622,20 +686,15 @@ void RenderGraph::compile(const CompileOptions& options) {
                     } else {
                         b.cur = m.fieldTextures.at(srcKey);
                     }
-                    info.connectedInputs.push_back(f.name);
                 }
-            } else if (f.kind == FieldKind::History ||
-                       (f.kind == FieldKind::Output && m.history.count(key))) {
+            } else if (f.kind == FieldKind::History || (f.kind == FieldKind::Output && m.history.count(key))) {
                 HistoryEntry& e = *m.history.at(key);
                 b.cur = &e.cur;
                 b.prev = &e.prev;
                 b.valid = &e.valid;
                 if (f.kind == FieldKind::History) n->validFlags.push_back(&e.valid);
-                if (f.kind == FieldKind::Output) info.consumedOutputs.push_back(f.name);
             } else if (auto it = m.fieldTextures.find(key); it != m.fieldTextures.end()) {
                 b.cur = it->second;
-                if (f.kind == FieldKind::Output && (consumed.count(key) || !f.optional))
-                    info.consumedOutputs.push_back(f.name);
                 n->poisonAtStart.push_back(it->second);
             }
             if (observed.count(key) && b.cur) {

@@ -88,9 +88,26 @@ ImageView<const T> asConst(ImageView<T> v) {
     return {v.data, v.width, v.height, v.rowPitch};
 }
 
+/// The direct/indirect split: both parts connected (`connected(name)`: whether that input is).
+template <class Connected>
+bool splitSignals(Connected connected) {
+    return connected(kDirect) && connected(kIndirect);
+}
+
+/// Last frame's guides come from the G-buffer's previous outputs (@prev edges) rather than this pass's copies.
+template <class Connected>
+bool sharedPrevGuides(Connected connected) {
+    return connected(kLinearZPrev) && connected(kNormWPrev) && (!connected(kMeshId) || connected(kMeshIdPrev));
+}
+
 }  // namespace
 
-void SVGFPass::reflect(Reflection& r, const CompileInfo&) const {
+void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
+    // Once the wiring is known, the fields these connections do not use are left out: the indirect signal's
+    // history and scratch without the split, the copies of last frame's guides when the @prev edges feed them.
+    const auto connected = [&](const char* name) { return info.isInputConnected(name); };
+    const bool splitFields = !info.wired || splitSignals(connected);
+    const bool ownGuides = !info.wired || !sharedPrevGuides(connected);
     r.input(kColor, Format::RGBA32F).doc("path-traced radiance to filter (also what miss pixels pass through)");
     r.input(kDirect, Format::RGBA32F)
         .optional()
@@ -119,23 +136,29 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo&) const {
 
     r.history(kIllumHistory, Format::RGBA32F)
         .doc("colour (split: direct) history, demodulated rgb and variance: the output of level feedbackTap");
-    r.history(kIndirectHistory, Format::RGBA32F).doc("indirect history (split only), as illumination");
+    if (splitFields) r.history(kIndirectHistory, Format::RGBA32F).doc("indirect history (split only), as illumination");
     r.history(kMomentsHistory, Format::RG32F).doc("luminance moments m1, m2 of colour (split: direct)");
-    r.history(kIndirectMomentsHistory, Format::RG32F).doc("luminance moments m1, m2 of indirect (split only)");
+    if (splitFields)
+        r.history(kIndirectMomentsHistory, Format::RG32F).doc("luminance moments m1, m2 of indirect (split only)");
     r.history(kLengthHistory, Format::R32F).doc("history length in frames, capped at maxHistory; 0: no history");
-    r.history(kPrevLinearZ, Format::RG32F)
-        .doc("linearZ of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
-    r.history(kPrevNormW, Format::RGBA32F)
-        .doc("normW of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
-    r.history(kPrevMeshId, Format::R32U)
-        .doc("meshId of the frame, for next frame's disocclusion test (not written when linearZPrev is connected)");
+    if (ownGuides) {
+        r.history(kPrevLinearZ, Format::RG32F)
+            .doc(
+                "linearZ of the frame, for next frame's disocclusion test (not declared when linearZPrev is "
+                "connected)");
+        r.history(kPrevNormW, Format::RGBA32F)
+            .doc("normW of the frame, for next frame's disocclusion test (not declared when linearZPrev is connected)");
+        r.history(kPrevMeshId, Format::R32U)
+            .doc(
+                "meshId of the frame, for next frame's disocclusion test (not declared when linearZPrev is connected)");
+    }
 
     r.internal(kIntegrated, Format::RGBA32F)
         .doc("colour (split: direct) after temporal accumulation, a = temporal variance; then the filtered result");
-    r.internal(kIntegratedIndirect, Format::RGBA32F).doc("indirect, as integrated (split only)");
+    if (splitFields) r.internal(kIntegratedIndirect, Format::RGBA32F).doc("indirect, as integrated (split only)");
     r.internal(kEstimate, Format::RGBA32F)
         .doc("input of the a-trous levels: integrated colour with its variance estimate (spatial while short)");
-    r.internal(kEstimateIndirect, Format::RGBA32F).doc("indirect, as estimate (split only)");
+    if (splitFields) r.internal(kEstimateIndirect, Format::RGBA32F).doc("indirect, as estimate (split only)");
 }
 
 void SVGFPass::declareParams(ParamList& p) {
@@ -184,7 +207,8 @@ void SVGFPass::execute(PassContext& ctx) {
         stats.set(kStatNonFinite, 0);
         return;
     }
-    const bool split = ctx.input(kDirect) && ctx.input(kIndirect);
+    const auto connected = [&](const char* name) { return ctx.input(name) != nullptr; };
+    const bool split = splitSignals(connected);
     const uint32_t w = ctx.output(kFiltered)->width(), h = ctx.output(kFiltered)->height();
 
     // Stage 1: demodulation, reprojection, moments (one pass).
@@ -208,8 +232,7 @@ void SVGFPass::execute(PassContext& ctx) {
     tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
     // Last frame's guides: the G-buffer's own previous outputs when the graph feeds them (@prev edges), else the
     // copies this pass keeps.
-    const bool sharedGuides =
-        ctx.input(kLinearZPrev) && ctx.input(kNormWPrev) && (!tv.meshId.data || ctx.input(kMeshIdPrev));
+    const bool sharedGuides = sharedPrevGuides(connected);
     if (sharedGuides) {
         tv.prevLinearZ = inputView<glm::vec2>(ctx, kLinearZPrev);
         tv.prevNormW = inputView<glm::vec4>(ctx, kNormWPrev);
@@ -220,7 +243,7 @@ void SVGFPass::execute(PassContext& ctx) {
         tv.prevMeshId = ctx.historyPrev(kPrevMeshId).view<uint32_t>();
     }
     tv.integrated0 = ctx.internal(kIntegrated)->view<glm::vec4>();
-    tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
+    if (split) tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
     tv.curMoments0 = ctx.historyCur(kMomentsHistory).view<glm::vec2>();
     if (split) tv.curMoments1 = ctx.historyCur(kIndirectMomentsHistory).view<glm::vec2>();
     tv.curLength = ctx.historyCur(kLengthHistory).view<float>();
@@ -287,7 +310,7 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.linearZ = tv.linearZ;
     vv.length = asConst(tv.curLength);
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
-    vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
+    if (split) vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
     const VarianceScales scales = varianceScales(ap);
     stats.set(kStatVarianceReference, 1.0);  // the scalar stages; the vector one counts

@@ -1,16 +1,15 @@
 // RenderGraph: wiring (explicit, by name, @prev), compile errors, culling, optional outputs, transient memory
 // and NaN poisoning, history across frames and recompiles, field observation, determinism, desc().
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/glm.hpp>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <fmt/format.h>
-#include <glm/glm.hpp>
-#include <nlohmann/json.hpp>
 
 #include "loom/Error.h"
 #include "loom/Graph.h"
@@ -21,9 +20,8 @@
 
 using namespace loom;
 
-#define EXPECT_CONTAINS(text, part)                                                             \
-    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" \
-                                                               << (text)
+#define EXPECT_CONTAINS(text, part) \
+    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" << (text)
 
 namespace {
 
@@ -75,6 +73,36 @@ public:
     }
 };
 
+/// Adds its optional inputs "src" and "bias" into "dst". It keeps a history of src and a scratch copy of bias, and
+/// once its connections are known (CompileInfo::wired) it declares each only when that input is connected; with
+/// "changePorts" its second reflection also declares an extra output, which the compiler must refuse.
+class ConnectionFieldsPass final : public RenderPass {
+public:
+    explicit ConnectionFieldsPass(bool changePorts = false) : mChangePorts(changePorts) {}
+    void reflect(Reflection& r, const CompileInfo& info) const override {
+        r.input("src", Format::RGBA32F).optional();
+        r.input("bias", Format::RGBA32F).optional();
+        r.output("dst", Format::RGBA32F);
+        if (mChangePorts && info.wired) r.output("extra", Format::R32F);
+        if (!info.wired || info.isInputConnected("src")) r.history("srcHistory", Format::RGBA32F);
+        if (!info.wired || info.isInputConnected("bias")) r.internal("biasScratch", Format::RGBA32F);
+    }
+    void execute(PassContext& ctx) override {
+        const Texture* src = ctx.input("src");
+        const Texture* bias = ctx.input("bias");
+        if (src) ctx.historyCur("srcHistory").copyFrom(*src);
+        if (bias) ctx.internal("biasScratch")->copyFrom(*bias);
+        auto dst = ctx.output("dst")->view<glm::vec4>();
+        for (uint32_t y = 0; y < dst.height; ++y)
+            for (uint32_t x = 0; x < dst.width; ++x)
+                dst.at(x, y) = (src ? src->view<glm::vec4>().at(x, y) : glm::vec4(0.f)) +
+                               (bias ? bias->view<glm::vec4>().at(x, y) : glm::vec4(0.f));
+    }
+
+private:
+    bool mChangePorts;
+};
+
 /// The test passes plugin plus the pass types defined here (registered once per process).
 PluginRegistry& registry() {
     static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
@@ -85,6 +113,10 @@ PluginRegistry& registry() {
         reg.registerPass("MaskReader", "reads 'mask'", [] { return std::make_unique<MaskReaderPass>(); });
         reg.registerPass("WidthLimit", "fails to compile above 100 pixels",
                          [] { return std::make_unique<WidthLimitPass>(); });
+        reg.registerPass("ConnectionFields", "fields that depend on the connections",
+                         [] { return std::make_unique<ConnectionFieldsPass>(); });
+        reg.registerPass("PortChanger", "declares another output once wired",
+                         [] { return std::make_unique<ConnectionFieldsPass>(true); });
         return true;
     }();
     (void)registered;
@@ -97,7 +129,9 @@ GraphDesc makeGraph(const std::string& passes, const std::string& edges, const s
                       R"(, "outputs": )" + outputs + "}");
 }
 
-GraphDesc testPatternGraph() { return loadGraph(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json"); }
+GraphDesc testPatternGraph() {
+    return loadGraph(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json");
+}
 
 CompileOptions sized(uint32_t w = 64, uint32_t h = 64) {
     CompileOptions o;
@@ -316,9 +350,9 @@ TEST(RenderGraphWiring, UnconnectedInputOfACulledPassIsOnlyAWarning) {
 
 TEST(RenderGraphErrors, UnknownPassTypeSuggestsTheClosest) {
     Error e = expectBadInput([] {
-        RenderGraph g(makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blr"}])", "[]",
-                                R"(["B.dst"])"),
-                      registry());
+        RenderGraph g(
+            makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blr"}])", "[]", R"(["B.dst"])"),
+            registry());
     });
     EXPECT_EQ(e.info().where, "/passes/1/type");
     EXPECT_CONTAINS(e.what(), "unknown pass type 'Blr'");
@@ -349,8 +383,8 @@ TEST(RenderGraphErrors, UnknownPassOnAnEdgeSuggestsTheClosest) {
 TEST(RenderGraphErrors, EdgeFromAnInputOrToAnOutput) {
     const std::string passes = R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blur"},
                                    {"name": "M", "type": "Add"}])";
-    Error from = compileError(
-        makeGraph(passes, R"([["C.dst", "B.src"], ["B.src", "M.a"], ["C.dst", "M.b"]])", R"(["M.dst"])"));
+    Error from =
+        compileError(makeGraph(passes, R"([["C.dst", "B.src"], ["B.src", "M.a"], ["C.dst", "M.b"]])", R"(["M.dst"])"));
     EXPECT_EQ(from.info().where, "/edges/1/0");
     EXPECT_CONTAINS(from.what(), "'src' is an input of Blur, not an output");
 
@@ -392,9 +426,9 @@ TEST(RenderGraphErrors, BadParameterValueNamesItsJsonPath) {
     EXPECT_CONTAINS(range.what(), "out of range");
 
     Error type = expectBadInput([] {
-        RenderGraph g(makeGraph(R"([{"name": "C", "type": "Constant", "params": {"color": "red"}}])", "[]",
-                                R"(["C.dst"])"),
-                      registry());
+        RenderGraph g(
+            makeGraph(R"([{"name": "C", "type": "Constant", "params": {"color": "red"}}])", "[]", R"(["C.dst"])"),
+            registry());
     });
     EXPECT_EQ(type.info().where, "/passes/0/params/color");
 
@@ -430,8 +464,8 @@ TEST(RenderGraphErrors, FailedSetDescDoesNotRunRemovedPasses) {
     g.compile(sized());
     g.execute(frameAt(0));
     expectBadInput([&] {
-        g.setDesc(makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blur"}])", "[]",
-                            R"(["B.dst"])"));
+        g.setDesc(
+            makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blur"}])", "[]", R"(["B.dst"])"));
     });
     EXPECT_FALSE(g.compiled());
     EXPECT_EQ(g.pass("P"), nullptr);
@@ -568,6 +602,54 @@ TEST(RenderGraphCulling, ConsumedOptionalOutputIsComputed) {
     g.execute(frameAt(0));
     EXPECT_EQ(g.lastStats()["O"]["maskWritten"], 1.0);
     EXPECT_EQ(texel(g, "R.dst", 0, 33, 2), 1.f);
+}
+
+TEST(RenderGraphReflect, InternalAndHistoryFieldsMayDependOnTheConnections) {
+    // src is wired by name, bias is not connected: the history of src is allocated, the scratch of bias is not.
+    const std::string passes = R"([{"name": "S", "type": "SrcSource", "params": {"color": [0.25, 0.5, 0, 1]}},
+                                   {"name": "C", "type": "ConnectionFields"}])";
+    RenderGraph g(makeGraph(passes, "[]", R"(["C.dst"])"), registry());
+    CompileOptions o = sized();
+    o.observe = {"C.*"};
+    g.compile(o);
+    ASSERT_NE(findResource(g.plan(), "C.srcHistory"), nullptr);
+    EXPECT_EQ(findResource(g.plan(), "C.biasScratch"), nullptr);
+    EXPECT_EQ(g.fieldTexture("C.biasScratch"), nullptr);
+    bool warned = false;
+    for (const auto& w : g.plan().warnings) warned |= w.find("'C.biasScratch' is not computed") != std::string::npos;
+    EXPECT_TRUE(warned) << "observing a field the connections leave out is a warning";
+    std::vector<std::string> seen;
+    g.setFieldObserver([&](const FrameInfo&, const std::string& pass, const std::string& field, const Texture&) {
+        seen.push_back(pass + "." + field);
+    });
+    g.execute(frameAt(0));
+    EXPECT_TRUE(contains(seen, "C.srcHistory"));
+    EXPECT_FALSE(contains(seen, "C.biasScratch"));
+    EXPECT_EQ(texel(g, "C.dst", 1, 3, 4), 0.5f);
+    EXPECT_EQ(texel(g, "C.srcHistory", 0, 3, 4), 0.25f);
+
+    // Both connected (bias by an explicit edge from a second source): both fields exist and are used.
+    RenderGraph both(makeGraph(R"([{"name": "S", "type": "SrcSource", "params": {"color": [0.25, 0.5, 0, 1]}},
+                                   {"name": "B", "type": "BiasSource", "params": {"color": [1, 1, 1, 0]}},
+                                   {"name": "C", "type": "ConnectionFields"}])",
+                               R"([["B.bias", "C.bias"]])", R"(["C.dst"])"),
+                     registry());
+    both.compile(sized());
+    EXPECT_NE(findResource(both.plan(), "C.srcHistory"), nullptr);
+    EXPECT_NE(findResource(both.plan(), "C.biasScratch"), nullptr);
+    both.execute(frameAt(0));
+    EXPECT_EQ(texel(both, "C.dst", 0, 3, 4), 1.25f);
+}
+
+TEST(RenderGraphReflect, InputsAndOutputsMustNotDependOnTheConnections) {
+    RenderGraph g(makeGraph(R"([{"name": "C", "type": "PortChanger"}])", "[]", R"(["C.dst"])"), registry());
+    try {
+        g.compile(sized());
+        ADD_FAILURE() << "expected an error";
+    } catch (const Error& e) {
+        EXPECT_CONTAINS(e.what(), "declares other inputs or outputs once its connections are known");
+        EXPECT_CONTAINS(e.what(), "C");
+    }
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -808,12 +890,12 @@ TEST(RenderGraphObserve, ObservingEverythingChangesNoOutput) {
     watched.compile(o);
     EXPECT_TRUE(watched.plan().warnings.empty());
     std::map<std::string, std::unique_ptr<Texture>> seen;  // "frame:Pass.field"
-    watched.setFieldObserver([&](const FrameInfo& frame, const std::string& pass, const std::string& field,
-                                 const Texture& tex) {
-        const std::string key = std::to_string(frame.frameIndex) + ":" + pass + "." + field;
-        EXPECT_EQ(seen.count(key), 0u) << key << " observed twice";
-        seen[key] = copyOf(tex);
-    });
+    watched.setFieldObserver(
+        [&](const FrameInfo& frame, const std::string& pass, const std::string& field, const Texture& tex) {
+            const std::string key = std::to_string(frame.frameIndex) + ":" + pass + "." + field;
+            EXPECT_EQ(seen.count(key), 0u) << key << " observed twice";
+            seen[key] = copyOf(tex);
+        });
     for (int f = 0; f < kFrames; ++f) {
         watched.execute(frameAt(uint64_t(f)));
         EXPECT_TRUE(watched.fieldTexture("Display.dst")->samePixels(*display[f])) << "frame " << f;

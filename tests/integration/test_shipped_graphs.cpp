@@ -18,10 +18,11 @@ using namespace loom;
 
 namespace {
 
-std::string graphPath(const std::string& name) { return std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/" + name; }
+std::string graphPath(const std::string& name) {
+    return std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/" + name;
+}
 
-std::unique_ptr<RenderGraph> compiled(const std::string& file, std::shared_ptr<Scene> scene, uint32_t w,
-                                      uint32_t h) {
+std::unique_ptr<RenderGraph> compiled(const std::string& file, std::shared_ptr<Scene> scene, uint32_t w, uint32_t h) {
     auto g = std::make_unique<RenderGraph>(loadGraph(file), test::pluginRegistry());
     g->setScene(std::move(scene));
     CompileOptions o;
@@ -97,6 +98,17 @@ TEST(ShippedGraphs, DefaultGraphFiltersTheCombinedColourAndTheSplitGraphTheSplit
     ASSERT_NE(wireTo(split->plan(), "SVGF.direct"), nullptr);
     EXPECT_EQ(wireTo(split->plan(), "SVGF.direct")->src.str(), "PathTracer.direct");
     EXPECT_EQ(wireTo(split->plan(), "SVGF.indirect")->src.str(), "PathTracer.indirect");
+
+    // Each allocates what its connections use: the indirect signal's fields only with the split, SVGF's own copies of
+    // last frame's guides in neither (both feed it the G-buffer's @prev outputs).
+    for (const char* field : {"SVGF.illuminationIndirect", "SVGF.momentsIndirect", "SVGF.estimateIndirect"}) {
+        EXPECT_EQ(combined->fieldTexture(field), nullptr) << field;
+        EXPECT_NE(split->fieldTexture(field), nullptr) << field;
+    }
+    for (const char* field : {"SVGF.prevLinearZ", "SVGF.prevNormW", "SVGF.prevMeshId"}) {
+        EXPECT_EQ(combined->fieldTexture(field), nullptr) << field;
+        EXPECT_EQ(split->fieldTexture(field), nullptr) << field;
+    }
 }
 
 TEST(ShippedGraphs, DefaultGraphIsCloserToTheReferenceThanTheNoisyInput) {

@@ -90,8 +90,13 @@ PluginRegistry& registry() {
     return test::pluginRegistry();
 }
 
-const char* const kHistoryFields[] = {"illumination", "illuminationIndirect", "moments",  "momentsIndirect",
-                                      "length",       "prevLinearZ",          "prevNormW"};
+/// SVGF's history fields in a compiled graph (which ones exist depends on its connections).
+std::vector<std::string> historyFields(const RenderGraph& g) {
+    std::vector<std::string> names;
+    for (const auto& r : g.plan().resources)
+        if (r.kind == ResourceKind::History && r.name.rfind("SVGF.", 0) == 0) names.push_back(r.name.substr(5));
+    return names;
+}
 
 /// Source -> SVGF on synthetic inputs, run frame by frame.
 struct Harness {
@@ -328,7 +333,7 @@ TEST(SVGF, NonFiniteInputNeverReachesOutputsOrHistory) {
             h.run();
             for (const char* out : {"filtered", "variance", "historyLength"})
                 EXPECT_TRUE(allFinite(h.field(out))) << out << " frame " << frame << " split " << split;
-            for (const char* hist : kHistoryFields)
+            for (const auto& hist : historyFields(h.graph))
                 EXPECT_TRUE(allFinite(h.field(hist))) << hist << " frame " << frame << " split " << split;
             if (frame == 3) {
                 EXPECT_EQ(h.stat("nonFinite"), 2.0);
@@ -545,8 +550,7 @@ TEST(SVGF, BitIdenticalForAnyThreadCount) {
         for (int f = 0; f < 4; ++f) renderFrame(*graph, *scene, uint64_t(f), 0.5 + f / 30.0, W, H);
         std::vector<Texture> out;
         out.push_back(copyOf(*graph->fieldTexture("SVGF.filtered")));
-        for (const char* hist : kHistoryFields)
-            out.push_back(copyOf(*graph->fieldTexture(std::string("SVGF.") + hist)));
+        for (const auto& hist : historyFields(*graph)) out.push_back(copyOf(*graph->fieldTexture("SVGF." + hist)));
         return out;
     };
     const auto one = render(1), two = render(2);
@@ -576,13 +580,13 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
         for (int f = 0; f < 6; ++f) {
             renderFrame(*graph, *s, uint64_t(f), 0.5 + f / 30.0, W, H);
             out.push_back(copyOf(*graph->fieldTexture("SVGF.filtered")));
-            for (const char* hist : kHistoryFields)
-                out.push_back(copyOf(*graph->fieldTexture(std::string("SVGF.") + hist)));
+            for (const auto& hist : historyFields(*graph)) out.push_back(copyOf(*graph->fieldTexture("SVGF." + hist)));
         }
         return out;
     };
     const auto fused = scene(false), reference = scene(true);
-    const size_t perFrame = 1 + std::size(kHistoryFields);
+    const auto probe = Scene::load(test::dataScene("cornell_dynamic.gltf"));
+    const size_t perFrame = 1 + historyFields(*sceneGraph(probe, W, H, nlohmann::json::object())).size();
     for (size_t i = 0; i < fused.size(); ++i) {
         if (i % perFrame == 0)
             expectSameOutput(fused[i], reference[i], "scene, frame " + std::to_string(i / perFrame));
@@ -625,7 +629,8 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
             expectSameOutput(fast.field("filtered"), ref.field("filtered"), what + "frame " + std::to_string(frame));
             for (const char* name : {"variance", "historyLength", "estimate", "prevMeshId"})
                 EXPECT_TRUE(fast.field(name).samePixels(ref.field(name))) << what << name << " frame " << frame;
-            for (const char* hist : kHistoryFields)
+            ASSERT_EQ(historyFields(fast.graph), historyFields(ref.graph));
+            for (const auto& hist : historyFields(fast.graph))
                 EXPECT_TRUE(fast.field(hist).samePixels(ref.field(hist))) << what << hist << " frame " << frame;
         }
     };
@@ -649,7 +654,7 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
 // With the G-buffer's @prev outputs connected, SVGF reads last frame's depth, normal and mesh id there instead of
 // copying them into its own history: the same disocclusion decisions, so every output and history field is the same
 // bit for bit as with its own copies, on a scene whose moving objects uncover and cover pixels; its copies are then
-// never written.
+// not even allocated.
 TEST(SVGF, PrevGuidesFromTheGBufferMatchItsOwnCopies) {
     const uint32_t W = 64, H = 64;
     auto sceneA = Scene::load(test::dataScene("cornell_dynamic.gltf"));
@@ -674,14 +679,44 @@ TEST(SVGF, PrevGuidesFromTheGBufferMatchItsOwnCopies) {
                 sawRestart |= f > 0 && n == 1.f;
                 sawLongHistory |= n >= float(f + 1) && f >= 4;
             }
-        // The pass's own copies: written in one graph, left alone in the other.
+        // The pass's own copies: written in one graph, not even allocated in the other.
         const Texture& ownCopy = *copies->fieldTexture("SVGF.prevLinearZ");
-        const Texture zero(W, H, ownCopy.format());
-        EXPECT_FALSE(ownCopy.samePixels(zero)) << "frame " << f;
-        EXPECT_TRUE(shared->fieldTexture("SVGF.prevLinearZ")->samePixels(zero)) << "frame " << f;
+        EXPECT_FALSE(ownCopy.samePixels(Texture(W, H, ownCopy.format()))) << "frame " << f;
+        for (const char* copy : {"SVGF.prevLinearZ", "SVGF.prevNormW", "SVGF.prevMeshId"})
+            EXPECT_EQ(shared->fieldTexture(copy), nullptr) << copy;
     }
     EXPECT_TRUE(sawRestart) << "no disocclusion: the test would not tell last frame's guides from this frame's";
     EXPECT_TRUE(sawLongHistory);
+}
+
+// SVGF declares the indirect signal's history and scratch only with the direct/indirect split, and its own copies
+// of last frame's guides only without the @prev edges: a graph allocates what its connections use.
+TEST(SVGF, FieldsFollowTheConnections) {
+    const char* const indirect[] = {"illuminationIndirect", "momentsIndirect", "integratedIndirect",
+                                    "estimateIndirect"};
+    const char* const copies[] = {"prevLinearZ", "prevNormW", "prevMeshId"};
+    auto has = [](const RenderGraph& g, const std::string& field) {
+        for (const auto& r : g.plan().resources)
+            if (r.name == "SVGF." + field) return true;
+        return false;
+    };
+    const GFn flat = [](uint64_t, uint32_t, uint32_t) { return GPixel{}; };
+    Harness combined({}, flat, false), split({}, flat, true);
+    for (const char* f : indirect) {
+        EXPECT_FALSE(has(combined.graph, f)) << f;
+        EXPECT_TRUE(has(split.graph, f)) << f;
+    }
+    EXPECT_LT(combined.graph.plan().historyBytes, split.graph.plan().historyBytes);
+    for (const char* f : copies) EXPECT_TRUE(has(combined.graph, f)) << f;  // no @prev edges in the harness
+    // A scene graph with the @prev edges (the path tracer's direct and indirect wired by name: the split).
+    auto scene = Scene::load(test::dataScene("cornell_dynamic.gltf"));
+    auto withPrev = sceneGraph(scene, 32, 32, nlohmann::json::object(), true);
+    for (const char* f : copies) EXPECT_FALSE(has(*withPrev, f)) << f;
+    for (const char* f : indirect) EXPECT_TRUE(has(*withPrev, f)) << f;
+    combined.run(2);
+    split.run(2);
+    EXPECT_EQ(combined.stat("split"), 0.0);
+    EXPECT_EQ(split.stat("split"), 1.0);
 }
 
 // The spatial variance estimate's weight, spelt for identical scalar and vector evaluation, against the closed
@@ -739,7 +774,8 @@ TEST(SVGF, ExtremeEdgeStoppingParametersStayFinite) {
                 h.run();
                 for (const char* out : {"filtered", "variance", "estimate"})
                     EXPECT_TRUE(allFinite(h.field(out))) << phi << " reference " << reference << " " << out;
-                for (const char* hist : kHistoryFields) EXPECT_TRUE(allFinite(h.field(hist))) << phi << " " << hist;
+                for (const auto& hist : historyFields(h.graph))
+                    EXPECT_TRUE(allFinite(h.field(hist))) << phi << " " << hist;
             }
         }
 }

@@ -14,18 +14,28 @@
 
 namespace loom {
 
-class Scene;   // defined by the scene module
-struct Camera; // defined by the scene module
+class Scene;    // defined by the scene module
+struct Camera;  // defined by the scene module
 
 /// What the compiler tells a pass when it reflects and compiles.
+///
+/// reflect() runs twice per compile. The first time (wired == false) the
+/// lists are empty: the inputs and outputs declared then are what the graph
+/// is wired from, and a pass declares every internal and history field it
+/// might use. Once the wiring is known, each live pass reflects again with
+/// wired == true and the lists filled: it must declare the same inputs and
+/// outputs, and may leave out internal and history fields these connections
+/// do not need (scratch of a signal that is not connected, say). Only the
+/// second declaration is allocated. compile() sees the second one's info.
 struct CompileInfo {
     uint32_t frameWidth = 0;
     uint32_t frameHeight = 0;
-    /// Optional inputs that are connected, and outputs someone consumes (an
-    /// optional output not listed here is neither allocated nor expected).
-    /// Empty during reflect.
+    /// The inputs that are connected, and the outputs that are computed
+    /// (required ones, and optional ones someone consumes: an optional output
+    /// not listed here is neither allocated nor expected). Filled when wired.
     std::vector<std::string> connectedInputs;
     std::vector<std::string> consumedOutputs;
+    bool wired = false;  ///< the lists above are filled (second reflect, compile)
     bool isInputConnected(std::string_view name) const;
     bool isOutputConsumed(std::string_view name) const;
 };
@@ -46,8 +56,8 @@ private:
 struct BoundField {
     std::string name;
     FieldKind kind;
-    Texture* cur = nullptr;   ///< input, output, internal, or history "cur"
-    Texture* prev = nullptr;  ///< history "prev"; for inputs fed by an @prev edge, unused
+    Texture* cur = nullptr;       ///< input, output, internal, or history "cur"
+    Texture* prev = nullptr;      ///< history "prev"; for inputs fed by an @prev edge, unused
     const bool* valid = nullptr;  ///< history pairs and @prev inputs: does prev hold a real frame?
 };
 
