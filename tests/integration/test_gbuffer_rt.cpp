@@ -30,7 +30,7 @@ std::unique_ptr<RenderGraph> gbufferGraph(const std::vector<std::string>& channe
                                           const std::shared_ptr<Scene>& scene) {
     GraphDesc g;
     g.name = "gbuffer";
-    g.passes.push_back({"GBuffer", "GBufferRT", nlohmann::json::object()});
+    g.passes.push_back({"GBuffer", "GBufferRT", nlohmann::json::object(), {}});
     for (const auto& c : channels) g.outputs.push_back({"GBuffer", c, false});
     auto graph = std::make_unique<RenderGraph>(g, registry());
     graph->setScene(scene);

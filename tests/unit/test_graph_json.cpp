@@ -88,9 +88,9 @@ std::vector<GraphDesc> sampleGraphs() {
 
     GraphDesc g;
     g.name = "Hand built";
-    g.passes.push_back({"C", "Constant", json{{"color", {0.1, 0.2, 0.3, 1.0}}}});
-    g.passes.push_back({"Counter", "FrameCounter", json::object()});
-    g.passes.push_back({"Opt", "OptionalInput", json{{"nested", {{"a", {1, 2, 3}}, {"b", nullptr}}}, {"s", "x\"y"}}});
+    g.passes.push_back({"C", "Constant", json{{"color", {0.1, 0.2, 0.3, 1.0}}}, {}});
+    g.passes.push_back({"Counter", "FrameCounter", json::object(), {}});
+    g.passes.push_back({"Opt", "OptionalInput", json{{"nested", {{"a", {1, 2, 3}}, {"b", nullptr}}}, {"s", "x\"y"}}, {}});
     g.edges.push_back({{"C", "dst", false}, {"Opt", "src", false}});
     g.edges.push_back({{"Opt", "dst", true}, {"Opt", "bias", false}});
     g.outputs.push_back({"Opt", "dst", false});
@@ -100,7 +100,7 @@ std::vector<GraphDesc> sampleGraphs() {
 
     GraphDesc unicode;
     unicode.name = "Ünïcødé — graph";
-    unicode.passes.push_back({"Pässe_1", "Pattern", json{{"frequency", 0.1}, {"speed", 1e-7}}});
+    unicode.passes.push_back({"Pässe_1", "Pattern", json{{"frequency", 0.1}, {"speed", 1e-7}}, {}});
     unicode.outputs.push_back({"Pässe_1", "dst", false});
     out.push_back(unicode);
     return out;
