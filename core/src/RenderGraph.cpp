@@ -1,7 +1,6 @@
 #include "loom/RenderGraph.h"
 
 #include <fnmatch.h>
-#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -10,6 +9,8 @@
 #include <map>
 #include <set>
 #include <sstream>
+
+#include <spdlog/spdlog.h>
 
 #include "loom/Error.h"
 #include "loom/PageMemory.h"
@@ -46,9 +47,7 @@ private:
     PageMemory mMemory;
 };
 
-std::string fieldKey(const std::string& pass, const std::string& field) {
-    return pass + "." + field;
-}
+std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }
 
 std::string bytesText(size_t bytes) {
     if (bytes >= (size_t(1) << 20)) return fmt::format("{:.2f} MiB", bytes / double(1 << 20));
@@ -221,12 +220,9 @@ void checkUniqueFields(const Reflection& r, const PassDesc& pass) {
     std::set<std::string> seen;
     for (const auto& f : r.fields())
         if (!seen.insert(f.name).second)
-            throw Error(Error::Info{ErrorKind::Runtime,
-                                    {},
-                                    fieldKey(pass.name, f.name),
+            throw Error(Error::Info{ErrorKind::Runtime, {}, fieldKey(pass.name, f.name),
                                     "pass type '" + pass.type + "' declares field '" + f.name + "' twice",
-                                    "unique field names",
-                                    "fix the pass's reflect()"});
+                                    "unique field names", "fix the pass's reflect()"});
 }
 
 /// The inputs and outputs of a reflection, in declaration order.
@@ -276,10 +272,10 @@ void RenderGraph::compile(const CompileOptions& options) {
         const FieldDesc* f = n.refl.find(r.channel);
         if (!f || f->kind != kind) {
             auto names = fieldNames(n, kind);
-            std::string what =
-                f ? fmt::format("'{}' is an {} of {}, not an {}", r.channel, fieldKindName(f->kind), n.desc.type,
-                                fieldKindName(kind))
-                  : fmt::format("unknown channel '{}' on pass '{}' ({})", r.channel, n.desc.name, n.desc.type);
+            std::string what = f ? fmt::format("'{}' is an {} of {}, not an {}", r.channel, fieldKindName(f->kind),
+                                               n.desc.type, fieldKindName(kind))
+                                 : fmt::format("unknown channel '{}' on pass '{}' ({})", r.channel, n.desc.name,
+                                               n.desc.type);
             fail(where, what, fmt::format("an {} of {}: {}", fieldKindName(kind), n.desc.type, join(names)),
                  didYouMean(r.channel, names, std::string(fieldKindName(kind)) + "s"));
         }
@@ -297,9 +293,8 @@ void RenderGraph::compile(const CompileOptions& options) {
         const FieldDesc& sf = resolveField(*src, e.src, FieldKind::Output, where + "/0");
         const FieldDesc& df = resolveField(*dst, e.dst, FieldKind::Input, where + "/1");
         if (sf.format != df.format)
-            fail(where,
-                 fmt::format("wrong format on edge {} -> {}: the output is {} but the input is {}", e.src.str(),
-                             e.dst.str(), formatName(sf.format), formatName(df.format)),
+            fail(where, fmt::format("wrong format on edge {} -> {}: the output is {} but the input is {}", e.src.str(),
+                                    e.dst.str(), formatName(sf.format), formatName(df.format)),
                  fmt::format("an output of format {}", formatName(df.format)),
                  "connect a channel of the input's format, or put a conversion pass between them");
         std::string key = fieldKey(e.dst.pass, e.dst.channel);
@@ -318,8 +313,8 @@ void RenderGraph::compile(const CompileOptions& options) {
         for (size_t k = 0; k < pd.unconnected.size(); ++k) {
             const std::string where = fmt::format("/passes/{}/unconnected/{}", i, k);
             const std::string key = fieldKey(pd.name, pd.unconnected[k]);
-            const FieldDesc& f =
-                resolveField(*n, ChannelRef{pd.name, pd.unconnected[k], false}, FieldKind::Input, where);
+            const FieldDesc& f = resolveField(*n, ChannelRef{pd.name, pd.unconnected[k], false}, FieldKind::Input,
+                                              where);
             if (!f.optional)
                 fail(where, "input '" + key + "' is required and cannot be left unconnected",
                      "an optional input of " + pd.type, "remove it from \"unconnected\"");
@@ -371,7 +366,8 @@ void RenderGraph::compile(const CompileOptions& options) {
                 wiringProblems[n->desc.name] = where;
                 wiringDetail[n->desc.name] = {
                     "input '" + where + "' is ambiguous: several passes output '" + f.name + "': " + join(producers),
-                    "exactly one producer, or an explicit edge such as [\"" + producers[0] + "\", \"" + where + "\"]"};
+                    "exactly one producer, or an explicit edge such as [\"" + producers[0] + "\", \"" + where +
+                        "\"]"};
             }
         }
     }
@@ -498,10 +494,10 @@ void RenderGraph::compile(const CompileOptions& options) {
     for (const auto& k : marked) consumed.insert(k);
     for (const auto& k : observed) consumed.insert(k);
 
-    // 7b. What each live pass is connected to, and its second reflection (CompileInfo::wired): it may leave out
+    // 7b. What feeds each input, and each live pass's second reflection (CompileInfo::wired): it may leave out
     //     internal and history fields these connections do not use; its inputs and outputs must stay the same.
-    std::set<std::string> connected;
-    for (const auto& w : wires) connected.insert(fieldKey(w.dst.pass, w.dst.channel));
+    std::map<std::string, const Wire*> wireInto;
+    for (const auto& w : wires) wireInto[fieldKey(w.dst.pass, w.dst.channel)] = &w;
     auto wiredInfo = [&](const PassNode& n) {
         CompileInfo info;
         info.frameWidth = options.width;
@@ -509,7 +505,7 @@ void RenderGraph::compile(const CompileOptions& options) {
         info.wired = true;
         for (const auto& f : n.refl.fields()) {
             const std::string key = fieldKey(n.desc.name, f.name);
-            if (f.kind == FieldKind::Input && connected.count(key)) info.connectedInputs.push_back(f.name);
+            if (f.kind == FieldKind::Input && wireInto.count(key)) info.connectedInputs.push_back(f.name);
             if (f.kind == FieldKind::Output && (consumed.count(key) || prevConsumed.count(key) || !f.optional))
                 info.consumedOutputs.push_back(f.name);
         }
@@ -521,12 +517,10 @@ void RenderGraph::compile(const CompileOptions& options) {
         checkUniqueFields(wired, n->desc);
         if (portsOf(wired) != portsOf(n->refl))
             throw Error(Error::Info{
-                ErrorKind::Runtime,
-                {},
-                n->desc.name,
+                ErrorKind::Runtime, {}, n->desc.name,
                 "pass type '" + n->desc.type + "' declares other inputs or outputs once its connections are known",
-                "the same inputs and outputs in both reflections (only internal and history "
-                "fields may depend on the connections)",
+                "the same inputs and outputs in both reflections (only internal and history fields may depend on "
+                "the connections)",
                 "fix the pass's reflect()"});
         for (const auto& f : n->refl.fields()) {
             const std::string key = fieldKey(n->desc.name, f.name);
@@ -617,12 +611,8 @@ void RenderGraph::compile(const CompileOptions& options) {
     m.transients.clear();
     m.fieldTextures.clear();
     if (!m.arena.reserve(peak))
-        throw Error(Error::Info{ErrorKind::Runtime,
-                                file,
-                                {},
-                                "out of memory for " + bytesText(peak) + " of frame data",
-                                {},
-                                "render at a smaller size"});
+        throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
+                                {}, "render at a smaller size"});
     for (const auto& t : transients) {
         auto tex = std::make_unique<Texture>(
             Texture::wrap(m.arena.data() + t.info.offset, t.info.width, t.info.height, t.info.format));
@@ -655,8 +645,6 @@ void RenderGraph::compile(const CompileOptions& options) {
     }
 
     // 11. Bind each live pass's context and compile it.
-    std::map<std::string, const Wire*> wireInto;
-    for (const auto& w : wires) wireInto[fieldKey(w.dst.pass, w.dst.channel)] = &w;
     for (auto& n : m.nodes) {
         n->ctx = PassContext();
         n->observeBefore.clear();
@@ -687,7 +675,8 @@ void RenderGraph::compile(const CompileOptions& options) {
                         b.cur = m.fieldTextures.at(srcKey);
                     }
                 }
-            } else if (f.kind == FieldKind::History || (f.kind == FieldKind::Output && m.history.count(key))) {
+            } else if (f.kind == FieldKind::History ||
+                       (f.kind == FieldKind::Output && m.history.count(key))) {
                 HistoryEntry& e = *m.history.at(key);
                 b.cur = &e.cur;
                 b.prev = &e.prev;

@@ -57,7 +57,7 @@ struct TileScratch {
     float rowMvx[kR][kW], rowMvy[kR][kW], rowMvLen[kR][kW];
     // One output row between the three phases of the resolve: where last frame's pixel was, which lanes resolve
     // against the history, the clipping box (centre, half extent and its inverse, YCoCg + alpha), the history.
-    alignas(64) float px[kW], py[kW], useHistory[kW], resolveHistory[kW];
+    alignas(64) float px[kW], py[kW], resolveHistory[kW];
     alignas(64) float center[4][kW], extent[4][kW], invExtent[4][kW], history[4][kW];
     bool anyHistory[kW];  // per vector (indexed by its first pixel): a lane resolves against the history
 };
@@ -524,11 +524,10 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 boxMin[ch] = mn;
                 boxMax[ch] = mx;
             }
-            const FloatMask resolveHistory = hn::AndNot(flat, useHistory);
-            hn::Store(hn::VecFromMask(d, useHistory), d, &s.useHistory[x]);
-            hn::Store(hn::VecFromMask(d, resolveHistory), d, &s.resolveHistory[x]);
+            counts.noHistory += n - hn::CountTrue(d, useHistory);
             s.anyHistory[x] = !hn::AllTrue(d, flat);
             if (!s.anyHistory[x]) continue;
+            hn::Store(hn::VecFromMask(d, hn::AndNot(flat, useHistory)), d, &s.resolveHistory[x]);
             hn::Store(px, d, &s.px[x]);
             hn::Store(pyv, d, &s.py[x]);
             // The box (makeClipBox with n = 9) channel by channel, as centre and half extent (clipToBox); the
@@ -651,7 +650,6 @@ void resolveTile(const TaaInputs& in, const taa::TaaParams& p, const Tile& t, co
                 interleavePixels(orr, og, ob, oa, packed);
             }
             storeInterleaved(packed, outRow + t.x0 + x, n, false);
-            counts.noHistory += n - hn::CountTrue(d, hn::MaskFromVec(hn::Load(d, &s.useHistory[x])));
             counts.clipped += hn::CountTrue(d, clipped);
         }
     }

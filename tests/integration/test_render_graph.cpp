@@ -1,15 +1,16 @@
 // RenderGraph: wiring (explicit, by name, @prev), compile errors, culling, optional outputs, transient memory
 // and NaN poisoning, history across frames and recompiles, field observation, determinism, desc().
-#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <glm/glm.hpp>
 #include <map>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include <fmt/format.h>
+#include <glm/glm.hpp>
+#include <nlohmann/json.hpp>
 
 #include "loom/Error.h"
 #include "loom/Graph.h"
@@ -20,8 +21,9 @@
 
 using namespace loom;
 
-#define EXPECT_CONTAINS(text, part) \
-    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" << (text)
+#define EXPECT_CONTAINS(text, part)                                                             \
+    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" \
+                                                               << (text)
 
 namespace {
 
@@ -129,9 +131,7 @@ GraphDesc makeGraph(const std::string& passes, const std::string& edges, const s
                       R"(, "outputs": )" + outputs + "}");
 }
 
-GraphDesc testPatternGraph() {
-    return loadGraph(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json");
-}
+GraphDesc testPatternGraph() { return loadGraph(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json"); }
 
 CompileOptions sized(uint32_t w = 64, uint32_t h = 64) {
     CompileOptions o;
@@ -350,9 +350,9 @@ TEST(RenderGraphWiring, UnconnectedInputOfACulledPassIsOnlyAWarning) {
 
 TEST(RenderGraphErrors, UnknownPassTypeSuggestsTheClosest) {
     Error e = expectBadInput([] {
-        RenderGraph g(
-            makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blr"}])", "[]", R"(["B.dst"])"),
-            registry());
+        RenderGraph g(makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blr"}])", "[]",
+                                R"(["B.dst"])"),
+                      registry());
     });
     EXPECT_EQ(e.info().where, "/passes/1/type");
     EXPECT_CONTAINS(e.what(), "unknown pass type 'Blr'");
@@ -383,8 +383,8 @@ TEST(RenderGraphErrors, UnknownPassOnAnEdgeSuggestsTheClosest) {
 TEST(RenderGraphErrors, EdgeFromAnInputOrToAnOutput) {
     const std::string passes = R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blur"},
                                    {"name": "M", "type": "Add"}])";
-    Error from =
-        compileError(makeGraph(passes, R"([["C.dst", "B.src"], ["B.src", "M.a"], ["C.dst", "M.b"]])", R"(["M.dst"])"));
+    Error from = compileError(
+        makeGraph(passes, R"([["C.dst", "B.src"], ["B.src", "M.a"], ["C.dst", "M.b"]])", R"(["M.dst"])"));
     EXPECT_EQ(from.info().where, "/edges/1/0");
     EXPECT_CONTAINS(from.what(), "'src' is an input of Blur, not an output");
 
@@ -426,9 +426,9 @@ TEST(RenderGraphErrors, BadParameterValueNamesItsJsonPath) {
     EXPECT_CONTAINS(range.what(), "out of range");
 
     Error type = expectBadInput([] {
-        RenderGraph g(
-            makeGraph(R"([{"name": "C", "type": "Constant", "params": {"color": "red"}}])", "[]", R"(["C.dst"])"),
-            registry());
+        RenderGraph g(makeGraph(R"([{"name": "C", "type": "Constant", "params": {"color": "red"}}])", "[]",
+                                R"(["C.dst"])"),
+                      registry());
     });
     EXPECT_EQ(type.info().where, "/passes/0/params/color");
 
@@ -464,8 +464,8 @@ TEST(RenderGraphErrors, FailedSetDescDoesNotRunRemovedPasses) {
     g.compile(sized());
     g.execute(frameAt(0));
     expectBadInput([&] {
-        g.setDesc(
-            makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blur"}])", "[]", R"(["B.dst"])"));
+        g.setDesc(makeGraph(R"([{"name": "C", "type": "Constant"}, {"name": "B", "type": "Blur"}])", "[]",
+                            R"(["B.dst"])"));
     });
     EXPECT_FALSE(g.compiled());
     EXPECT_EQ(g.pass("P"), nullptr);
@@ -890,12 +890,12 @@ TEST(RenderGraphObserve, ObservingEverythingChangesNoOutput) {
     watched.compile(o);
     EXPECT_TRUE(watched.plan().warnings.empty());
     std::map<std::string, std::unique_ptr<Texture>> seen;  // "frame:Pass.field"
-    watched.setFieldObserver(
-        [&](const FrameInfo& frame, const std::string& pass, const std::string& field, const Texture& tex) {
-            const std::string key = std::to_string(frame.frameIndex) + ":" + pass + "." + field;
-            EXPECT_EQ(seen.count(key), 0u) << key << " observed twice";
-            seen[key] = copyOf(tex);
-        });
+    watched.setFieldObserver([&](const FrameInfo& frame, const std::string& pass, const std::string& field,
+                                 const Texture& tex) {
+        const std::string key = std::to_string(frame.frameIndex) + ":" + pass + "." + field;
+        EXPECT_EQ(seen.count(key), 0u) << key << " observed twice";
+        seen[key] = copyOf(tex);
+    });
     for (int f = 0; f < kFrames; ++f) {
         watched.execute(frameAt(uint64_t(f)));
         EXPECT_TRUE(watched.fieldTexture("Display.dst")->samePixels(*display[f])) << "frame " << f;

@@ -18,11 +18,10 @@ using namespace loom;
 
 namespace {
 
-std::string graphPath(const std::string& name) {
-    return std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/" + name;
-}
+std::string graphPath(const std::string& name) { return std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/" + name; }
 
-std::unique_ptr<RenderGraph> compiled(const std::string& file, std::shared_ptr<Scene> scene, uint32_t w, uint32_t h) {
+std::unique_ptr<RenderGraph> compiled(const std::string& file, std::shared_ptr<Scene> scene, uint32_t w,
+                                      uint32_t h) {
     auto g = std::make_unique<RenderGraph>(loadGraph(file), test::pluginRegistry());
     g->setScene(std::move(scene));
     CompileOptions o;

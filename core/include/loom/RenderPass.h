@@ -14,8 +14,8 @@
 
 namespace loom {
 
-class Scene;    // defined by the scene module
-struct Camera;  // defined by the scene module
+class Scene;   // defined by the scene module
+struct Camera; // defined by the scene module
 
 /// What the compiler tells a pass when it reflects and compiles.
 ///
@@ -56,8 +56,8 @@ private:
 struct BoundField {
     std::string name;
     FieldKind kind;
-    Texture* cur = nullptr;       ///< input, output, internal, or history "cur"
-    Texture* prev = nullptr;      ///< history "prev"; for inputs fed by an @prev edge, unused
+    Texture* cur = nullptr;   ///< input, output, internal, or history "cur"
+    Texture* prev = nullptr;  ///< history "prev"; for inputs fed by an @prev edge, unused
     const bool* valid = nullptr;  ///< history pairs and @prev inputs: does prev hold a real frame?
 };
 
