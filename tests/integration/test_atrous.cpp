@@ -2,6 +2,7 @@
 // on images with depth edges, normal creases, misses and borders; constant signals; the closed form of a flat
 // region; variance propagation; feedback tap semantics; thread-count independence; bad input.
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 
 #include <algorithm>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include <random>
 
 #include "../../passes/SVGF/Atrous.h"
+#include "../../passes/SVGF/AtrousSimd.h"
 #include "loom/Parallel.h"
 #include "loom/Texture.h"
 
@@ -236,6 +238,25 @@ TEST(Atrous, IdenticalForOneAndTwoThreads) {
         EXPECT_TRUE(one.dst.samePixels(two.dst));
         EXPECT_TRUE(one.feedback.samePixels(two.feedback));
     }
+}
+
+TEST(Atrous, AVX512AndAVX2GiveTheSameBits) {
+    // Both targets run the same arithmetic: AVX-512 forms the weight's power of two with vscalefps (and its mask)
+    // instead of exponent-bit arithmetic and a blend, which must not change one bit. Five levels reach every step
+    // form; a partial last vector (131 columns) and misses are covered.
+    if (!(hwy::SupportedTargets() & HWY_AVX3)) GTEST_SKIP() << "this CPU has no AVX-512";
+    const Frame f = makeEdgyFrame(131, 77, 21);
+    Result results[2];
+    const int64_t targets[2] = {HWY_AVX3, HWY_AVX2};
+    const char* names[2] = {"AVX3", "AVX2"};
+    for (int i = 0; i < 2; ++i) {
+        hwy::SetSupportedTargetsForTest(targets[i]);
+        EXPECT_EQ(names[i], simd::targetName());
+        results[i] = runFilter(f, 5, false, 2);
+    }
+    hwy::SetSupportedTargetsForTest(0);  // back to what the CPU has
+    EXPECT_TRUE(results[0].dst.samePixels(results[1].dst));
+    EXPECT_TRUE(results[0].feedback.samePixels(results[1].feedback));
 }
 
 TEST(Atrous, FeedbackTapSemantics) {
