@@ -2,6 +2,7 @@
 // pass (median-free mean over the timed frames, after warm-up), and the stage times SVGFPass reports in its
 // stats ("ms.*"). The graph files are the ones users run, so the figures are what `loom render` would show.
 #include <benchmark/benchmark.h>
+#include <hwy/targets.h>
 
 #include <functional>
 #include <map>
@@ -27,6 +28,7 @@ struct Pipeline {
     std::shared_ptr<Scene> scene;
     std::unique_ptr<RenderGraph> graph;
     uint64_t frame = 0;
+    std::function<void()> beforeStep;  ///< called before each frame (e.g. to choose the vector target)
 
     /// The shipped graph file graphName; `edit`, when given, changes its description first.
     Pipeline(const std::string& graphName, uint32_t width, uint32_t height,
@@ -44,6 +46,7 @@ struct Pipeline {
         scene->camera.aspect = float(width) / float(height);
     }
     void step() {
+        if (beforeStep) beforeStep();
         const double time = double(frame) / 30.0;
         scene->update(time);
         if (frame == 0) scene->cutMotion();
@@ -133,6 +136,22 @@ void BM_PathTracerSVGFSharedGuides(benchmark::State& state) {
     compareAlternating(state, copies, shared);
 }
 
+/// The default graph twice in one process, frames alternating: a restricted to Highway's AVX2 target, b on the
+/// best target the CPU has (AVX-512): what the wider vectors give each pass that dispatches at run time.
+void BM_PathTracerSVGFVectorWidth(benchmark::State& state) {
+    if (!(hwy::SupportedTargets() & HWY_AVX3)) {
+        state.SkipWithError("this CPU has no AVX-512");
+        return;
+    }
+    Pipeline avx2("PathTracerSVGF", 1280, 720), best("PathTracerSVGF", 1280, 720);
+    avx2.beforeStep = [] { hwy::SetSupportedTargetsForTest(HWY_AVX2); };
+    best.beforeStep = [] { hwy::SetSupportedTargetsForTest(0); };
+    avx2.warmUp();
+    best.warmUp();
+    compareAlternating(state, avx2, best);
+    hwy::SetSupportedTargetsForTest(0);
+}
+
 void BM_PathTracerSVGF(benchmark::State& s) {
     runGraph(s, "PathTracerSVGF", 1280, 720);
 }
@@ -147,6 +166,7 @@ BENCHMARK(BM_PathTracerSVGFDirectIndirect)->Unit(benchmark::kMillisecond)->UseRe
 BENCHMARK(BM_PathTracerATrous)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerSVGFHugePages)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerSVGFSharedGuides)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PathTracerSVGFVectorWidth)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 
