@@ -44,6 +44,37 @@ HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
                    hn::Mul(hn::Set(d, 0.0722f), b));
 }
 
+/// Where the N lanes read tap k (0..3) of their 2x2 reprojection footprint in last frame's fields: side by side from
+/// texel (c0 + (k & 1), r0 + (k >> 1)) when every lane has the same integer offset and the footprint lies inside the
+/// frame (a static camera, a pan), else each lane at its own texel (qx, qy), clamped into the frame (motion that
+/// varies across the vector, a footprint at the frame's edge: the taps outside are invalid anyway).
+struct Footprint {
+    bool contiguous = true;
+    uint32_t c0 = 0, r0 = 0;
+    hn::Vec<DI> qx[4], qy[4];
+};
+
+/// Channels 0 .. C - 1 of tap k of every lane from an image of C floats per texel.
+template <int C, class T>
+HWY_INLINE void loadTap(D d, const Footprint& f, int k, ImageView<T> image, V (&out)[C]) {
+    if (f.contiguous) {
+        const float* p = reinterpret_cast<const float*>(&image.at(f.c0 + uint32_t(k & 1), f.r0 + uint32_t(k >> 1)));
+        if constexpr (C == 1) {
+            out[0] = hn::LoadU(d, p);
+        } else if constexpr (C == 2) {
+            hn::LoadInterleaved2(d, p, out[0], out[1]);
+        } else {
+            hn::LoadInterleaved4(d, p, out[0], out[1], out[2], out[3]);
+        }
+        return;
+    }
+    const DI di;
+    const auto index = hn::Add(hn::Mul(f.qy[k], hn::Set(di, int32_t(image.rowPitch / sizeof(float)))),
+                               hn::Mul(f.qx[k], hn::Set(di, C)));
+    const float* base = reinterpret_cast<const float*>(image.data);
+    for (int c = 0; c < C; ++c) out[c] = hn::GatherIndex(d, base + c, index);
+}
+
 /// Non-temporal stores of n floats (a multiple of N) from src to dst, whole cache lines that this frame does not read
 /// again soon (history for the next frame, the integrated and estimate images): no read-for-ownership of the
 /// destination, which halves their memory traffic. dst is 32-byte aligned (the x of a vector group is a multiple of
@@ -176,11 +207,32 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         const V fx0 = hn::Floor(px), fy0 = hn::Floor(py);
         const V ox = hn::Sub(fx0, xf), oy = hn::Sub(fy0, yf);
         const float ox0 = hn::GetLane(ox), oy0 = hn::GetLane(oy);
-        if (!hn::AllTrue(d, hn::And(hn::Eq(ox, hn::Set(d, ox0)), hn::Eq(oy, hn::Set(d, oy0))))) return false;
         // Columns x + ox0 .. x + ox0 + N (both taps of every lane) and rows y + oy0, y + oy0 + 1 inside the frame.
         const float col = float(x) + ox0, row = float(y) + oy0;
-        if (!(col >= 0.f && col + float(N) < W && row >= 0.f && row + 1.f < H)) return false;
-        const uint32_t c0 = uint32_t(col), r0 = uint32_t(row);
+        Footprint f;
+        f.contiguous = hn::AllTrue(d, hn::And(hn::Eq(ox, hn::Set(d, ox0)), hn::Eq(oy, hn::Set(d, oy0)))) &&
+                       col >= 0.f && col + float(N) < W && row >= 0.f && row + 1.f < H;
+        M inFrame[4];
+        if (f.contiguous) {
+            f.c0 = uint32_t(col);
+            f.r0 = uint32_t(row);
+            for (M& m : inFrame) m = hn::FirstN(d, N);
+        } else {
+            // reprojectionTapValid's frame test per lane. Positions far off the frame are clamped first (still off
+            // it) so the conversion to integers cannot overflow.
+            const auto ix = hn::ConvertTo(di, hn::Min(hn::Max(fx0, hn::Set(d, -2.f)), hn::Set(d, W + 1.f)));
+            const auto iy = hn::ConvertTo(di, hn::Min(hn::Max(fy0, hn::Set(d, -2.f)), hn::Set(d, H + 1.f)));
+            const auto w = hn::Set(di, int32_t(W)), h = hn::Set(di, int32_t(H)), zeroI = hn::Zero(di),
+                       minusOne = hn::Set(di, -1);
+            const auto maxX = hn::Sub(w, hn::Set(di, 1)), maxY = hn::Sub(h, hn::Set(di, 1));
+            for (int k = 0; k < 4; ++k) {
+                const auto qx = hn::Add(ix, hn::Set(di, k & 1)), qy = hn::Add(iy, hn::Set(di, k >> 1));
+                inFrame[k] = hn::RebindMask(d, hn::And(hn::And(hn::Gt(qx, minusOne), hn::Lt(qx, w)),
+                                                       hn::And(hn::Gt(qy, minusOne), hn::Lt(qy, h))));
+                f.qx[k] = hn::Min(hn::Max(qx, zeroI), maxX);
+                f.qy[k] = hn::Min(hn::Max(qy, zeroI), maxY);
+            }
+        }
         const V fx = hn::Sub(px, fx0), fy = hn::Sub(py, fy0);
         const V bw[4] = {hn::Mul(hn::Sub(one, fx), hn::Sub(one, fy)), hn::Mul(fx, hn::Sub(one, fy)),
                          hn::Mul(hn::Sub(one, fx), fy), hn::Mul(fx, fy)};
@@ -189,17 +241,23 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             hn::Mul(hn::Set(d, kDepthThreshold), hn::Add(dz, hn::Mul(hn::Set(d, kDepthEpsilon), z)));
         M tapValid[4];
         V sumW = zero;
+        V prevLength[4];
         for (int k = 0; k < 4; ++k) {
-            const uint32_t qx = c0 + uint32_t(k & 1), qy = r0 + uint32_t(k >> 1);
-            V zp, dzp, pnx, pny, pnz, pnw;
-            hn::LoadInterleaved2(d, &v.prevLinearZ.at(qx, qy).x, zp, dzp);
-            hn::LoadInterleaved4(d, &v.prevNormW.at(qx, qy).x, pnx, pny, pnz, pnw);
-            const V dot = hn::Add(hn::Add(hn::Mul(nx, pnx), hn::Mul(ny, pny)), hn::Mul(nz, pnz));
-            M m = hn::And(hit, hn::Gt(bw[k], zero));
-            m = hn::And(m, hn::Gt(hn::LoadU(d, &v.prevLength.at(qx, qy)), zero));
-            m = hn::AndNot(hn::Lt(zp, zero), m);
-            if (v.meshId.data) m = hn::And(m, hn::RebindMask(d, hn::Eq(hn::LoadU(du, &v.prevMeshId.at(qx, qy)), mesh)));
-            m = hn::AndNot(hn::Gt(hn::Abs(hn::Sub(z, zp)), depthTolerance), m);
+            V zp[2], pn[4], length[1];
+            loadTap(d, f, k, v.prevLinearZ, zp);
+            loadTap(d, f, k, v.prevNormW, pn);
+            loadTap(d, f, k, v.prevLength, length);
+            prevLength[k] = length[0];
+            const V dot = hn::Add(hn::Add(hn::Mul(nx, pn[0]), hn::Mul(ny, pn[1])), hn::Mul(nz, pn[2]));
+            M m = hn::And(hn::And(hit, inFrame[k]), hn::Gt(bw[k], zero));
+            m = hn::And(m, hn::Gt(prevLength[k], zero));
+            m = hn::AndNot(hn::Lt(zp[0], zero), m);
+            if (v.meshId.data) {
+                V prevMesh[1];
+                loadTap(d, f, k, v.prevMeshId, prevMesh);  // the ids' bits
+                m = hn::And(m, hn::RebindMask(d, hn::Eq(hn::BitCast(du, prevMesh[0]), mesh)));
+            }
+            m = hn::AndNot(hn::Gt(hn::Abs(hn::Sub(z, zp[0])), depthTolerance), m);
             m = hn::AndNot(hn::Lt(dot, hn::Set(d, kNormalThreshold)), m);
             tapValid[k] = m;
             sumW = hn::Add(sumW, hn::IfThenElseZero(m, bw[k]));
@@ -210,29 +268,27 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         V ra = zero, sa = zero;
         for (int k = 0; k < 4; ++k) {
             if (hn::AllFalse(d, tapValid[k])) continue;
-            const uint32_t qx = c0 + uint32_t(k & 1), qy = r0 + uint32_t(k >> 1);
             const M m = tapValid[k];
-            V ir, ig, ib, ia, m0, m1;
-            hn::LoadInterleaved4(d, &v.prevIllum0.at(qx, qy).x, ir, ig, ib, ia);
-            hn::LoadInterleaved2(d, &v.prevMoments0.at(qx, qy).x, m0, m1);
+            V illum[4], moments[2];
+            loadTap(d, f, k, v.prevIllum0, illum);
+            loadTap(d, f, k, v.prevMoments0, moments);
             const V w = bw[k];
-            rr = hn::Add(rr, hn::IfThenElseZero(m, hn::Mul(w, ir)));
-            rg = hn::Add(rg, hn::IfThenElseZero(m, hn::Mul(w, ig)));
-            rb = hn::Add(rb, hn::IfThenElseZero(m, hn::Mul(w, ib)));
-            ra = hn::Add(ra, hn::IfThenElseZero(m, hn::Mul(w, ia)));
-            rm[0] = hn::Add(rm[0], hn::IfThenElseZero(m, hn::Mul(w, m0)));
-            rm[1] = hn::Add(rm[1], hn::IfThenElseZero(m, hn::Mul(w, m1)));
-            rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, hn::LoadU(d, &v.prevLength.at(qx, qy)))));
+            rr = hn::Add(rr, hn::IfThenElseZero(m, hn::Mul(w, illum[0])));
+            rg = hn::Add(rg, hn::IfThenElseZero(m, hn::Mul(w, illum[1])));
+            rb = hn::Add(rb, hn::IfThenElseZero(m, hn::Mul(w, illum[2])));
+            ra = hn::Add(ra, hn::IfThenElseZero(m, hn::Mul(w, illum[3])));
+            rm[0] = hn::Add(rm[0], hn::IfThenElseZero(m, hn::Mul(w, moments[0])));
+            rm[1] = hn::Add(rm[1], hn::IfThenElseZero(m, hn::Mul(w, moments[1])));
+            rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, prevLength[k])));
             if (split) {  // unsplit, signal 1's sums stay zero, as the reference's sums of zero fields do
-                V jr, jg, jb, ja, m2, m3;
-                hn::LoadInterleaved2(d, &v.prevMoments1.at(qx, qy).x, m2, m3);
-                rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, m2)));
-                rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, m3)));
-                hn::LoadInterleaved4(d, &v.prevIllum1.at(qx, qy).x, jr, jg, jb, ja);
-                sr = hn::Add(sr, hn::IfThenElseZero(m, hn::Mul(w, jr)));
-                sg = hn::Add(sg, hn::IfThenElseZero(m, hn::Mul(w, jg)));
-                sb = hn::Add(sb, hn::IfThenElseZero(m, hn::Mul(w, jb)));
-                sa = hn::Add(sa, hn::IfThenElseZero(m, hn::Mul(w, ja)));
+                loadTap(d, f, k, v.prevMoments1, moments);
+                rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, moments[0])));
+                rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, moments[1])));
+                loadTap(d, f, k, v.prevIllum1, illum);
+                sr = hn::Add(sr, hn::IfThenElseZero(m, hn::Mul(w, illum[0])));
+                sg = hn::Add(sg, hn::IfThenElseZero(m, hn::Mul(w, illum[1])));
+                sb = hn::Add(sb, hn::IfThenElseZero(m, hn::Mul(w, illum[2])));
+                sa = hn::Add(sa, hn::IfThenElseZero(m, hn::Mul(w, illum[3])));
             }
         }
         const V inv = hn::Div(one, sumW);
