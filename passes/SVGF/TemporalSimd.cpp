@@ -160,8 +160,14 @@ HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Resul
     if (j.out.variance.data) hn::StoreU(hn::Add(r.i[3], split ? r.j[3] : hn::Zero(d)), d, &j.out.variance.at(x, y));
 }
 
-/// N pixels from x on row y in the vector path; false (nothing written) when they need the reference.
-bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
+/// Lanes of a vector group, one bit each (lane i: bit i).
+using LaneBits = uint64_t;
+constexpr LaneBits kEveryLane = ~LaneBits(0);
+
+/// N pixels from x on row y in the vector path. Returns the lanes the reference must (re)do: kEveryLane when nothing
+/// was written (a non-finite colour or motion vector), else the hits whose footprint needs the 3x3 fallback, which
+/// the vector path writes with the others and the reference then overwrites.
+LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     const TemporalViews& v = j.v;
     const TemporalParams& p = j.p;
     const D d;
@@ -174,10 +180,10 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     const bool split = p.split;
     V cr, cg, cb, ca, dr = zero, dg = zero, db = zero, da;
     hn::LoadInterleaved4(d, &(split ? v.direct : v.color).at(x, y).x, cr, cg, cb, ca);
-    if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(cr), hn::IsFinite(cg)), hn::IsFinite(cb)))) return false;
+    if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(cr), hn::IsFinite(cg)), hn::IsFinite(cb)))) return kEveryLane;
     if (split) {
         hn::LoadInterleaved4(d, &v.indirect.at(x, y).x, dr, dg, db, da);
-        if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(dr), hn::IsFinite(dg)), hn::IsFinite(db)))) return false;
+        if (!hn::AllTrue(d, hn::And(hn::And(hn::IsFinite(dr), hn::IsFinite(dg)), hn::IsFinite(db)))) return kEveryLane;
     }
     V z, dz;
     hn::LoadInterleaved2(d, &v.linearZ.at(x, y).x, z, dz);
@@ -190,17 +196,17 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         writePixels(j, x, y,
                     Results{{zero, zero, zero, zero}, {zero, zero, zero, zero}, {zero, zero, zero, zero}, zero},
                     Guides{z, dz, nx, ny, nz, mesh});
-        return true;
+        return 0;
     }
 
     // Reprojection (reproject() of SVGFKernels.h) for footprints with one integer offset, all inside the frame.
-    M valid = hn::FirstN(d, 0);
+    M valid = hn::FirstN(d, 0), fallback = valid;
     V rr = zero, rg = zero, rb = zero, rm[4] = {zero, zero, zero, zero}, rl = zero;
     V sr = zero, sg = zero, sb = zero;  // signal 1's reprojected rgb
     if (p.temporal && !hn::AllFalse(d, hit)) {
         V mx, my;
         hn::LoadInterleaved2(d, &v.mvec.at(x, y).x, mx, my);
-        if (!hn::AllTrue(d, hn::And(hn::IsFinite(mx), hn::IsFinite(my)))) return false;
+        if (!hn::AllTrue(d, hn::And(hn::IsFinite(mx), hn::IsFinite(my)))) return kEveryLane;
         const float W = float(v.color.width), H = float(v.color.height);
         const V xf = hn::ConvertTo(d, hn::Iota(di, int32_t(x))), yf = hn::Set(d, float(y));
         const V px = hn::Add(xf, hn::Mul(mx, hn::Set(d, W))), py = hn::Add(yf, hn::Mul(my, hn::Set(d, H)));
@@ -263,8 +269,9 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             sumW = hn::Add(sumW, hn::IfThenElseZero(m, bw[k]));
         }
         const M bilinear = hn::Ge(sumW, hn::Set(d, kMinBilinearWeight));
-        // A hit whose footprint carries too little weight needs the 3x3 fallback: the reference does it.
-        if (!hn::AllTrue(d, hn::Or(hn::Not(hit), bilinear))) return false;
+        // A hit whose footprint carries too little weight needs the 3x3 fallback: the reference redoes it. Its lane
+        // runs on here with no valid history (whatever it computes is overwritten).
+        fallback = hn::AndNot(bilinear, hit);
         V ra = zero, sa = zero;
         for (int k = 0; k < 4; ++k) {
             if (hn::AllFalse(d, tapValid[k])) continue;
@@ -365,7 +372,11 @@ bool vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     writePixels(j, x, y,
                 Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
                 Guides{z, dz, nx, ny, nz, mesh});
-    return true;
+    uint8_t bits[8] = {};
+    hn::StoreMaskBits(d, fallback, bits);
+    LaneBits lanes = 0;
+    for (int i = 0; i < 8; ++i) lanes |= LaneBits(bits[i]) << (8 * i);
+    return lanes;
 }
 
 TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
@@ -374,9 +385,15 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
     for (uint32_t y = t.y0; y < t.y1; ++y) {
         uint32_t x = t.x0;
         for (; x + N <= t.x1; x += N) {
-            if (vectorPixels(j, x, y)) continue;
-            for (uint32_t k = 0; k < N; ++k) counts.rejected += scalarPixel(j, x + k, y) ? 1 : 0;
-            counts.reference += N;
+            const LaneBits redo = vectorPixels(j, x, y);
+            if (redo == 0) continue;
+            // Lanes the vector path wrote are overwritten below: its streamed stores go first.
+            if (redo != kEveryLane) hwy::FlushStream();
+            for (uint32_t k = 0; k < N; ++k) {
+                if (!((redo >> k) & 1)) continue;
+                counts.rejected += scalarPixel(j, x + k, y) ? 1 : 0;
+                ++counts.reference;
+            }
         }
         for (; x < t.x1; ++x, ++counts.reference) counts.rejected += scalarPixel(j, x, y) ? 1 : 0;
     }
