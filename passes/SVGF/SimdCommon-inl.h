@@ -62,6 +62,31 @@ HWY_INLINE void storeSignal(D d, const SignalPlanes& S, size_t o, V r, V g, V b,
     storePlane<kStream>(d, luminanceOf(d, r, g, b), S.l + o);
 }
 
+/// Non-temporal stores of n floats (a multiple of N) from src to dst, whole cache lines that this frame does not read
+/// again soon (history for the next frame, the integrated and estimate images): no read-for-ownership of the
+/// destination, which halves their memory traffic. dst is aligned to the vector (the x of a vector group is a
+/// multiple of N, rows are 64-byte aligned).
+template <class D>
+HWY_INLINE void streamCopy(D d, const float* src, float* dst, size_t n) {
+    for (size_t i = 0; i < n; i += hn::Lanes(d)) hn::Stream(hn::LoadU(d, src + i), d, dst + i);
+}
+
+/// Four channels of N pixels streamed to dst as interleaved RGBA.
+template <class D, class V>
+HWY_INLINE void streamInterleaved4(D d, V a, V b, V c, V e, float* dst) {
+    HWY_ALIGN float lanes[4 * kMaxLanes];
+    hn::StoreInterleaved4(a, b, c, e, d, lanes);
+    streamCopy(d, lanes, dst, 4 * hn::Lanes(d));
+}
+
+/// Two channels of N pixels streamed to dst as interleaved pairs.
+template <class D, class V>
+HWY_INLINE void streamInterleaved2(D d, V a, V b, float* dst) {
+    HWY_ALIGN float lanes[2 * kMaxLanes];
+    hn::StoreInterleaved2(a, b, d, lanes);
+    streamCopy(d, lanes, dst, 2 * hn::Lanes(d));
+}
+
 }  // namespace loom::svgf::simd::HWY_NAMESPACE
 HWY_AFTER_NAMESPACE();
 

@@ -75,28 +75,6 @@ HWY_INLINE void loadTap(D d, const Footprint& f, int k, ImageView<T> image, V (&
     for (int c = 0; c < C; ++c) out[c] = hn::GatherIndex(d, base + c, index);
 }
 
-/// Non-temporal stores of n floats (a multiple of N) from src to dst, whole cache lines that this frame does not read
-/// again soon (history for the next frame, the integrated and estimate images): no read-for-ownership of the
-/// destination, which halves their memory traffic. dst is 32-byte aligned (the x of a vector group is a multiple of
-/// N, rows are 64-byte aligned).
-HWY_INLINE void streamCopy(D d, const float* src, float* dst, size_t n) {
-    for (size_t i = 0; i < n; i += hn::Lanes(d)) hn::Stream(hn::LoadU(d, src + i), d, dst + i);
-}
-
-/// Four channels of N pixels streamed to dst as interleaved RGBA.
-HWY_INLINE void streamInterleaved4(D d, V a, V b, V c, V e, float* dst) {
-    HWY_ALIGN float lanes[4 * kMaxLanes];
-    hn::StoreInterleaved4(a, b, c, e, d, lanes);
-    streamCopy(d, lanes, dst, 4 * hn::Lanes(d));
-}
-
-/// Two channels of N pixels streamed to dst as interleaved pairs.
-HWY_INLINE void streamInterleaved2(D d, V a, V b, float* dst) {
-    HWY_ALIGN float lanes[2 * kMaxLanes];
-    hn::StoreInterleaved2(a, b, d, lanes);
-    streamCopy(d, lanes, dst, 2 * hn::Lanes(d));
-}
-
 struct RowJob {
     const TemporalViews& v;
     const TemporalParams& p;
