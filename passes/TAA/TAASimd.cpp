@@ -66,6 +66,19 @@ constexpr uint32_t kLanes = uint32_t(hn::MaxLanes(FloatTag()));
 constexpr uint32_t kBlocks = kLanes / 4, kChunks = 4 / kBlocks;
 static_assert(kLanes <= kMaxLanes && kTileW % kLanes == 0, "scratch and tiles are sized for at most kMaxLanes");
 
+/// first, first + 1, ... in the lanes: Highway's Iota writes its lanes to memory one by one here, which stalls the
+/// vector load that follows; this adds `first` to a constant.
+template <class D, typename T>
+HWY_INLINE hn::Vec<D> firstPlusLane(D d, T first) {
+    alignas(64) static constexpr int32_t kLane[kMaxLanes] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+    const hn::RebindToSigned<D> di;
+    const auto lane = hn::Load(di, kLane);
+    if constexpr (hwy::IsFloat<T>())
+        return hn::Add(hn::ConvertTo(d, lane), hn::Set(d, first));
+    else
+        return hn::Add(lane, hn::Set(d, first));
+}
+
 /// YCoCg + alpha of structure-of-arrays RGBA (toYCoCg, lane-wise).
 HWY_INLINE void toYCoCgVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, FloatVec& y, FloatVec& co, FloatVec& cg) {
     const FloatVec rb = hn::Add(r, b);
@@ -267,7 +280,7 @@ HWY_INLINE void sampleHistoryVec(const ClampedImage<glm::vec4>& history, FloatVe
     const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(py, fy0));
     const int32_t ix0 = hn::GetLane(ixv), iy0 = hn::GetLane(iyv);
     if (hn::AllTrue(d, integer) && ix0 >= 0 && ix0 + N <= W && iy0 >= 0 && iy0 < H &&
-        hn::AllTrue(di, hn::And(hn::Eq(ixv, hn::Iota(di, ix0)), hn::Eq(iyv, hn::Set(di, iy0))))) {
+        hn::AllTrue(di, hn::And(hn::Eq(ixv, firstPlusLane(di, ix0)), hn::Eq(iyv, hn::Set(di, iy0))))) {
         hn::LoadInterleaved4(d, reinterpret_cast<const float*>(&history.at(ix0, iy0)), hr, hg, hb, ha);
         if (prefetchNext && iy0 + 1 < H) prefetchRange(&history.at(ix0, iy0 + 1), sizeof(glm::vec4) * kLanes);
         return;
@@ -301,42 +314,40 @@ HWY_INLINE void sampleHistoryVec(const ClampedImage<glm::vec4>& history, FloatVe
         const auto* last = block(N - 1) + 4 * pitch + 4 * sizeof(glm::vec4);
         if (last > first && last - first < 64 * N) prefetchRange(first, size_t(last - first));
     }
-    // The texel (ix, iy) a lane adds last (a texel of its block, clamped to the frame near the edges; a copy of it at
-    // an integer position; 0 where unused), and the bicubic differences from it: lane i's block as `partial(i, ref)`
-    // gives them.
-    alignas(16) static constexpr float kNothing[4] = {};
-    const auto texel = [&](uint32_t i) {
-        return kinds[i] == kUnused ? kNothing : reinterpret_cast<const float*>(&history.at(ixs[i], iys[i]));
-    };
-    // Lanes k, k + 4, k + 8, ... as the 128-bit blocks of q[k], then to structure of arrays.
+    // Lanes k, k + 4, k + 8, ... as the 128-bit blocks of q[k], then to structure of arrays. `partial(i, texel)`
+    // points `texel` at what lane i adds last, texel (ix, iy) (in its block, clamped to the frame near the edges; 0
+    // where unused), and returns the lane's bicubic differences from it.
     const auto sample = [&](auto partial) {
         FloatVec q[4];
         for (uint32_t k = 0; k < 4; ++k) {
             const float* texels[kBlocks];
             FloatVec parts[kBlocks];
-            for (uint32_t m = 0; m < kBlocks; ++m) {
-                const uint32_t i = k + 4 * m;
-                texels[m] = texel(i);
-                parts[m] = partial(i, hn::LoadDup128(d, texels[m]));
-            }
+            for (uint32_t m = 0; m < kBlocks; ++m) parts[m] = partial(k + 4 * m, texels[m]);
             q[k] = hn::Add(blocksOf(texels), sumBlocks(parts));
         }
         transposeBlocks(q, hr, hg, hb, ha);
     };
+    const auto inPlace = [&](uint32_t i, const float*& texel) {
+        const unsigned char* b = block(i);
+        texel = reinterpret_cast<const float*>(b + pitch + sizeof(glm::vec4));
+        return bicubicBlock(b, pitch, hn::LoadDup128(d, texel), wx + 4 * i, wy, i);
+    };
     if (hn::AllTrue(di, hn::Eq(kind, hn::Set(di, kInterior)))) {
         // Every lane reads its block in place (the common case under motion): no per-lane branches.
-        sample([&](uint32_t i, FloatVec ref) { return bicubicBlock(block(i), pitch, ref, wx + 4 * i, wy, i); });
+        sample(inPlace);
         return;
     }
-    sample([&](uint32_t i, FloatVec ref) {
-        if (kinds[i] == kInterior) return bicubicBlock(block(i), pitch, ref, wx + 4 * i, wy, i);
+    sample([&](uint32_t i, const float*& texel) {
+        if (kinds[i] == kInterior) return inPlace(i, texel);
+        alignas(16) static constexpr float kNothing[4] = {};
+        texel = kinds[i] == kUnused ? kNothing : reinterpret_cast<const float*>(&history.at(ixs[i], iys[i]));
         if (kinds[i] != kEdge) return hn::Zero(d);  // an integer position or an unused lane: the texel alone
         // Near the frame's edge: the clamped taps, then the same arithmetic.
         alignas(64) glm::vec4 clampedBlock[4][4];
         for (int j = 0; j < 4; ++j)
             for (int k = 0; k < 4; ++k) clampedBlock[j][k] = history.at(ixs[i] - 1 + k, iys[i] - 1 + j);
-        return bicubicBlock(reinterpret_cast<const unsigned char*>(clampedBlock), sizeof(clampedBlock[0]), ref,
-                            wx + 4 * i, wy, i);
+        return bicubicBlock(reinterpret_cast<const unsigned char*>(clampedBlock), sizeof(clampedBlock[0]),
+                            hn::LoadDup128(d, texel), wx + 4 * i, wy, i);
     });
 }
 
@@ -505,7 +516,7 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 mvy = hn::IfThenElse(longer, hn::LoadU(d, &s.rowMvy[r][x]), mvy);
             }
             // previousPosition (the same operations as the reference: the off-frame decision is exact).
-            const FloatVec px = hn::Add(hn::Iota(d, float(t.x0 + x)), hn::Mul(mvx, hn::Set(d, float(W))));
+            const FloatVec px = hn::Add(firstPlusLane(d, float(t.x0 + x)), hn::Mul(mvx, hn::Set(d, float(W))));
             const FloatVec pyv = hn::Add(hn::Set(d, float(py)), hn::Mul(mvy, hn::Set(d, float(H))));
             FloatMask useHistory =
                 hn::And(hn::And(hn::Ge(px, hn::Set(d, -0.5f)), hn::Le(px, hn::Set(d, float(W) - 0.5f))),

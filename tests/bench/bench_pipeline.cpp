@@ -2,6 +2,7 @@
 // pass (median-free mean over the timed frames, after warm-up), and the stage times SVGFPass reports in its
 // stats ("ms.*"). The graph files are the ones users run, so the figures are what `loom render` would show.
 #include <benchmark/benchmark.h>
+#include <hwy/targets.h>
 
 #include <functional>
 #include <map>
@@ -86,13 +87,17 @@ void runGraph(benchmark::State& state, const std::string& graphName, uint32_t wi
 }
 
 /// Per-pass times of two pipelines stepped alternately frame by frame (so both see the same minutes of the machine),
-/// as "<pass> a", "<pass> b" and "<pass> b/a", and the SVGF stages' ratios.
-void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b) {
+/// as "<pass> a", "<pass> b" and "<pass> b/a", and the SVGF stages' ratios. `before(isB)`, when given, runs before
+/// each step.
+void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b,
+                        const std::function<void(bool isB)>& before = {}) {
     std::map<std::string, double> aMs, bMs, aStages, bStages;
     uint64_t timed = 0;
     for (auto _ : state) {
+        if (before) before(false);
         a.step();
         addTimes(a, aMs, aStages);
+        if (before) before(true);
         b.step();
         addTimes(b, bMs, bStages);
         ++timed;
@@ -133,6 +138,18 @@ void BM_PathTracerSVGFSharedGuides(benchmark::State& state) {
     compareAlternating(state, copies, shared);
 }
 
+/// The default graph twice in one process, frames alternating: a with Highway's run-time dispatch restricted to AVX2
+/// (TAA's tiled path, SVGF's fused stages), b on the best target the CPU has (AVX-512 here). libhwy is shared, so
+/// the plugins follow the switch.
+void BM_PathTracerSVGFTargets(benchmark::State& state) {
+    Pipeline avx2("PathTracerSVGF", 1280, 720);
+    avx2.warmUp();
+    Pipeline best("PathTracerSVGF", 1280, 720);
+    best.warmUp();
+    compareAlternating(state, avx2, best, [](bool isB) { hwy::SetSupportedTargetsForTest(isB ? 0 : HWY_AVX2); });
+    hwy::SetSupportedTargetsForTest(0);
+}
+
 void BM_PathTracerSVGF(benchmark::State& s) {
     runGraph(s, "PathTracerSVGF", 1280, 720);
 }
@@ -147,6 +164,7 @@ BENCHMARK(BM_PathTracerSVGFDirectIndirect)->Unit(benchmark::kMillisecond)->UseRe
 BENCHMARK(BM_PathTracerATrous)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerSVGFHugePages)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PathTracerSVGFSharedGuides)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PathTracerSVGFTargets)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 
