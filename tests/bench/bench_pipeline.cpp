@@ -89,15 +89,21 @@ void runGraph(benchmark::State& state, const std::string& graphName, uint32_t wi
 }
 
 /// Per-pass times of two pipelines stepped alternately frame by frame (so both see the same minutes of the machine),
-/// as "<pass> a", "<pass> b" and "<pass> b/a", and the SVGF stages' ratios.
+/// as "<pass> a", "<pass> b" and "<pass> b/a", and the SVGF stages' ratios. Which of the two goes first alternates
+/// too: the second of a pair otherwise finds caches and clocks in a different state (a measured bias of up to 5 %).
 void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b) {
     std::map<std::string, double> aMs, bMs, aStages, bStages;
     uint64_t timed = 0;
     for (auto _ : state) {
-        a.step();
-        addTimes(a, aMs, aStages);
-        b.step();
-        addTimes(b, bMs, bStages);
+        for (int i = 0; i < 2; ++i) {
+            if ((timed + uint64_t(i)) % 2 == 0) {
+                a.step();
+                addTimes(a, aMs, aStages);
+            } else {
+                b.step();
+                addTimes(b, bMs, bStages);
+            }
+        }
         ++timed;
     }
     for (const auto& [name, ms] : aMs) {

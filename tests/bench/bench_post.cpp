@@ -1,6 +1,7 @@
 // TAAPass and ToneMap at 1280x720: the time of the pass itself (the graph's per-pass timing, reported as manual
 // time), with a copy of one RGBA32F frame and the TAA reference kernel as baselines measured in the same run.
 #include <benchmark/benchmark.h>
+#include <hwy/targets.h>
 
 #include <chrono>
 #include <cmath>
@@ -86,21 +87,22 @@ double passMs(const RenderGraph& graph) {
     return 0.0;
 }
 
+/// Runs the graph's next frame; returns the pass's time.
+double runFrame(RenderGraph& graph, uint64_t& frame) {
+    FrameInfo f;
+    f.frameIndex = frame++;
+    f.time = double(f.frameIndex) / 60.0;
+    graph.execute(f);
+    return passMs(graph);
+}
+
 /// Runs frames and reports the pass's own time per frame.
 void runFrames(benchmark::State& state, RenderGraph& graph) {
     uint64_t frame = 0;
-    FrameInfo f;
-    for (int i = 0; i < 3; ++i) {  // warm up: the source writes, history becomes valid
-        f.frameIndex = frame++;
-        f.time = double(f.frameIndex) / 60.0;
-        graph.execute(f);
-    }
+    for (int i = 0; i < 3; ++i) runFrame(graph, frame);  // warm up: the source writes, history becomes valid
     double totalMs = 0.0;
     for (auto _ : state) {
-        f.frameIndex = frame++;
-        f.time = double(f.frameIndex) / 60.0;
-        graph.execute(f);
-        const double ms = passMs(graph);
+        const double ms = runFrame(graph, frame);
         totalMs += ms;
         state.SetIterationTime(ms / 1000.0);
     }
@@ -142,6 +144,47 @@ BENCHMARK(BM_TAA)
     ->Args({1, 1, 0})
     ->Args({1, 0, 1})
     ->Args({0, 0, 1})
+    ->UseManualTime()
+    ->Unit(benchmark::kMillisecond);
+
+/// TAA's tiled path restricted to AVX2 against the best target the CPU has (AVX-512 here), frames alternating in one
+/// graph (the order swapping every iteration): the same-process comparison of the two. The dispatch is switched
+/// through libhwy, which the plugin shares; the pass's vectorLanes stat shows what ran (label: AVX2 lanes vs best).
+void BM_TAATargets(benchmark::State& state) {
+    const bool moving = state.range(0) != 0;
+    ThreadLimit limit(unsigned(state.range(1)));
+    auto graph = makeGraph(moving ? "BenchSourceMoving" : "BenchSourceStatic", "TAAPass", nlohmann::json::object(),
+                           "colorIn", {"Pass.colorOut"});
+    uint64_t frame = 0;
+    for (int i = 0; i < 3; ++i) runFrame(*graph, frame);
+    double totalMs[2] = {0.0, 0.0}, lanes[2] = {0.0, 0.0};
+    bool avx2First = true;
+    for (auto _ : state) {
+        double ms = 0.0;
+        for (int k = 0; k < 2; ++k) {
+            const int side = avx2First ? k : 1 - k;  // 0: AVX2, 1: the best target
+            hwy::SetSupportedTargetsForTest(side == 0 ? HWY_AVX2 : 0);
+            const double t = runFrame(*graph, frame);
+            totalMs[side] += t;
+            ms += t;
+            lanes[side] = graph->lastStats().at("Pass").at("vectorLanes");
+        }
+        avx2First = !avx2First;
+        state.SetIterationTime(ms / 1000.0);
+    }
+    hwy::SetSupportedTargetsForTest(0);
+    const double n = double(state.iterations());
+    state.counters["avx2_ms"] = totalMs[0] / n;
+    state.counters["best_ms"] = totalMs[1] / n;
+    state.counters["best_over_avx2"] = totalMs[1] / totalMs[0];
+    state.SetLabel(std::to_string(int(lanes[0])) + " vs " + std::to_string(int(lanes[1])) + " lanes");
+}
+// Args: moving (0/1), threads (0 = all). One iteration is two frames, one on each target.
+BENCHMARK(BM_TAATargets)
+    ->Args({1, 0})
+    ->Args({0, 0})
+    ->Args({1, 1})
+    ->Args({0, 1})
     ->UseManualTime()
     ->Unit(benchmark::kMillisecond);
 

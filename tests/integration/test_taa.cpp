@@ -3,6 +3,7 @@
 // off-frame cases, non-finite input, the tiled path against the reference kernel (to a tolerance), determinism across
 // thread counts, and parameter-independent reflection.
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 
 #include <algorithm>
 #include <cmath>
@@ -492,46 +493,78 @@ TEST(TAAPass, HugeInputsStayFinite) {
 
 // The vector path uses FMA and refined hardware estimates of sqrt and 1/x where the reference divides, so the two
 // agree to a tolerance, not to the bit: within 1e-4 of max(1, |value|) per channel after 8 frames of feedback
-// (values up to 3, partial tiles, frame edges, clipping, dilation at a motion edge, a NaN tile).
-TEST(TAAPass, TiledPathAgreesWithTheReferenceKernel) {
+// (values up to 3, partial tiles, frame edges, clipping, dilation at a motion edge, a NaN tile). Returns the tiled
+// path's vectorLanes stat.
+namespace {
+double tiledPathAgainstReference(uint32_t W, uint32_t H) {
     const float nan = std::numeric_limits<float>::quiet_NaN();
+    double lanes = -1.0;
     for (bool antiFlicker : {true, false}) {
         SCOPED_TRACE(antiFlicker ? "anti-flicker" : "plain blend");
         std::unique_ptr<Texture> results[2];
         double clipped[2];
         for (int run = 0; run < 2; ++run) {
-            Harness h(nlohmann::json{{"reference", run == 1}, {"sigma", 1.25f}, {"antiFlicker", antiFlicker}}, 100,
-                      70);  // partial tiles
+            Harness h(nlohmann::json{{"reference", run == 1}, {"sigma", 1.25f}, {"antiFlicker", antiFlicker}}, W, H);
             h.source->color = [&](uint64_t f, uint32_t x, uint32_t y) {
                 if (f == 3 && x == 50 && y == 9) return glm::vec4(nan);
                 return noisyPattern(f, x, y) * 3.f;
             };
-            h.source->motion = [](uint64_t f, uint32_t x, uint32_t y) {
+            h.source->motion = [&](uint64_t f, uint32_t x, uint32_t y) {
                 // Varying, fractional motion: an edge where the dilation matters. Below row 40, whole-pixel motion
-                // (zero on every other frame, a pan of (-3, 2) pixels on the others; a run of eight such pixels
-                // on one row reads its history texels directly), which must agree with the filter too.
-                if (y >= 40) return f % 2 ? glm::vec2(-3.f / 100.f, 2.f / 70.f) : glm::vec2(0.f);
-                return x > 40 && x < 60 ? glm::vec2(-1.37f / 100.f, 0.61f / 70.f)
-                                        : glm::vec2(0.11f / 100.f, float(f % 2) / 70.f);
+                // (zero on every other frame, a pan of (-3, 2) pixels on the others; a run of a vector's pixels on
+                // one row reads its history texels directly), which must agree with the filter too.
+                if (y >= 40) return f % 2 ? glm::vec2(-3.f / float(W), 2.f / float(H)) : glm::vec2(0.f);
+                return x > 40 && x < 60 ? glm::vec2(-1.37f / float(W), 0.61f / float(H))
+                                        : glm::vec2(0.11f / float(W), float(f % 2) / float(H));
             };
             h.run(8);
             results[run] = copyOf(h.field("colorOut"));
             clipped[run] = h.stat("clipped");
+            if (run == 0) lanes = h.stat("vectorLanes");
         }
         const auto fast = results[0]->view<glm::vec4>(), reference = results[1]->view<glm::vec4>();
         double maxError = 0.0;
-        for (uint32_t y = 0; y < 70; ++y)
-            for (uint32_t x = 0; x < 100; ++x)
+        for (uint32_t y = 0; y < H; ++y)
+            for (uint32_t x = 0; x < W; ++x)
                 for (int c = 0; c < 4; ++c) {
                     const double r = reference.at(x, y)[c];
                     const double e = std::fabs(double(fast.at(x, y)[c]) - r) / std::max(1.0, std::fabs(r));
-                    ASSERT_LE(e, 1e-4) << x << "," << y << " channel " << c;
+                    EXPECT_LE(e, 1e-4) << x << "," << y << " channel " << c;
+                    if (e > 1e-4) return lanes;
                     maxError = std::max(maxError, e);
                 }
-        std::printf("tiled path against the reference kernel: max error %.3g\n", maxError);
-        EXPECT_GT(clipped[1], 1000) << "clipping should be exercised";
+        std::printf("%ux%u, %g lanes: tiled path against the reference kernel: max error %.3g\n", W, H, lanes,
+                    maxError);
+        EXPECT_GT(clipped[1], 0.1 * W * H) << "clipping should be exercised";
         EXPECT_NEAR(clipped[0], clipped[1], 0.01 * clipped[1]) << "the same pixels are clipped, but for ties";
     }
+    return lanes;
+}
+}  // namespace
+
+TEST(TAAPass, TiledPathAgreesWithTheReferenceKernel) {
+    tiledPathAgainstReference(100, 70);  // partial tiles
+}
+
+// The tiled path is compiled for AVX2 and AVX-512 and dispatched at run time: each target the CPU has agrees with the
+// reference kernel, on a frame of several tiles whose last column and row are partial and whose widths are not whole
+// vectors (1000 = 7 x 128 + 104, 104 = 6 x 16 + 8).
+TEST(TAAPass, TiledPathAgreesWithTheReferenceKernelOnEveryTarget) {
+    struct Target {
+        int64_t bit;
+        double lanes;
+    };
+    int tested = 0;
+    for (const Target t : {Target{HWY_AVX2, 8}, Target{HWY_AVX3, 16}}) {
+        if ((hwy::SupportedTargets() & t.bit) == 0) continue;
+        SCOPED_TRACE(hwy::TargetName(t.bit));
+        hwy::SetSupportedTargetsForTest(t.bit);
+        const double lanes = tiledPathAgainstReference(1000, 37);
+        hwy::SetSupportedTargetsForTest(0);  // the best target again
+        EXPECT_EQ(lanes, t.lanes) << "the dispatch should follow the supported targets";
+        ++tested;
+    }
+    EXPECT_GE(tested, 1);
 }
 
 TEST(TAAPass, IdenticalResultsForAnyThreadCount) {
