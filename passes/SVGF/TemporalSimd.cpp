@@ -54,9 +54,11 @@ struct Footprint {
     hn::Vec<DI> qx[4], qy[4];
 };
 
-/// Channels 0 .. C - 1 of tap k of every lane from an image of C floats per texel.
-template <int C, class T>
+/// Channels 0 .. C - 1 of tap k of every lane from an image of C floats per texel; gathered, only the first kUsed
+/// (the others are left unspecified).
+template <int kUsed, int C, class T>
 HWY_INLINE void loadTap(D d, const Footprint& f, int k, ImageView<T> image, V (&out)[C]) {
+    static_assert(kUsed <= C, "a texel has C channels");
     if (f.contiguous) {
         const float* p = reinterpret_cast<const float*>(&image.at(f.c0 + uint32_t(k & 1), f.r0 + uint32_t(k >> 1)));
         if constexpr (C == 1) {
@@ -72,7 +74,7 @@ HWY_INLINE void loadTap(D d, const Footprint& f, int k, ImageView<T> image, V (&
     const auto index = hn::Add(hn::Mul(f.qy[k], hn::Set(di, int32_t(image.rowPitch / sizeof(float)))),
                                hn::Mul(f.qx[k], hn::Set(di, C)));
     const float* base = reinterpret_cast<const float*>(image.data);
-    for (int c = 0; c < C; ++c) out[c] = hn::GatherIndex(d, base + c, index);
+    for (int c = 0; c < kUsed; ++c) out[c] = hn::GatherIndex(d, base + c, index);
 }
 
 struct RowJob {
@@ -228,9 +230,9 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
         V prevLength[4];
         for (int k = 0; k < 4; ++k) {
             V zp[2], pn[4], length[1];
-            loadTap(d, f, k, v.prevLinearZ, zp);
-            loadTap(d, f, k, v.prevNormW, pn);
-            loadTap(d, f, k, v.prevLength, length);
+            loadTap<1>(d, f, k, v.prevLinearZ, zp);  // the depth, not its derivative
+            loadTap<3>(d, f, k, v.prevNormW, pn);
+            loadTap<1>(d, f, k, v.prevLength, length);
             prevLength[k] = length[0];
             const V dot = hn::Add(hn::Add(hn::Mul(nx, pn[0]), hn::Mul(ny, pn[1])), hn::Mul(nz, pn[2]));
             M m = hn::And(hn::And(hit, inFrame[k]), hn::Gt(bw[k], zero));
@@ -238,7 +240,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             m = hn::AndNot(hn::Lt(zp[0], zero), m);
             if (v.meshId.data) {
                 V prevMesh[1];
-                loadTap(d, f, k, v.prevMeshId, prevMesh);  // the ids' bits
+                loadTap<1>(d, f, k, v.prevMeshId, prevMesh);  // the ids' bits
                 m = hn::And(m, hn::RebindMask(d, hn::Eq(hn::BitCast(du, prevMesh[0]), mesh)));
             }
             m = hn::AndNot(hn::Gt(hn::Abs(hn::Sub(z, zp[0])), depthTolerance), m);
@@ -255,8 +257,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             if (hn::AllFalse(d, tapValid[k])) continue;
             const M m = tapValid[k];
             V illum[4], moments[2];
-            loadTap(d, f, k, v.prevIllum0, illum);
-            loadTap(d, f, k, v.prevMoments0, moments);
+            loadTap<4>(d, f, k, v.prevIllum0, illum);
+            loadTap<2>(d, f, k, v.prevMoments0, moments);
             const V w = bw[k];
             rr = hn::Add(rr, hn::IfThenElseZero(m, hn::Mul(w, illum[0])));
             rg = hn::Add(rg, hn::IfThenElseZero(m, hn::Mul(w, illum[1])));
@@ -266,10 +268,10 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
             rm[1] = hn::Add(rm[1], hn::IfThenElseZero(m, hn::Mul(w, moments[1])));
             rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, prevLength[k])));
             if (split) {  // unsplit, signal 1's sums stay zero, as the reference's sums of zero fields do
-                loadTap(d, f, k, v.prevMoments1, moments);
+                loadTap<2>(d, f, k, v.prevMoments1, moments);
                 rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, moments[0])));
                 rm[3] = hn::Add(rm[3], hn::IfThenElseZero(m, hn::Mul(w, moments[1])));
-                loadTap(d, f, k, v.prevIllum1, illum);
+                loadTap<4>(d, f, k, v.prevIllum1, illum);
                 sr = hn::Add(sr, hn::IfThenElseZero(m, hn::Mul(w, illum[0])));
                 sg = hn::Add(sg, hn::IfThenElseZero(m, hn::Mul(w, illum[1])));
                 sb = hn::Add(sb, hn::IfThenElseZero(m, hn::Mul(w, illum[2])));
