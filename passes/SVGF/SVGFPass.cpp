@@ -279,6 +279,8 @@ void SVGFPass::execute(PassContext& ctx) {
         to.estimate = ctx.internal(kEstimate)->view<glm::vec4>();
         if (split) to.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
         to.variance = outputView<float>(ctx, kVariance);
+        mShortRows.resize(h);
+        to.shortRows = mShortRows.data();
         const simd::TemporalCounts counts = simd::temporalFused(tv, tp, to, kTemporalBandRows);
         nonFinite = counts.rejected;
         referencePixels = counts.reference;
@@ -315,8 +317,9 @@ void SVGFPass::execute(PassContext& ctx) {
     const VarianceScales scales = varianceScales(ap);
     stats.set(kStatVarianceReference, 1.0);  // the scalar stages; the vector one counts
     if (fused && scales.series) {
-        const simd::VarianceCounts counts = simd::varianceFused(vv, scales, *planes.layout, planes.guide, planes.signal,
-                                                                planes.signal1, split, kTemporalBandRows);
+        const simd::VarianceCounts counts =
+            simd::varianceFused(vv, scales, *planes.layout, planes.guide, planes.signal, planes.signal1, split,
+                                kTemporalBandRows, mShortRows.data());
         stats.set(kStatSpatialPixels, double(counts.spatial));
         stats.set(kStatVarianceReference, counts.spatial ? double(counts.reference) / double(counts.spatial) : 0.0);
     } else if (fusedTemporal) {

@@ -15,7 +15,10 @@
 //   prevLinearZ, prevNormW, prevMeshId   this frame's guides, for next frame's disocclusion tests; not written when
 //                         the graph feeds last frame's G-buffer outputs instead (inputs linearZPrev, normWPrev,
 //                         meshIdPrev from "GBuffer.linearZ@prev" ... edges: no copy, as the shipped graphs do)
-// The pass object holds only parameters and the à-trous scratch.
+// The pass object holds only parameters, the à-trous scratch and which rows hold a short history this frame.
+#include <cstdint>
+#include <vector>
+
 #include "Atrous.h"
 #include "SVGFKernels.h"
 #include "TemporalSimd.h"
@@ -48,6 +51,7 @@ private:
 
     // Scratch of the à-trous levels (no state across frames).
     svgf::AtrousFilter mAtrous;
+    std::vector<uint8_t> mShortRows;  ///< per row of the frame: a short history in it (the fused stages' shortcut)
 };
 
 }  // namespace loom

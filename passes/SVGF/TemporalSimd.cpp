@@ -147,7 +147,7 @@ constexpr LaneBits kEveryLane = ~LaneBits(0);
 /// N pixels from x on row y in the vector path. Returns the lanes the reference must (re)do: kEveryLane when nothing
 /// was written (a non-finite colour or motion vector), else the hits whose footprint needs the 3x3 fallback, which
 /// the vector path writes with the others and the reference then overwrites.
-LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
+LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
     const TemporalViews& v = j.v;
     const TemporalParams& p = j.p;
     const D d;
@@ -352,6 +352,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y) {
     writePixels(j, x, y,
                 Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
                 Guides{z, dz, nx, ny, nz, mesh});
+    // needsSpatialVariance: a hit whose history is shorter than kSpatialVarianceFrames.
+    anyShort = !hn::AllFalse(d, hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hit));
     uint8_t bits[8] = {};
     hn::StoreMaskBits(d, fallback, bits);
     LaneBits lanes = 0;
@@ -363,19 +365,31 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
     const uint32_t N = uint32_t(hn::Lanes(D()));
     TemporalCounts counts;
     for (uint32_t y = t.y0; y < t.y1; ++y) {
+        bool rowShort = false;
+        // A pixel the reference ran: its history length is in curLength.
+        const auto scalarShort = [&](uint32_t px) {
+            rowShort |= needsSpatialVariance(j.v.linearZ.at(px, y).x, j.v.curLength.at(px, y));
+        };
         uint32_t x = t.x0;
         for (; x + N <= t.x1; x += N) {
-            const LaneBits redo = vectorPixels(j, x, y);
+            bool anyShort = false;
+            const LaneBits redo = vectorPixels(j, x, y, anyShort);
+            rowShort |= anyShort;
             if (redo == 0) continue;
             // Lanes the vector path wrote are overwritten below: its streamed stores go first.
             if (redo != kEveryLane) hwy::FlushStream();
             for (uint32_t k = 0; k < N; ++k) {
                 if (!((redo >> k) & 1)) continue;
                 counts.rejected += scalarPixel(j, x + k, y) ? 1 : 0;
+                scalarShort(x + k);
                 ++counts.reference;
             }
         }
-        for (; x < t.x1; ++x, ++counts.reference) counts.rejected += scalarPixel(j, x, y) ? 1 : 0;
+        for (; x < t.x1; ++x, ++counts.reference) {
+            counts.rejected += scalarPixel(j, x, y) ? 1 : 0;
+            scalarShort(x);
+        }
+        if (j.out.shortRows) j.out.shortRows[y] = rowShort ? 1 : 0;
     }
     hwy::FlushStream();  // the streamed stores are visible before the tile is reported done
     return counts;
@@ -528,8 +542,10 @@ size_t varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
 
 VarianceCounts VarianceFusedTarget(const VarianceViews& v, const VarianceScales& scales, const PlaneLayout& L,
                                    const GuidePlanes& G, const SignalPlanes& S0, const SignalPlanes& S1, bool split,
-                                   uint32_t rows) {
+                                   uint32_t rows, const uint8_t* shortRows) {
     const VarianceJob job{v, scales, L, G, S0, S1};
+    // Rows stage 1 found no short history in have nothing to do in either loop below.
+    const auto skipRow = [shortRows](uint32_t y) { return shortRows && !shortRows[y]; };
     const uint32_t W = v.integrated0.width, H = v.integrated0.height;
     const uint32_t N = uint32_t(hn::Lanes(D()));
     auto isShort = [&v](uint32_t x, uint32_t y) {
@@ -541,7 +557,8 @@ VarianceCounts VarianceFusedTarget(const VarianceViews& v, const VarianceScales&
         1, H,
         [&](const Tile& band) {
             uint64_t vectorCount = 0, scalarCount = 0;
-            for (uint32_t y = band.y0; y < band.y1; ++y)
+            for (uint32_t y = band.y0; y < band.y1; ++y) {
+                if (skipRow(y)) continue;
                 for (uint32_t x = 0; x < W;) {
                     if (x >= 3 && x + N + 3 <= W) {
                         vectorCount += split ? varianceVector<true>(job, x, y) : varianceVector<false>(job, x, y);
@@ -554,6 +571,7 @@ VarianceCounts VarianceFusedTarget(const VarianceViews& v, const VarianceScales&
                     }
                     ++x;
                 }
+            }
             spatial += vectorCount + scalarCount;
             reference += scalarCount;
         },
@@ -564,6 +582,7 @@ VarianceCounts VarianceFusedTarget(const VarianceViews& v, const VarianceScales&
         [&](const Tile& band) {
             const D d;
             for (uint32_t y = band.y0; y < band.y1; ++y) {
+                if (skipRow(y)) continue;
                 uint32_t x = 0;
                 for (; x + N <= W; x += N) {
                     V z, dz;
@@ -603,8 +622,9 @@ TemporalCounts temporalFused(const TemporalViews& v, const TemporalParams& p, co
 
 VarianceCounts varianceFused(const VarianceViews& v, const VarianceScales& scales, const PlaneLayout& layout,
                              const GuidePlanes& guide, const SignalPlanes& signal0, const SignalPlanes& signal1,
-                             bool split, uint32_t rows) {
-    return HWY_DYNAMIC_DISPATCH(VarianceFusedTarget)(v, scales, layout, guide, signal0, signal1, split, rows);
+                             bool split, uint32_t rows, const uint8_t* shortRows) {
+    return HWY_DYNAMIC_DISPATCH(VarianceFusedTarget)(v, scales, layout, guide, signal0, signal1, split, rows,
+                                                     shortRows);
 }
 
 }  // namespace loom::svgf::simd

@@ -5,12 +5,13 @@
 // history is short. With the fast à-trous it also packs the à-trous guide planes and input planes in the same loop,
 // so the à-trous stage reads no image of its own.
 //
-// The common case is vectorised: N pixels of a row (N = 8 on AVX2) whose colour samples and motion vectors are
-// finite, whose 2x2 bilinear footprints all have the same integer offset from the pixels (a camera pan or a static
-// view; the footprint then is two contiguous runs of each history row) and lie inside the frame, and whose valid
-// taps carry at least kMinBilinearWeight. Every other group of N pixels (and the row's tail) runs temporalPixel
-// itself, pixel by pixel: disocclusion that needs the 3x3 fallback, non-finite samples, footprints across the
-// frame's border or moving objects' edges.
+// The common case is vectorised: N pixels of a row (N = 16 on AVX-512, 8 on AVX2) whose colour samples and motion
+// vectors are finite. When their 2x2 bilinear footprints all have the same integer offset from the pixels (a camera
+// pan or a static view) and lie inside the frame, each footprint row is a contiguous run of every history field;
+// otherwise (motion that varies across the group, a footprint at the frame's border) each pixel's taps are gathered,
+// taps off the frame invalid. A hit whose valid taps carry less than kMinBilinearWeight needs the 3x3 fallback: the
+// vector path writes it with the others and temporalPixel then redoes that pixel alone. Groups with a non-finite
+// sample, and the row's tail, run temporalPixel pixel by pixel.
 //
 // The vector path performs the reference's float operations in the reference's order (the build does not contract
 // a * b + c into FMAs, and max / min follow maxf / minf), so its results are bit-identical to temporalPixel's;
@@ -35,6 +36,9 @@ struct TemporalOutputs {
     ImageView<glm::vec4> estimate;        ///< signal 0 as an image (the variance stage overwrites short histories)
     ImageView<glm::vec4> estimate1;       ///< signal 1 (indirect) as an image, split only
     ImageView<float> variance;            ///< optional debug output: the temporal variance (split: summed)
+    /// Optional, one entry per row: set to 1 where a pixel of the row needs the spatial variance estimate
+    /// (needsSpatialVariance), else 0, so the variance stage visits only those rows.
+    uint8_t* shortRows = nullptr;
 };
 
 /// Pixel counts of one frame of the fused stage.
@@ -57,9 +61,10 @@ struct VarianceCounts {
 /// Stage 2 of the fused path, after temporalFused packed the à-trous planes (layout, guide, signal0 and with
 /// split signal1): varianceEstimatePixel for every pixel whose history is short, vectorised where all 7x7 taps lie
 /// in the frame's columns (the reference's operations in its order: bit-identical), then those pixels' à-trous
-/// input planes repacked. Requires the series form of the weight (scales.series); rows: band height.
+/// input planes repacked. Requires the series form of the weight (scales.series); rows: band height. shortRows
+/// (optional, TemporalOutputs::shortRows of this frame): rows without a short history are skipped.
 VarianceCounts varianceFused(const VarianceViews& v, const VarianceScales& scales, const PlaneLayout& layout,
                              const GuidePlanes& guide, const SignalPlanes& signal0, const SignalPlanes& signal1,
-                             bool split, uint32_t rows);
+                             bool split, uint32_t rows, const uint8_t* shortRows = nullptr);
 
 }  // namespace loom::svgf::simd
