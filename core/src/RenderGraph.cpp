@@ -508,6 +508,7 @@ void RenderGraph::compile(const CompileOptions& options) {
             if (f.kind == FieldKind::Input && wireInto.count(key)) info.connectedInputs.push_back(f.name);
             if (f.kind == FieldKind::Output && (consumed.count(key) || prevConsumed.count(key) || !f.optional))
                 info.consumedOutputs.push_back(f.name);
+            if (observed.count(key)) info.observedFields.push_back(f.name);
         }
         return info;
     };

@@ -12,6 +12,9 @@ bool CompileInfo::isInputConnected(std::string_view name) const {
 bool CompileInfo::isOutputConsumed(std::string_view name) const {
     return std::find(consumedOutputs.begin(), consumedOutputs.end(), name) != consumedOutputs.end();
 }
+bool CompileInfo::isObserved(std::string_view name) const {
+    return std::find(observedFields.begin(), observedFields.end(), name) != observedFields.end();
+}
 
 const BoundField* PassContext::find(std::string_view name, FieldKind kind) const {
     for (const auto& f : mFields)

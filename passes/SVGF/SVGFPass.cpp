@@ -187,6 +187,10 @@ void SVGFPass::declareParams(ParamList& p) {
             "fused fast path (validation: the history is bit-identical, the output within rounding)");
 }
 
+void SVGFPass::compile(const CompileInfo& info) {
+    mEstimateObserved = info.isObserved(kEstimate) || info.isObserved(kEstimateIndirect);
+}
+
 void SVGFPass::passThrough(PassContext& ctx) const {
     const auto color = ctx.input(kColor)->view<glm::vec4>();
     const auto dst = ctx.output(kFiltered)->view<glm::vec4>();
@@ -281,6 +285,10 @@ void SVGFPass::execute(PassContext& ctx) {
         to.variance = outputView<float>(ctx, kVariance);
         mShortRows.resize(h);
         to.shortRows = mShortRows.data();
+        // Only the variance stage's short histories read the estimate images on the fused path (the à-trous input
+        // planes hold every estimate), unless the images are dumped or the levels take the unfiltered signal
+        // itself (no levels, or feedback of the unfiltered signal).
+        to.everyEstimate = !fused || mEstimateObserved || mIterations <= 0 || mFeedbackTap < 0;
         const simd::TemporalCounts counts = simd::temporalFused(tv, tp, to, kTemporalBandRows);
         nonFinite = counts.rejected;
         referencePixels = counts.reference;

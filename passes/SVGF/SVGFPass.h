@@ -30,6 +30,7 @@ class SVGFPass final : public RenderPass {
 public:
     void reflect(Reflection& r, const CompileInfo& info) const override;
     void declareParams(ParamList& p) override;
+    void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
 
 private:
@@ -51,6 +52,7 @@ private:
 
     // Scratch of the à-trous levels (no state across frames).
     svgf::AtrousFilter mAtrous;
+    bool mEstimateObserved = false;   ///< the estimate images are dumped: written for every pixel
     std::vector<uint8_t> mShortRows;  ///< per row of the frame: a short history in it (the fused stages' shortcut)
 };
 

@@ -110,8 +110,8 @@ struct Guides {
     hn::Vec<DU> mesh;
 };
 
-/// Stores N pixels' results: history, estimate, à-trous planes, debug variance.
-HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Results& r, const Guides& g) {
+/// Stores N pixels' results: history, estimate (where `estimate`), à-trous planes, debug variance.
+HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Results& r, const Guides& g, bool estimate) {
     const TemporalViews& v = j.v;
     const D d;
     const size_t N = hn::Lanes(d);
@@ -125,10 +125,10 @@ HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Resul
         streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
         hn::Stream(hn::BitCast(d, g.mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
     }
-    streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &j.out.estimate.at(x, y).x);
+    if (estimate) streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &j.out.estimate.at(x, y).x);
     if (split) {
         streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &v.integrated1.at(x, y).x);
-        streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &j.out.estimate1.at(x, y).x);
+        if (estimate) streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &j.out.estimate1.at(x, y).x);
     }
     if (j.out.layout) {
         const size_t o = j.out.layout->offset(x, y);
@@ -175,7 +175,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
         // Misses only (sky): no history, zero signal, as below, without reading albedo, emission or motion.
         writePixels(j, x, y,
                     Results{{zero, zero, zero, zero}, {zero, zero, zero, zero}, {zero, zero, zero, zero}, zero},
-                    Guides{z, dz, nx, ny, nz, mesh});
+                    Guides{z, dz, nx, ny, nz, mesh}, j.out.everyEstimate);
         return 0;
     }
 
@@ -349,11 +349,11 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
     ia = hn::IfThenElseZero(hit, ia);
     for (V& c : m) c = hn::IfThenElseZero(hit, c);
 
-    writePixels(j, x, y,
-                Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
-                Guides{z, dz, nx, ny, nz, mesh});
     // needsSpatialVariance: a hit whose history is shorter than kSpatialVarianceFrames.
     anyShort = !hn::AllFalse(d, hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hit));
+    writePixels(j, x, y,
+                Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
+                Guides{z, dz, nx, ny, nz, mesh}, j.out.everyEstimate || anyShort);
     uint8_t bits[8] = {};
     hn::StoreMaskBits(d, fallback, bits);
     LaneBits lanes = 0;

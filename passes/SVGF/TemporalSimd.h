@@ -39,6 +39,10 @@ struct TemporalOutputs {
     /// Optional, one entry per row: set to 1 where a pixel of the row needs the spatial variance estimate
     /// (needsSpatialVariance), else 0, so the variance stage visits only those rows.
     uint8_t* shortRows = nullptr;
+    /// false: the estimate images are written only for groups of N pixels with a short history, the only ones the
+    /// variance stage reads and completes (the à-trous input planes hold every pixel's estimate). true: every pixel,
+    /// for whoever reads the images (the reference à-trous path, a dump).
+    bool everyEstimate = true;
 };
 
 /// Pixel counts of one frame of the fused stage.

@@ -89,7 +89,13 @@ public:
         if (!info.wired || info.isInputConnected("src")) r.history("srcHistory", Format::RGBA32F);
         if (!info.wired || info.isInputConnected("bias")) r.internal("biasScratch", Format::RGBA32F);
     }
+    void compile(const CompileInfo& info) override {
+        mObserved = double(info.observedFields.size());
+        mHistoryObserved = info.isObserved("srcHistory");
+    }
     void execute(PassContext& ctx) override {
+        ctx.stats().set("observedFields", mObserved);
+        ctx.stats().set("srcHistoryObserved", mHistoryObserved ? 1.0 : 0.0);
         const Texture* src = ctx.input("src");
         const Texture* bias = ctx.input("bias");
         if (src) ctx.historyCur("srcHistory").copyFrom(*src);
@@ -103,6 +109,8 @@ public:
 
 private:
     bool mChangePorts;
+    double mObserved = -1.0;
+    bool mHistoryObserved = false;
 };
 
 /// The test passes plugin plus the pass types defined here (registered once per process).
@@ -627,6 +635,10 @@ TEST(RenderGraphReflect, InternalAndHistoryFieldsMayDependOnTheConnections) {
     EXPECT_FALSE(contains(seen, "C.biasScratch"));
     EXPECT_EQ(texel(g, "C.dst", 1, 3, 4), 0.5f);
     EXPECT_EQ(texel(g, "C.srcHistory", 0, 3, 4), 0.25f);
+    // compile() learns which of its fields are observed: those "C.*" matches that the pass declares once wired
+    // (src, bias, dst, srcHistory; not biasScratch).
+    EXPECT_EQ(g.lastStats()["C"]["observedFields"], 4.0);
+    EXPECT_EQ(g.lastStats()["C"]["srcHistoryObserved"], 1.0);
 
     // Both connected (bias by an explicit edge from a second source): both fields exist and are used.
     RenderGraph both(makeGraph(R"([{"name": "S", "type": "SrcSource", "params": {"color": [0.25, 0.5, 0, 1]}},
@@ -639,6 +651,8 @@ TEST(RenderGraphReflect, InternalAndHistoryFieldsMayDependOnTheConnections) {
     EXPECT_NE(findResource(both.plan(), "C.biasScratch"), nullptr);
     both.execute(frameAt(0));
     EXPECT_EQ(texel(both, "C.dst", 0, 3, 4), 1.25f);
+    EXPECT_EQ(both.lastStats()["C"]["observedFields"], 0.0) << "nothing observed";
+    EXPECT_EQ(both.lastStats()["C"]["srcHistoryObserved"], 0.0);
 }
 
 TEST(RenderGraphReflect, InputsAndOutputsMustNotDependOnTheConnections) {

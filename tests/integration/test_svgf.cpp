@@ -438,7 +438,8 @@ namespace {
 /// GBufferRT + PathTracer (1 spp) + SVGF on a data scene. With prevEdges, SVGF reads last frame's guides from the
 /// G-buffer's @prev outputs (as the shipped graphs do); without, it keeps its own copies.
 std::unique_ptr<RenderGraph> sceneGraph(const std::shared_ptr<Scene>& scene, uint32_t w, uint32_t h,
-                                        const nlohmann::json& svgfParams, bool prevEdges = false) {
+                                        const nlohmann::json& svgfParams, bool prevEdges = false,
+                                        const CompileOptions& base = {}) {
     auto edge = [](const std::string& a, const std::string& b) { return nlohmann::json::array({a, b}); };
     // GBufferRT and the path tracer both offer albedo and emission: take the G-buffer's.
     nlohmann::json edges =
@@ -457,7 +458,7 @@ std::unique_ptr<RenderGraph> sceneGraph(const std::shared_ptr<Scene>& scene, uin
                         {"outputs", {"SVGF.filtered", "SVGF.historyLength", "PT.color"}}};
     auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), registry());
     graph->setScene(scene);
-    CompileOptions o;
+    CompileOptions o = base;
     o.width = w;
     o.height = h;
     graph->compile(o);
@@ -687,6 +688,39 @@ TEST(SVGF, PrevGuidesFromTheGBufferMatchItsOwnCopies) {
     }
     EXPECT_TRUE(sawRestart) << "no disocclusion: the test would not tell last frame's guides from this frame's";
     EXPECT_TRUE(sawLongHistory);
+}
+
+// The fused path writes its estimate image only where the variance stage reads it (groups with a short history),
+// unless the image is observed: then every pixel. Either way the results are the same, bit for bit; with poisoned
+// transients the unobserved image keeps NaN where it was skipped and the observed one has none.
+TEST(SVGF, EstimateIsWrittenInFullOnlyWhenObserved) {
+    const uint32_t W = 64, H = 64;
+    auto sceneA = Scene::load(test::dataScene("cornell_dynamic.gltf"));
+    auto sceneB = Scene::load(test::dataScene("cornell_dynamic.gltf"));
+    CompileOptions poisoned;
+    poisoned.poisonTransients = true;
+    CompileOptions observed = poisoned;
+    observed.observe = {"SVGF.estimate"};
+    auto skipping = sceneGraph(sceneA, W, H, nlohmann::json::object(), true, poisoned);
+    auto full = sceneGraph(sceneB, W, H, nlohmann::json::object(), true, observed);
+    Texture estimate;
+    full->setFieldObserver([&](const FrameInfo&, const std::string&, const std::string& field, const Texture& t) {
+        if (field == "estimate") estimate = copyOf(t);
+    });
+    bool skipped = false;
+    for (int f = 0; f < 8; ++f) {
+        const double time = 0.5 + f / 30.0;
+        renderFrame(*skipping, *sceneA, uint64_t(f), time, W, H);
+        renderFrame(*full, *sceneB, uint64_t(f), time, W, H);
+        for (const char* field : {"filtered", "illumination", "moments", "length"})
+            EXPECT_TRUE(skipping->fieldTexture(std::string("SVGF.") + field)
+                            ->samePixels(*full->fieldTexture(std::string("SVGF.") + field)))
+                << field << " frame " << f;
+        ASSERT_EQ(estimate.width(), W);
+        EXPECT_TRUE(allFinite(estimate)) << "an observed estimate is written everywhere, frame " << f;
+        skipped |= !allFinite(*skipping->fieldTexture("SVGF.estimate"));
+    }
+    EXPECT_TRUE(skipped) << "with long histories the unobserved estimate is not written everywhere";
 }
 
 // SVGF declares the indirect signal's history and scratch only with the direct/indirect split, and its own copies

@@ -12,7 +12,7 @@
 #include "loom/RenderPass.h"
 
 /// Bumped whenever RenderPass, PassContext or the registrar change layout.
-#define LOOM_PLUGIN_ABI_VERSION 2
+#define LOOM_PLUGIN_ABI_VERSION 3
 
 #if defined(_WIN32)
 #define LOOM_PLUGIN_EXPORT extern "C" __declspec(dllexport)

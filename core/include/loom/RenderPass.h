@@ -35,9 +35,14 @@ struct CompileInfo {
     /// not listed here is neither allocated nor expected). Filled when wired.
     std::vector<std::string> connectedInputs;
     std::vector<std::string> consumedOutputs;
+    /// This pass's fields that CompileOptions::observe matches (dumped, shown):
+    /// a pass that leaves parts of a field unwritten where nothing of its own
+    /// reads them must write them in full when the field is observed.
+    std::vector<std::string> observedFields;
     bool wired = false;  ///< the lists above are filled (second reflect, compile)
     bool isInputConnected(std::string_view name) const;
     bool isOutputConsumed(std::string_view name) const;
+    bool isObserved(std::string_view name) const;
 };
 
 /// Counters a pass reports for the frame (rays traced, samples dropped...).
