@@ -189,6 +189,7 @@ void SVGFPass::declareParams(ParamList& p) {
 
 void SVGFPass::compile(const CompileInfo& info) {
     mEstimateObserved = info.isObserved(kEstimate) || info.isObserved(kEstimateIndirect);
+    mIntegratedObserved = info.isObserved(kIntegrated) || info.isObserved(kIntegratedIndirect);
 }
 
 void SVGFPass::passThrough(PassContext& ctx) const {
@@ -214,6 +215,12 @@ void SVGFPass::execute(PassContext& ctx) {
     const auto connected = [&](const char* name) { return ctx.input(name) != nullptr; };
     const bool split = splitSignals(connected);
     const uint32_t w = ctx.output(kFiltered)->width(), h = ctx.output(kFiltered)->height();
+
+    AtrousParams ap;
+    ap.phiColor = mPhiColor;
+    ap.phiNormal = mPhiNormal;
+    ap.phiDepth = mPhiDepth;
+    const VarianceScales scales = varianceScales(ap);
 
     // Stage 1: demodulation, reprojection, moments (one pass).
     auto t0 = Clock::now();
@@ -289,6 +296,9 @@ void SVGFPass::execute(PassContext& ctx) {
         // planes hold every estimate), unless the images are dumped or the levels take the unfiltered signal
         // itself (no levels, or feedback of the unfiltered signal).
         to.everyEstimate = !fused || mEstimateObserved || mIterations <= 0 || mFeedbackTap < 0;
+        // The vectorised variance stage reads the integrated images only at short histories and, in its scalar
+        // edge columns, around them; the scalar variance stage reads them around every short history.
+        to.everyIntegrated = !(fused && scales.series) || mIntegratedObserved;
         const simd::TemporalCounts counts = simd::temporalFused(tv, tp, to, kTemporalBandRows);
         nonFinite = counts.rejected;
         referencePixels = counts.reference;
@@ -307,10 +317,6 @@ void SVGFPass::execute(PassContext& ctx) {
 
     // Stage 2: variance estimate (spatial where history is short).
     t0 = Clock::now();
-    AtrousParams ap;
-    ap.phiColor = mPhiColor;
-    ap.phiNormal = mPhiNormal;
-    ap.phiDepth = mPhiDepth;
     VarianceViews vv;
     vv.integrated0 = asConst(tv.integrated0);
     vv.integrated1 = asConst(tv.integrated1);
@@ -322,7 +328,6 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
     if (split) vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
-    const VarianceScales scales = varianceScales(ap);
     stats.set(kStatVarianceReference, 1.0);  // the scalar stages; the vector one counts
     if (fused && scales.series) {
         const simd::VarianceCounts counts =

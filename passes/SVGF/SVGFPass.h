@@ -52,8 +52,9 @@ private:
 
     // Scratch of the à-trous levels (no state across frames).
     svgf::AtrousFilter mAtrous;
-    bool mEstimateObserved = false;   ///< the estimate images are dumped: written for every pixel
-    std::vector<uint8_t> mShortRows;  ///< per row of the frame: a short history in it (the fused stages' shortcut)
+    bool mEstimateObserved = false;    ///< the estimate images are dumped: written for every pixel
+    bool mIntegratedObserved = false;  ///< likewise the integrated images
+    std::vector<uint8_t> mShortRows;   ///< per row of the frame: a short history in it (the fused stages' shortcut)
 };
 
 }  // namespace loom

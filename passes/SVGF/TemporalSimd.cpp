@@ -110,13 +110,26 @@ struct Guides {
     hn::Vec<DU> mesh;
 };
 
-/// Stores N pixels' results: history, estimate (where `estimate`), à-trous planes, debug variance.
-HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Results& r, const Guides& g, bool estimate) {
+/// What writePixels stores besides history, planes and debug variance.
+struct Scratch {
+    bool integrated, estimate;
+};
+
+/// The scratch images N pixels from x need: the variance stage reads them at short histories (`anyShort`), and
+/// its scalar columns (the first 3 and the last N + 3) read the integrated images 3 columns around.
+HWY_INLINE Scratch scratchFor(const RowJob& j, uint32_t x, bool anyShort) {
+    const uint32_t N = uint32_t(hn::Lanes(D())), W = j.v.integrated0.width;
+    const bool nearEdge = x < 6 || x + 2 * N + 6 > W;
+    return {j.out.everyIntegrated || anyShort || nearEdge, j.out.everyEstimate || anyShort};
+}
+
+/// Stores N pixels' results: history, the scratch images `s` asks for, à-trous planes, debug variance.
+HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Results& r, const Guides& g, Scratch s) {
     const TemporalViews& v = j.v;
     const D d;
     const size_t N = hn::Lanes(d);
     const bool split = j.p.split;
-    streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &v.integrated0.at(x, y).x);
+    if (s.integrated) streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &v.integrated0.at(x, y).x);
     streamInterleaved2(d, r.m[0], r.m[1], &v.curMoments0.at(x, y).x);
     if (split) streamInterleaved2(d, r.m[2], r.m[3], &v.curMoments1.at(x, y).x);
     hn::StoreU(r.length, d, &v.curLength.at(x, y));  // read again by the variance stage
@@ -125,10 +138,10 @@ HWY_INLINE void writePixels(const RowJob& j, uint32_t x, uint32_t y, const Resul
         streamCopy(d, &v.normW.at(x, y).x, &v.curNormW.at(x, y).x, 4 * N);
         hn::Stream(hn::BitCast(d, g.mesh), d, reinterpret_cast<float*>(&v.curMeshId.at(x, y)));
     }
-    if (estimate) streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &j.out.estimate.at(x, y).x);
+    if (s.estimate) streamInterleaved4(d, r.i[0], r.i[1], r.i[2], r.i[3], &j.out.estimate.at(x, y).x);
     if (split) {
-        streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &v.integrated1.at(x, y).x);
-        if (estimate) streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &j.out.estimate1.at(x, y).x);
+        if (s.integrated) streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &v.integrated1.at(x, y).x);
+        if (s.estimate) streamInterleaved4(d, r.j[0], r.j[1], r.j[2], r.j[3], &j.out.estimate1.at(x, y).x);
     }
     if (j.out.layout) {
         const size_t o = j.out.layout->offset(x, y);
@@ -175,7 +188,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
         // Misses only (sky): no history, zero signal, as below, without reading albedo, emission or motion.
         writePixels(j, x, y,
                     Results{{zero, zero, zero, zero}, {zero, zero, zero, zero}, {zero, zero, zero, zero}, zero},
-                    Guides{z, dz, nx, ny, nz, mesh}, j.out.everyEstimate);
+                    Guides{z, dz, nx, ny, nz, mesh}, scratchFor(j, x, false));
         return 0;
     }
 
@@ -353,7 +366,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
     anyShort = !hn::AllFalse(d, hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hit));
     writePixels(j, x, y,
                 Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
-                Guides{z, dz, nx, ny, nz, mesh}, j.out.everyEstimate || anyShort);
+                Guides{z, dz, nx, ny, nz, mesh}, scratchFor(j, x, anyShort));
     uint8_t bits[8] = {};
     hn::StoreMaskBits(d, fallback, bits);
     LaneBits lanes = 0;

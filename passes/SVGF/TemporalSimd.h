@@ -43,6 +43,10 @@ struct TemporalOutputs {
     /// variance stage reads and completes (the à-trous input planes hold every pixel's estimate). true: every pixel,
     /// for whoever reads the images (the reference à-trous path, a dump).
     bool everyEstimate = true;
+    /// false: the integrated images (TemporalViews) are written only for groups with a short history and for the
+    /// groups within reach of the vectorised variance stage's scalar edge columns (the first and last N + 6
+    /// columns), all it reads of them. true: every pixel.
+    bool everyIntegrated = true;
 };
 
 /// Pixel counts of one frame of the fused stage.

@@ -690,24 +690,28 @@ TEST(SVGF, PrevGuidesFromTheGBufferMatchItsOwnCopies) {
     EXPECT_TRUE(sawLongHistory);
 }
 
-// The fused path writes its estimate image only where the variance stage reads it (groups with a short history),
-// unless the image is observed: then every pixel. Either way the results are the same, bit for bit; with poisoned
+// The fused path writes its estimate and integrated images only where the variance stage reads them (groups with a
+// short history, and the integrated image near the left and right edges), unless the image is observed: then every
+// pixel. Either way the results are the same, bit for bit; with poisoned
 // transients the unobserved image keeps NaN where it was skipped and the observed one has none.
-TEST(SVGF, EstimateIsWrittenInFullOnlyWhenObserved) {
+TEST(SVGF, ScratchImagesAreWrittenInFullOnlyWhenObserved) {
     const uint32_t W = 64, H = 64;
     auto sceneA = Scene::load(test::dataScene("cornell_dynamic.gltf"));
     auto sceneB = Scene::load(test::dataScene("cornell_dynamic.gltf"));
     CompileOptions poisoned;
     poisoned.poisonTransients = true;
     CompileOptions observed = poisoned;
-    observed.observe = {"SVGF.estimate"};
+    observed.observe = {"SVGF.estimate*", "SVGF.integrated*"};
     auto skipping = sceneGraph(sceneA, W, H, nlohmann::json::object(), true, poisoned);
     auto full = sceneGraph(sceneB, W, H, nlohmann::json::object(), true, observed);
-    Texture estimate;
+    // The graph filters direct and indirect separately: the indirect signal's integrated image keeps what the
+    // temporal stage wrote (the direct one's receives its filtered result later in the frame).
+    Texture estimate, integrated;
     full->setFieldObserver([&](const FrameInfo&, const std::string&, const std::string& field, const Texture& t) {
         if (field == "estimate") estimate = copyOf(t);
+        if (field == "integratedIndirect") integrated = copyOf(t);
     });
-    bool skipped = false;
+    bool skipped = false, skippedIntegrated = false;
     for (int f = 0; f < 8; ++f) {
         const double time = 0.5 + f / 30.0;
         renderFrame(*skipping, *sceneA, uint64_t(f), time, W, H);
@@ -717,10 +721,14 @@ TEST(SVGF, EstimateIsWrittenInFullOnlyWhenObserved) {
                             ->samePixels(*full->fieldTexture(std::string("SVGF.") + field)))
                 << field << " frame " << f;
         ASSERT_EQ(estimate.width(), W);
+        ASSERT_EQ(integrated.width(), W);
         EXPECT_TRUE(allFinite(estimate)) << "an observed estimate is written everywhere, frame " << f;
+        EXPECT_TRUE(allFinite(integrated)) << "likewise the integrated image, frame " << f;
         skipped |= !allFinite(*skipping->fieldTexture("SVGF.estimate"));
+        skippedIntegrated |= !allFinite(*skipping->fieldTexture("SVGF.integratedIndirect"));
     }
     EXPECT_TRUE(skipped) << "with long histories the unobserved estimate is not written everywhere";
+    EXPECT_TRUE(skippedIntegrated) << "nor the unobserved integrated image";
 }
 
 // SVGF declares the indirect signal's history and scratch only with the direct/indirect split, and its own copies
