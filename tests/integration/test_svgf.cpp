@@ -5,12 +5,12 @@
 // independent; the direct/indirect split agrees with the combined signal; any thread count gives the same bits;
 // the spatial variance weight matches its closed form.
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 
 #include <cmath>
 #include <cstdio>
 #include <functional>
 #include <glm/glm.hpp>
-#include <hwy/targets.h>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
