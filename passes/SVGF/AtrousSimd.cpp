@@ -125,7 +125,7 @@ HWY_INLINE V addNormalExponent(D d, V e, V ncx, V ncy, V ncz, V nqx, V nqy, V nq
 /// What every tap of a centre vector compares against.
 struct Centre {
     V z, l, nx, ny, nz, invPhiL;
-    V invPhiZ[5];
+    V invPhiZ;  ///< log2(e) / (phiZ + eps), for a tap at distance 1
 };
 struct Sums {
     V r, g, b, v, w;
@@ -147,8 +147,10 @@ HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Cen
         if (ai * t.c.step >= t.W) return;  // off-frame for every pixel of the row
         const ptrdiff_t q = row + I * t.c.step;
         const V zq = hn::LoadU(d, t.G.z + q);
-        V e = hn::MulAdd(hn::Abs(hn::Sub(k.z, zq)), k.invPhiZ[kDistanceIndex[aj][ai]],
-                         hn::Set(d, kB3Exponent[ai] + kB3Exponent[aj]));
+        constexpr int distance = kDistanceIndex[aj][ai];
+        V depth = hn::Abs(hn::Sub(k.z, zq));
+        if constexpr (distance != 0) depth = hn::Mul(depth, hn::Set(d, 1.f / kTapDistance[distance]));
+        V e = hn::MulAdd(depth, k.invPhiZ, hn::Set(d, kB3Exponent[ai] + kB3Exponent[aj]));
         e = hn::MulAdd(hn::Abs(hn::Sub(k.l, hn::LoadU(d, t.in.l + q))), k.invPhiL, e);
         e = addNormalExponent<kSeries>(d, e, k.nx, k.ny, k.nz, hn::LoadU(d, t.G.nx + q), hn::LoadU(d, t.G.ny + q),
                                        hn::LoadU(d, t.G.nz + q), t.c);
@@ -261,19 +263,19 @@ HWY_INLINE void weighCentre(D d, const TapContext& t, V zc, V dzc, V ncx, V ncy,
     // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
     const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, t.c.phiColor), sigma, eps));
     const V phiZ = hn::Mul(hn::Set(d, t.c.phiDepthStep), dzc);
-    // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five.
+    // log2(e) / (phiZ |(i, j)| + eps) as log2(e) / (phiZ + eps) / |(i, j)|: one division instead of five, and the
+    // tap divides its depth difference by its constant |(i, j)| (one register for all five distances: the tap loop
+    // is short of registers; 0.975x of a level against five scales held per centre).
     // They differ by eps (1 - |(i, j)|) / (|(i, j)| (phiZ + eps)) relative, below 1e-6 for phiZ >= 1e-4;
     // only phiZ ~ eps (a zero depth derivative) moves the already enormous exponent of a depth step.
     const V invPhiZ1 = hn::Div(log2e, hn::Add(phiZ, eps));
-    V invPhiZ[5];
-    for (int k = 0; k < 5; ++k) invPhiZ[k] = hn::Mul(invPhiZ1, hn::Set(d, 1.f / kTapDistance[k]));
 
     // Centre tap: no depth or luminance difference, only its normal with itself.
     const V w =
         exp2Neg(d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx, ncy, ncz, t.c));
 
     // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
-    const Centre centre{zc, lc, ncx, ncy, ncz, invPhiL, {invPhiZ[0], invPhiZ[1], invPhiZ[2], invPhiZ[3], invPhiZ[4]}};
+    const Centre centre{zc, lc, ncx, ncy, ncz, invPhiL, invPhiZ1};
     Sums sums{hn::Mul(w, rc), hn::Mul(w, gc), hn::Mul(w, bc), hn::Mul(hn::Mul(w, w), vc), w};
     accumulateRow<kSeries, kVariance, -2>(d, t, centre, sums);
     accumulateRow<kSeries, kVariance, -1>(d, t, centre, sums);
