@@ -29,9 +29,14 @@ private:
 }  // namespace
 
 void parallelFor2D(uint32_t width, uint32_t height, const std::function<void(const Tile&)>& fn, uint32_t tileSize) {
+    parallelFor2D(width, height, fn, tileSize, tileSize);
+}
+
+void parallelFor2D(uint32_t width, uint32_t height, const std::function<void(const Tile&)>& fn, uint32_t tileWidth,
+                   uint32_t tileHeight) {
     if (width == 0 || height == 0) return;
-    const uint32_t tilesX = (width + tileSize - 1) / tileSize;
-    const uint32_t tilesY = (height + tileSize - 1) / tileSize;
+    const uint32_t tilesX = (width + tileWidth - 1) / tileWidth;
+    const uint32_t tilesY = (height + tileHeight - 1) / tileHeight;
     // Tiles are fixed by the image size alone (not by the scheduler), so the
     // work each call sees is the same for any thread count.
     tbb::parallel_for(
@@ -40,8 +45,8 @@ void parallelFor2D(uint32_t width, uint32_t height, const std::function<void(con
             const FlushDenormals flush;
             for (uint32_t ty = r.rows().begin(); ty < r.rows().end(); ++ty)
                 for (uint32_t tx = r.cols().begin(); tx < r.cols().end(); ++tx) {
-                    Tile t{tx * tileSize, ty * tileSize, std::min(width, (tx + 1) * tileSize),
-                           std::min(height, (ty + 1) * tileSize)};
+                    Tile t{tx * tileWidth, ty * tileHeight, std::min(width, (tx + 1) * tileWidth),
+                           std::min(height, (ty + 1) * tileHeight)};
                     fn(t);
                 }
         },

@@ -431,15 +431,9 @@ void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalP
         const LevelConstants& c;
         bool series;
     } job{L, G, in, out, c, series};
-    // The cells of a grid of level tiles (parallelFor2D's own tiles are square).
-    const uint32_t tilesX = (L.width + kLevelTileWidth - 1) / kLevelTileWidth;
-    const uint32_t tilesY = (L.height + kLevelTileHeight - 1) / kLevelTileHeight;
     parallelFor2D(
-        tilesX, tilesY,
-        [j = &job](const Tile& cell) {
-            const Tile t{cell.x0 * kLevelTileWidth, cell.y0 * kLevelTileHeight,
-                         std::min(j->L.width, (cell.x0 + 1) * kLevelTileWidth),
-                         std::min(j->L.height, (cell.y0 + 1) * kLevelTileHeight)};
+        L.width, L.height,
+        [j = &job](const Tile& t) {
             if (j->series && j->out.variance)
                 filterRows<true, true>(j->L, j->G, j->in, j->out, j->c, t);
             else if (j->series)
@@ -449,7 +443,7 @@ void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalP
             else
                 filterRows<false, false>(j->L, j->G, j->in, j->out, j->c, t);
         },
-        1);  // one level tile per task
+        kLevelTileWidth, kLevelTileHeight);
 }
 
 int64_t TargetBits() {

@@ -275,6 +275,7 @@ void SVGFPass::execute(PassContext& ctx) {
     // short histories; with the fast à-trous, stage 1 also packs the à-trous guides and input planes (`fused`).
     const bool fusedTemporal = !mReferenceStages;
     const bool fused = fusedTemporal && !mReferenceAtrous;
+    const bool vectorVariance = fused && scales.series;  // stage 2 vectorised over the à-trous planes
     std::atomic<uint64_t> nonFinite{0};
     uint64_t referencePixels = uint64_t(w) * h;
     AtrousFilter::FramePlanes planes{};
@@ -298,7 +299,7 @@ void SVGFPass::execute(PassContext& ctx) {
         to.everyEstimate = !fused || mEstimateObserved || mIterations <= 0 || mFeedbackTap < 0;
         // The vectorised variance stage reads the integrated images only at short histories and, in its scalar
         // edge columns, around them; the scalar variance stage reads them around every short history.
-        to.everyIntegrated = !(fused && scales.series) || mIntegratedObserved;
+        to.everyIntegrated = !vectorVariance || mIntegratedObserved;
         const simd::TemporalCounts counts = simd::temporalFused(tv, tp, to, kTemporalBandRows);
         nonFinite = counts.rejected;
         referencePixels = counts.reference;
@@ -329,7 +330,7 @@ void SVGFPass::execute(PassContext& ctx) {
     if (split) vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
     stats.set(kStatVarianceReference, 1.0);  // the scalar stages; the vector one counts
-    if (fused && scales.series) {
+    if (vectorVariance) {
         const simd::VarianceCounts counts =
             simd::varianceFused(vv, scales, *planes.layout, planes.guide, planes.signal, planes.signal1, split,
                                 kTemporalBandRows, mShortRows.data());

@@ -44,6 +44,11 @@ HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
                    hn::Mul(hn::Set(d, 0.0722f), b));
 }
 
+/// needsSpatialVariance lane-wise: a hit whose history is shorter than kSpatialVarianceFrames.
+HWY_INLINE M needsSpatialVarianceVec(D d, V z, V length) {
+    return hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hn::Ge(z, hn::Zero(d)));
+}
+
 /// Where the N lanes read tap k (0..3) of their 2x2 reprojection footprint in last frame's fields: side by side from
 /// texel (c0 + (k & 1), r0 + (k >> 1)) when every lane has the same integer offset and the footprint lies inside the
 /// frame (a static camera, a pan), else each lane at its own texel (qx, qy), clamped into the frame (motion that
@@ -192,7 +197,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
         return 0;
     }
 
-    // Reprojection (reproject() of SVGFKernels.h) for footprints with one integer offset, all inside the frame.
+    // Reprojection (reproject() of SVGFKernels.h) through the 2x2 footprints (Footprint); the 3x3 fallback is left
+    // to the reference.
     M valid = hn::FirstN(d, 0), fallback = valid;
     V rr = zero, rg = zero, rb = zero, rm[4] = {zero, zero, zero, zero}, rl = zero;
     V sr = zero, sg = zero, sb = zero;  // signal 1's reprojected rgb
@@ -362,8 +368,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
     ia = hn::IfThenElseZero(hit, ia);
     for (V& c : m) c = hn::IfThenElseZero(hit, c);
 
-    // needsSpatialVariance: a hit whose history is shorter than kSpatialVarianceFrames.
-    anyShort = !hn::AllFalse(d, hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hit));
+    anyShort = !hn::AllFalse(d, needsSpatialVarianceVec(d, z, length));
     writePixels(j, x, y,
                 Results{{ir, ig, ib, ia}, {jr, jg, jb, ja}, {m[0], m[1], m[2], m[3]}, hn::IfThenElseZero(hit, length)},
                 Guides{z, dz, nx, ny, nz, mesh}, scratchFor(j, x, anyShort));
@@ -452,8 +457,7 @@ struct VarianceJob {
 /// Lanes of the N pixels from x on row y that take the spatial estimate (varianceEstimatePixel's test).
 HWY_INLINE M shortHistory(D d, const VarianceViews& v, uint32_t x, uint32_t y, V& z, V& dz) {
     hn::LoadInterleaved2(d, &v.linearZ.at(x, y).x, z, dz);
-    const V length = hn::LoadU(d, &v.length.at(x, y));
-    return hn::AndNot(hn::Ge(length, hn::Set(d, kSpatialVarianceFrames)), hn::Ge(z, hn::Zero(d)));
+    return needsSpatialVarianceVec(d, z, hn::LoadU(d, &v.length.at(x, y)));
 }
 
 /// One signal's sums over the 7x7 taps.

@@ -73,12 +73,9 @@ void TAAPass::execute(PassContext& ctx) {
     std::atomic<uint64_t> nonFinite{0}, noHistory{0}, clipped{0};
     const taa::TaaParams params = mParams;
     const bool reference = mReference;
-    const uint32_t tilesX = (out.width + kTileW - 1) / kTileW, tilesY = (out.height + kTileH - 1) / kTileH;
     parallelFor2D(
-        tilesX, tilesY,
-        [&](const Tile& cell) {
-            const Tile t{cell.x0 * kTileW, cell.y0 * kTileH, std::min(out.width, (cell.x0 + 1) * kTileW),
-                         std::min(out.height, (cell.y0 + 1) * kTileH)};
+        out.width, out.height,
+        [&](const Tile& t) {
             Counts counts;
             if (reference)
                 taa::resolveTileReference(in, params, t, out, history, counts);
@@ -89,7 +86,7 @@ void TAAPass::execute(PassContext& ctx) {
             noHistory += counts.noHistory;
             clipped += counts.clipped;
         },
-        1);  // one cell of the tile grid per task
+        kTileW, kTileH);
 
     ctx.stats().set(kStatNonFinite, double(nonFinite));
     ctx.stats().set(kStatNoHistory, double(noHistory));

@@ -14,7 +14,7 @@ namespace loom::taa {
 inline constexpr uint32_t kMaxLanes = 16;
 
 // Tiles of 128 x 16 pixels: rows long enough (2 KiB of colour) for the hardware prefetchers to stream, few enough
-// rows that the tile's scratch stays in L2. They are dispatched as the cells of a tile grid through parallelFor2D.
+// rows that the tile's scratch stays in L2.
 inline constexpr uint32_t kTileW = 128, kTileH = 16;
 // Whole vectors of every target: a pixel's arithmetic does not depend on where its tile ends.
 static_assert(kTileW % kMaxLanes == 0, "the tile width must be a multiple of the widest vector");

@@ -1,6 +1,7 @@
 // parallelFor2D: every pixel once, and the floating-point mode its tasks run in.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cfloat>
 #include <vector>
@@ -20,6 +21,26 @@ TEST(Parallel, EveryPixelIsVisitedExactlyOnce) {
                 for (uint32_t x = t.x0; x < t.x1; ++x) ++visits[size_t(y) * w + x];
         },
         16);
+    for (const auto& v : visits) ASSERT_EQ(v.load(), 1);
+}
+
+TEST(Parallel, RectangularTilesHaveTheAskedSize) {
+    const uint32_t w = 300, h = 77, tw = 128, th = 16;
+    std::vector<std::atomic<int>> visits(size_t(w) * h);
+    std::atomic<int> tiles{0};
+    parallelFor2D(
+        w, h,
+        [&](const Tile& t) {
+            EXPECT_EQ(t.x0 % tw, 0u);
+            EXPECT_EQ(t.y0 % th, 0u);
+            EXPECT_EQ(t.x1, std::min(w, t.x0 + tw));
+            EXPECT_EQ(t.y1, std::min(h, t.y0 + th));
+            ++tiles;
+            for (uint32_t y = t.y0; y < t.y1; ++y)
+                for (uint32_t x = t.x0; x < t.x1; ++x) ++visits[size_t(y) * w + x];
+        },
+        tw, th);
+    EXPECT_EQ(tiles.load(), 3 * 5);
     for (const auto& v : visits) ASSERT_EQ(v.load(), 1);
 }
 

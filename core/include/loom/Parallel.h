@@ -26,6 +26,10 @@ inline constexpr uint32_t kDefaultTileSize = 32;
 void parallelFor2D(uint32_t width, uint32_t height, const std::function<void(const Tile&)>& fn,
                    uint32_t tileSize = kDefaultTileSize);
 
+/// The same over tiles of tileWidth x tileHeight pixels (long rows for row-streaming kernels, say).
+void parallelFor2D(uint32_t width, uint32_t height, const std::function<void(const Tile&)>& fn, uint32_t tileWidth,
+                   uint32_t tileHeight);
+
 /// Per-pixel convenience form: fn(x, y).
 template <class Fn>
 void parallelForPixels(uint32_t width, uint32_t height, Fn&& fn, uint32_t tileSize = kDefaultTileSize) {
