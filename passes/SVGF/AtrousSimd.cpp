@@ -31,7 +31,7 @@ struct LevelConstants {
     int step;
     float phiColor, phiDepthStep;
     float phiNormal;
-    float series[4];  // phi * log2(e) / k, k = 1..4: the normal weight's exponent in powers of two
+    float series[4];  // -phi * log2(e) / k, k = 1..4: the normal weight's exponent in powers of two, negated
 };
 
 inline LevelConstants makeConstants(int step, const AtrousParams& p) {
@@ -41,6 +41,7 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
     c.phiDepthStep = std::max(0.f, p.phiDepth) * float(step);
     c.phiNormal = std::max(0.f, p.phiNormal);
     normalSeriesTerms(c.phiNormal, c.series);
+    for (float& term : c.series) term = -term;  // the exponent is accumulated negative (maskedExp2)
     return c;
 }
 
@@ -67,46 +68,42 @@ using D = hn::ScalableTag<float>;
 using DI = hn::RebindToSigned<D>;
 using V = hn::Vec<D>;
 
-/// p(f) ~ 2^f on [-0.5, 0.5], the minimax polynomial of exp2Neg.
-HWY_INLINE V exp2Polynomial(D d, V f) {
-    V p = hn::MulAdd(hn::Set(d, kWeightExp2C4), f, hn::Set(d, kWeightExp2C3));
-    p = hn::MulAdd(p, f, hn::Set(d, kWeightExp2C2));
-    p = hn::MulAdd(p, f, hn::Set(d, kWeightExp2C1));
-    return hn::MulAdd(p, f, hn::Set(d, kWeightExp2C0));
+/// q(g) ~ 2^g on [0, 1): exp2NonPositive's polynomial, sqrt(2) p(g - 1/2) for the degree-4 minimax p of 2^f on
+/// [-0.5, 0.5] (kWeightExp2C*) expanded in powers of g, so its relative error is p's (<= 2.7e-6 in float).
+HWY_INLINE V exp2Fraction(D d, V g) {
+    V q = hn::MulAdd(hn::Set(d, 0.013534167781472206f), g, hn::Set(d, 0.052011460065841675f));
+    q = hn::MulAdd(q, g, hn::Set(d, 0.2414427548646927f));
+    q = hn::MulAdd(q, g, hn::Set(d, 0.6930038332939148f));
+    return hn::MulAdd(q, g, hn::Set(d, 1.0000026226043701f));
 }
 
-/// 2^-t for t >= -126 (t above kWeightMaxExponent is clamped), relative error <= 2.6e-6.
-HWY_INLINE V exp2Neg(D d, V t) {
-    const DI di;
-    const V magic = hn::Set(d, 12582912.f);  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
-    t = hn::Min(t, hn::Set(d, kWeightMaxExponent));
-    const V r = hn::Add(t, magic);
-    const V n = hn::Sub(r, magic);
-    const V p = exp2Polynomial(d, hn::Sub(n, t));  // f = n - t in [-0.5, 0.5]
-    // The low bits of r hold round(t); shifting by 23 drops everything else and lands it on the exponent field.
-    const auto e = hn::ShiftLeft<23>(hn::BitCast(di, r));
-    return hn::BitCast(d, hn::Sub(hn::BitCast(di, p), e));
-}
-
-/// exp2Neg(t) where `use`, exactly 0 elsewhere. On AVX-512, vscalefps multiplies by 2^-round(t) and applies the
-/// mask in one instruction, and vrndscaleps rounds in one: three operations fewer per tap than the exponent-bit
-/// arithmetic and the blend, bit for bit the same result (p 2^-n stays a normal float for t <= 100).
-HWY_INLINE V maskedExp2Neg(D d, hn::Mask<D> use, V t) {
+/// 2^u for u <= 0 where `use`, exactly 0 elsewhere: 2^floor(u) q(u - floor(u)), u clamped to -kWeightMaxExponent
+/// (a weight stays a normal float, >= 2^-100). The exponent is accumulated negative (every scale and constant of
+/// the tap's sum carries the sign), so no negation is left to do here. On AVX-512 one vreduceps gives
+/// u - floor(u) and one vscalefps multiplies by 2^floor(u) and applies the mask; AVX2 spends six operations there
+/// (floor, subtraction, conversion, shift, addition, blend). Both are exact, so the two targets give the same bits.
+/// Against the earlier form (2^-round(t) p(round(t) - t), then negated for vscalefps): a level 0.97-0.98x, same
+/// process, and the fast path's largest difference from the reference 7.5e-6 -> 3.7e-6.
+HWY_INLINE V maskedExp2(D d, hn::Mask<D> use, V u) {
+    u = hn::Max(u, hn::Set(d, -kWeightMaxExponent));
 #if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
-    t = hn::Min(t, hn::Set(d, kWeightMaxExponent));
-    const V n = hn::Round(t);  // to nearest even, as the magic-number addition rounds
-    const V p = exp2Polynomial(d, hn::Sub(n, t));
-    return V{_mm512_maskz_scalef_ps(use.raw, p.raw, hn::Neg(n).raw)};
+    const V g{_mm512_reduce_ps(u.raw, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC)};
+    return V{_mm512_maskz_scalef_ps(use.raw, exp2Fraction(d, g).raw, u.raw)};
 #else
-    return hn::IfThenElseZero(use, exp2Neg(d, t));
+    const DI di;
+    const V n = hn::Floor(u);
+    const V q = exp2Fraction(d, hn::Sub(u, n));
+    const auto e = hn::ShiftLeft<23>(hn::ConvertTo(di, n));  // 2^n: n added to q's exponent field
+    return hn::IfThenElseZero(use, hn::BitCast(d, hn::Add(hn::BitCast(di, q), e)));
 #endif
 }
 
-/// e plus the normal weight's exponent (in powers of two, >= 0) for the centre and tap normals.
+/// e plus the normal weight's exponent (in powers of two, <= 0) for the centre and tap normals.
 template <bool kSeries>
 HWY_INLINE V addNormalExponent(D d, V e, V ncx, V ncy, V ncz, V nqx, V nqy, V nqz, const LevelConstants& c) {
-    // The dot product rounded as the reference rounds it (glm::dot, no contraction): at phi = 128 a rounding of
-    // 2^-24 in the dot is already 1e-5 in the weight, so both sides must see the same value.
+    // The compiler contracts the dot product into FMAs (this file keeps GCC's default contraction), so it may differ
+    // from the reference's glm::dot by a rounding: at phi = 128 that is up to 1e-5 in a weight, inside the fast
+    // path's tolerance. Every target contracts it alike, so they still agree to the bit.
     const V dot = hn::Add(hn::Add(hn::Mul(ncx, nqx), hn::Mul(ncy, nqy)), hn::Mul(ncz, nqz));
     if constexpr (kSeries) {
         // d = 1 - dot is exact for dot in [0.5, 2]. A dot just above 1 (rounding) gives the reference's weight
@@ -118,14 +115,14 @@ HWY_INLINE V addNormalExponent(D d, V e, V ncx, V ncy, V ncz, V nqx, V nqy, V nq
         return hn::MulAdd(dd, u, e);
     } else {
         const V lg = hn::Log2(d, hn::Max(dot, hn::Set(d, 1e-30f)));
-        return hn::NegMulAdd(hn::Set(d, c.phiNormal), lg, e);
+        return hn::MulAdd(hn::Set(d, c.phiNormal), lg, e);
     }
 }
 
 /// What every tap of a centre vector compares against.
 struct Centre {
     V z, l, nx, ny, nz, invPhiL;
-    V invPhiZ;  ///< log2(e) / (phiZ + eps), for a tap at distance 1
+    V invPhiZ;  ///< -log2(e) / (phiZ + eps), for a tap at distance 1 (invPhiL is negative too)
 };
 struct Sums {
     V r, g, b, v, w;
@@ -150,11 +147,11 @@ HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Cen
         constexpr int distance = kDistanceIndex[aj][ai];
         V depth = hn::Abs(hn::Sub(k.z, zq));
         if constexpr (distance != 0) depth = hn::Mul(depth, hn::Set(d, 1.f / kTapDistance[distance]));
-        V e = hn::MulAdd(depth, k.invPhiZ, hn::Set(d, kB3Exponent[ai] + kB3Exponent[aj]));
+        V e = hn::MulAdd(depth, k.invPhiZ, hn::Set(d, -(kB3Exponent[ai] + kB3Exponent[aj])));
         e = hn::MulAdd(hn::Abs(hn::Sub(k.l, hn::LoadU(d, t.in.l + q))), k.invPhiL, e);
         e = addNormalExponent<kSeries>(d, e, k.nx, k.ny, k.nz, hn::LoadU(d, t.G.nx + q), hn::LoadU(d, t.G.ny + q),
                                        hn::LoadU(d, t.G.nz + q), t.c);
-        const V w = maskedExp2Neg(d, hn::Ge(zq, hn::Zero(d)), e);
+        const V w = maskedExp2(d, hn::Ge(zq, hn::Zero(d)), e);
         s.r = hn::MulAdd(w, hn::LoadU(d, t.in.r + q), s.r);
         s.g = hn::MulAdd(w, hn::LoadU(d, t.in.g + q), s.g);
         s.b = hn::MulAdd(w, hn::LoadU(d, t.in.b + q), s.b);
@@ -258,7 +255,7 @@ HWY_INLINE void weighCentre(D d, const TapContext& t, V zc, V dzc, V ncx, V ncy,
     }
     const V blurred = hn::IfThenElseZero(hn::Gt(den, zero), hn::Div(num, hn::Max(den, hn::Set(d, 1e-30f))));
     const V sigma = hn::Sqrt(hn::Max(blurred, zero));
-    const V log2e = hn::Set(d, kWeightLog2e);
+    const V log2e = hn::Set(d, -kWeightLog2e);  // negative: the exponents are summed negative
     const V eps = hn::Set(d, kAtrousEpsilon);
     // Inverse edge-stopping scales, pre-multiplied by log2(e) so the weight is one power of two.
     const V invPhiL = hn::Div(log2e, hn::MulAdd(hn::Set(d, t.c.phiColor), sigma, eps));
@@ -272,7 +269,8 @@ HWY_INLINE void weighCentre(D d, const TapContext& t, V zc, V dzc, V ncx, V ncy,
 
     // Centre tap: no depth or luminance difference, only its normal with itself.
     const V w =
-        exp2Neg(d, addNormalExponent<kSeries>(d, hn::Set(d, 2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx, ncy, ncz, t.c));
+        maskedExp2(d, hn::Ge(zc, zero),
+                   addNormalExponent<kSeries>(d, hn::Set(d, -2.f * kB3Exponent[0]), ncx, ncy, ncz, ncx, ncy, ncz, t.c));
 
     // The 24 other taps, unrolled: each tap's B3 weight and distance are compile-time constants.
     const Centre centre{zc, lc, ncx, ncy, ncz, invPhiL, invPhiZ1};

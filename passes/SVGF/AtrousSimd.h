@@ -6,19 +6,19 @@
 // vector).
 //
 // Approximations against the scalar reference (atrousPixel), with their bounds:
-// - one exponential per tap: the depth, luminance and normal terms and the B3 weight (-log2 h) are summed as a
-//   power of two t, and 2^-t = 2^-round(t) * p(f), p a degree-4 minimax polynomial on f in [-0.5, 0.5] (relative
-//   error <= 2.6e-6), the exponent built in the float's bits. t is clamped to 100: a weight the reference makes
-//   smaller than 2^-100 (8e-31) stays at that, invisible unless a neighbour is brighter than ~1e25. Miss and
-//   off-frame taps are masked to exactly 0.
+// - one exponential per tap: the depth, luminance and normal terms and the B3 weight (log2 h) are summed, negative,
+//   as a power of two u, and 2^u = 2^floor(u) * q(u - floor(u)), q a degree-4 polynomial on [0, 1) (relative error
+//   <= 2.7e-6). u is clamped to -100: a weight the reference makes smaller than 2^-100 (8e-31) stays at that,
+//   invisible unless a neighbour is brighter than ~1e25. Miss and off-frame taps are masked to exactly 0.
 // - the normal weight max(0, n_p.n_q)^phi, for phi >= kWeightSeriesMinPhi: exp(-phi * (d + d^2/2 + d^3/3 + d^4/4)),
 //   d = 1 - n_p.n_q, the first four terms of -ln(1 - d); its absolute error is <= 3.2e-6 over d in [0, 2] for
-//   phi >= 32 (<= 1.5e-8 at the default 128). The dot product is rounded exactly as the reference rounds it.
+//   phi >= 32 (<= 1.5e-8 at the default 128). The dot product is contracted into FMAs (a rounding from the
+//   reference's).
 //   Smaller phi use exp2(phi * log2(max(dot, 1e-30))) with Highway's log2 (a few ulp).
 // - the five depth scales of a centre, log2(e) / (phiZ |(i, j)| + eps), as log2(e) / (phiZ + eps) / |(i, j)|
 //   (relative difference below 1e-6 for phiZ >= 1e-4).
-// Each weight is within ~6e-6 relative of the reference; rgb and variance, ratios of weighted sums, agree to
-// 7.7e-6 relative over 1-5 levels in tests/integration/test_atrous.cpp, which asserts 3e-5.
+// Each weight is within ~1e-5 relative of the reference; rgb and variance, ratios of weighted sums, agree to
+// 3.7e-6 relative over 1-5 levels in tests/integration/test_atrous.cpp, which asserts 3e-5.
 //
 // Bad input: non-finite illumination values become 0 and magnitudes are clamped to 1e30 (no sums overflow);
 // non-finite depth counts as a miss; non-finite or negative depth derivatives and non-finite normals become 0.

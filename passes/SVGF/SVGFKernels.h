@@ -268,7 +268,8 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 ///   powf;
 /// - 2^-t = 2^-round(t) p(t - round(t)), p a degree-4 fit of 2^f on [-0.5, 0.5] (relative error <= 2.6e-6), t
 ///   clamped to 100 (weights below 2^-100 stay there).
-/// The à-trous fast path (AtrousSimd.cpp) builds its weights from the same constants.
+/// The à-trous fast path (AtrousSimd.cpp) uses the same normal series and clamp, its exponential the same
+/// polynomial shifted to [0, 1).
 inline constexpr float kWeightSeriesMinPhi = 32.f;
 inline constexpr float kWeightLog2e = 1.44269504088896341f;
 inline constexpr float kWeightMaxExponent = 100.f;
