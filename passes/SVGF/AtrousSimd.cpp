@@ -144,6 +144,7 @@ HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Cen
         if (ai * t.c.step >= t.W) return;  // off-frame for every pixel of the row
         const ptrdiff_t q = row + I * t.c.step;
         const V zq = hn::LoadU(d, t.G.z + q);
+        const auto use = hn::Ge(zq, hn::Zero(d));  // a mask register from here: zq is not needed after the depth term
         constexpr int distance = kDistanceIndex[aj][ai];
         V depth = hn::Abs(hn::Sub(k.z, zq));
         if constexpr (distance != 0) depth = hn::Mul(depth, hn::Set(d, 1.f / kTapDistance[distance]));
@@ -151,7 +152,7 @@ HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Cen
         e = hn::MulAdd(hn::Abs(hn::Sub(k.l, hn::LoadU(d, t.in.l + q))), k.invPhiL, e);
         e = addNormalExponent<kSeries>(d, e, k.nx, k.ny, k.nz, hn::LoadU(d, t.G.nx + q), hn::LoadU(d, t.G.ny + q),
                                        hn::LoadU(d, t.G.nz + q), t.c);
-        const V w = maskedExp2(d, hn::Ge(zq, hn::Zero(d)), e);
+        const V w = maskedExp2(d, use, e);
         s.r = hn::MulAdd(w, hn::LoadU(d, t.in.r + q), s.r);
         s.g = hn::MulAdd(w, hn::LoadU(d, t.in.g + q), s.g);
         s.b = hn::MulAdd(w, hn::LoadU(d, t.in.b + q), s.b);
