@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <string>
 
 #include "SVGFKernels.h"
@@ -133,6 +134,8 @@ struct TapContext {
     const LevelConstants& c;
     int W, H, y;
     ptrdiff_t o, stride;
+    ptrdiff_t plane;  ///< floats from one plane to the next (planesEvenlySpaced; taken as G.dz - G.z, which
+                      ///< measured 0.97x of a level against the same value from PlaneLayout::planeSize())
 };
 
 template <bool kSeries, bool kVariance, int I, int J>
@@ -143,20 +146,25 @@ HWY_INLINE void accumulateTap(D d, const TapContext& t, ptrdiff_t row, const Cen
     } else {
         if (ai * t.c.step >= t.W) return;  // off-frame for every pixel of the row
         const ptrdiff_t q = row + I * t.c.step;
-        const V zq = hn::LoadU(d, t.G.z + q);
+        // Every plane from two pointers and multiples of the plane spacing (x86 addressing takes p + P * 1, 2, 4
+        // or 8 in the load itself), rather than nine plane pointers, more than the general registers hold.
+        const float* pz = t.G.z + q;
+        const float* ps = t.in.r + q;
+        const ptrdiff_t P = t.plane;
+        const V zq = hn::LoadU(d, pz);
         const auto use = hn::Ge(zq, hn::Zero(d));  // a mask register from here: zq is not needed after the depth term
         constexpr int distance = kDistanceIndex[aj][ai];
         V depth = hn::Abs(hn::Sub(k.z, zq));
         if constexpr (distance != 0) depth = hn::Mul(depth, hn::Set(d, 1.f / kTapDistance[distance]));
         V e = hn::MulAdd(depth, k.invPhiZ, hn::Set(d, -(kB3Exponent[ai] + kB3Exponent[aj])));
-        e = hn::MulAdd(hn::Abs(hn::Sub(k.l, hn::LoadU(d, t.in.l + q))), k.invPhiL, e);
-        e = addNormalExponent<kSeries>(d, e, k.nx, k.ny, k.nz, hn::LoadU(d, t.G.nx + q), hn::LoadU(d, t.G.ny + q),
-                                       hn::LoadU(d, t.G.nz + q), t.c);
+        e = hn::MulAdd(hn::Abs(hn::Sub(k.l, hn::LoadU(d, ps + 4 * P))), k.invPhiL, e);
+        e = addNormalExponent<kSeries>(d, e, k.nx, k.ny, k.nz, hn::LoadU(d, pz + 2 * P), hn::LoadU(d, pz + 3 * P),
+                                       hn::LoadU(d, pz + 4 * P), t.c);
         const V w = maskedExp2(d, use, e);
-        s.r = hn::MulAdd(w, hn::LoadU(d, t.in.r + q), s.r);
-        s.g = hn::MulAdd(w, hn::LoadU(d, t.in.g + q), s.g);
-        s.b = hn::MulAdd(w, hn::LoadU(d, t.in.b + q), s.b);
-        if constexpr (kVariance) s.v = hn::MulAdd(hn::Mul(w, w), hn::LoadU(d, t.in.v + q), s.v);
+        s.r = hn::MulAdd(w, hn::LoadU(d, ps), s.r);
+        s.g = hn::MulAdd(w, hn::LoadU(d, ps + P), s.g);
+        s.b = hn::MulAdd(w, hn::LoadU(d, ps + 2 * P), s.b);
+        if constexpr (kVariance) s.v = hn::MulAdd(hn::Mul(w, w), hn::LoadU(d, ps + 3 * P), s.v);
         s.w = hn::Add(s.w, w);
     }
 }
@@ -328,8 +336,8 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             // miss centre does in weighCentre: nothing to weigh.
             V r = rc, g = gc, b = bc, v = kVariance ? vc : zero;
             if (!hn::AllTrue(d, hn::Lt(zc, zero)))
-                weighCentre<kSeries, kVariance>(d, TapContext{G, in, c, W, H, int(y), ptrdiff_t(o), stride}, zc, dzc,
-                                                ncx, ncy, ncz, rc, gc, bc, vc, lc, r, g, b, v);
+                weighCentre<kSeries, kVariance>(d, TapContext{G, in, c, W, H, int(y), ptrdiff_t(o), stride, G.dz - G.z},
+                                                zc, dzc, ncx, ncy, ncz, rc, gc, bc, vc, lc, r, g, b, v);
 
             if (out.planes.r) {
                 // Lanes past the frame's right edge have miss centres: they store the margin's zeros back.
@@ -419,6 +427,10 @@ void PackSignalTarget(const PlaneLayout& L, ImageView<const glm::vec4> src, cons
 
 void FilterLevelTarget(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& in, const LevelOutputs& out,
                        int step, const AtrousParams& params) {
+    if (!planesEvenlySpaced(L, G, in))
+        throw std::invalid_argument(
+            "filterLevel: the guide's and the input signal's planes must each lie "
+            "planeSize() floats apart, in member order (as AtrousFilter allocates them)");
     const LevelConstants c = makeConstants(step, params);
     const bool series = c.phiNormal >= kWeightSeriesMinPhi;
     // One pointer captured: the std::function holds it without allocating.

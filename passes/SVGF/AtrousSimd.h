@@ -125,7 +125,17 @@ struct LevelOutputs {
     bool variance = true;
 };
 
-/// One à-trous level with tap spacing `step` from `in` to `out`.
+/// Whether the guide's planes (z, dz, nx, ny, nz) and the signal's (r, g, b, v, l) each follow one another
+/// layout.planeSize() floats apart, as AtrousFilter allocates them: a tap then addresses all of them from two
+/// pointers.
+inline bool planesEvenlySpaced(const PlaneLayout& layout, const GuidePlanes& g, const SignalPlanes& s) {
+    const size_t P = layout.planeSize();
+    return g.dz == g.z + P && g.nx == g.z + 2 * P && g.ny == g.z + 3 * P && g.nz == g.z + 4 * P && s.g == s.r + P &&
+           s.b == s.r + 2 * P && s.v == s.r + 3 * P && s.l == s.r + 4 * P;
+}
+
+/// One à-trous level with tap spacing `step` from `in` to `out`; the planes of `guide` and of `in` must be evenly
+/// spaced (planesEvenlySpaced), else it throws std::invalid_argument.
 void filterLevel(const PlaneLayout& layout, const GuidePlanes& guide, const SignalPlanes& in, const LevelOutputs& out,
                  int step, const AtrousParams& params);
 

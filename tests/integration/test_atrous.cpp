@@ -11,6 +11,8 @@
 #include <glm/glm.hpp>
 #include <limits>
 #include <random>
+#include <stdexcept>
+#include <vector>
 
 #include "../../passes/SVGF/Atrous.h"
 #include "../../passes/SVGF/AtrousSimd.h"
@@ -359,4 +361,28 @@ TEST(Atrous, BadInputStaysFinite) {
                 ASSERT_TRUE(std::isfinite(r.dst.view<glm::vec4>().at(x, y)[ch])) << x << "," << y;
                 ASSERT_TRUE(std::isfinite(r.feedback.view<glm::vec4>().at(x, y)[ch])) << x << "," << y;
             }
+}
+
+// The level addresses every plane of a tap from two pointers and the plane spacing, so it refuses planes that do
+// not lie planeSize() apart instead of reading the wrong memory; the allocator's own layout passes the check.
+TEST(Atrous, LevelRefusesPlanesNotEvenlySpaced) {
+    const simd::PlaneLayout layout = simd::makeLayout(40, 8, 2);
+    const size_t P = layout.planeSize();
+    std::vector<float> block(15 * P, 0.f), stray(P, 0.f);
+    float* base = block.data();
+    const simd::GuidePlanes guide{base, base + P, base + 2 * P, base + 3 * P, base + 4 * P};
+    const simd::SignalPlanes in{base + 5 * P, base + 6 * P, base + 7 * P, base + 8 * P, base + 9 * P};
+    simd::LevelOutputs out;
+    out.planes = {base + 10 * P, base + 11 * P, base + 12 * P, base + 13 * P, base + 14 * P};
+    EXPECT_TRUE(simd::planesEvenlySpaced(layout, guide, in));
+    std::fill(guide.z, guide.z + P, -1.f);  // misses everywhere: nothing to weigh, the input is copied
+    EXPECT_NO_THROW(simd::filterLevel(layout, guide, in, out, 1, AtrousParams{}));
+
+    simd::GuidePlanes strayGuide = guide;
+    strayGuide.ny = stray.data();
+    EXPECT_FALSE(simd::planesEvenlySpaced(layout, strayGuide, in));
+    EXPECT_THROW(simd::filterLevel(layout, strayGuide, in, out, 1, AtrousParams{}), std::invalid_argument);
+    simd::SignalPlanes strayIn = in;
+    strayIn.l = stray.data();
+    EXPECT_THROW(simd::filterLevel(layout, guide, strayIn, out, 1, AtrousParams{}), std::invalid_argument);
 }
