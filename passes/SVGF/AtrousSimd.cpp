@@ -185,13 +185,19 @@ HWY_INLINE void accumulateRow(D d, const TapContext& t, const Centre& k, Sums& s
     accumulateTap<kSeries, kVariance, kPadded, 2, J>(d, t, row, k, s);
 }
 
-/// Prefetches pixels x0 .. x1 - 1 of row y of the remodulation's inputs.
+/// Which images the remodulation of pixel x's group on row y reads (Remodulation::groups).
+HWY_INLINE uint8_t remodulationGroupReads(const Remodulation& r, uint32_t x, uint32_t y) {
+    return r.groups ? r.groups[size_t(y) * r.groupsPerRow + x / kRemodulationGroup] : kReadsAll;
+}
+
+/// Prefetches pixels x0 .. x1 - 1 of row y of the remodulation's inputs (those their groups read).
 HWY_INLINE void prefetchRemodulation(const Remodulation& r, uint32_t x0, uint32_t x1, uint32_t y) {
     const ModulateViews& m = r.views;
     for (uint32_t x = x0; x < x1; x += 4) {  // 4 RGBA32F pixels to a cache line
-        hwy::Prefetch(&m.color.at(x, y));
-        hwy::Prefetch(&m.albedo.at(x, y));
-        if (m.emission.data) hwy::Prefetch(&m.emission.at(x, y));
+        const uint8_t reads = remodulationGroupReads(r, x, y);
+        if (reads & kReadsColour) hwy::Prefetch(&m.color.at(x, y));
+        if (reads & kReadsAlbedo) hwy::Prefetch(&m.albedo.at(x, y));
+        if (m.emission.data && (reads & kReadsEmission)) hwy::Prefetch(&m.emission.at(x, y));
         if (r.split) hwy::Prefetch(&m.filtered0.at(x, y));
         if ((x & 7) == 0) hwy::Prefetch(&m.linearZ.at(x, y));
     }
@@ -217,10 +223,15 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& modulation, uint32_t x0
         return;
     }
     const V zero = hn::Zero(d), one = hn::Set(d, 1.f), minAlbedo = hn::Set(d, kMinAlbedo);
-    V cr, cg, cb, ca, ar, ag, ab, aa, er = zero, eg = zero, eb = zero, ea, z, dz;
-    hn::LoadInterleaved4(d, &m.color.at(x0, y).x, cr, cg, cb, ca);
-    hn::LoadInterleaved4(d, &m.albedo.at(x0, y).x, ar, ag, ab, aa);
-    if (m.emission.data) hn::LoadInterleaved4(d, &m.emission.at(x0, y).x, er, eg, eb, ea);
+    // Only the images the group needs (Remodulation::groups): the colour where it has a miss or an alpha other than
+    // 1, the albedo where it has a hit, the emission where a hit has some. The images skipped are zero here, which
+    // the operations below never use: no hit takes the albedo's place, no miss the colour's, alpha 1 is the colour's.
+    const uint8_t reads = remodulationGroupReads(modulation, x0, y);
+    V cr = zero, cg = zero, cb = zero, ca = one, ar = zero, ag = zero, ab = zero, aa, er = zero, eg = zero, eb = zero,
+      ea, z, dz;
+    if (reads & kReadsColour) hn::LoadInterleaved4(d, &m.color.at(x0, y).x, cr, cg, cb, ca);
+    if (reads & kReadsAlbedo) hn::LoadInterleaved4(d, &m.albedo.at(x0, y).x, ar, ag, ab, aa);
+    if (m.emission.data && (reads & kReadsEmission)) hn::LoadInterleaved4(d, &m.emission.at(x0, y).x, er, eg, eb, ea);
     if (modulation.split) {
         // modulatePixel's filtered0 + filtered1: the other signal first.
         V sr, sg, sb, sa;

@@ -113,7 +113,34 @@ void packSignal(const PlaneLayout& layout, ImageView<const glm::vec4> src, const
 struct Remodulation {
     ModulateViews views;
     bool split = false;
+    /// Optional (the temporal stage's TemporalOutputs::remodulationGroups of this frame): for each group of
+    /// kRemodulationGroup pixels of a row, groupsPerRow to a row, which images its remodulation reads
+    /// (kReadsColour, kReadsAlbedo, kReadsEmission). Null: all of them.
+    const uint8_t* groups = nullptr;
+    size_t groupsPerRow = 0;
 };
+
+/// Remodulation::groups: pixels x of a row in group x / kRemodulationGroup (the widest vector: a narrower one reads
+/// its group's flags, which cover it).
+inline constexpr uint32_t kRemodulationGroup = kMaxLanes;
+inline uint32_t remodulationGroupsPerRow(uint32_t width) {
+    return (width + kRemodulationGroup - 1) / kRemodulationGroup;
+}
+/// What a group's remodulation reads: the colour for a miss (passed through) or an alpha other than 1 (split:
+/// always, the temporal stage does not read the colour there); the albedo for a hit; the emission for a hit that
+/// has some. Half the default scene's pixels are sky: their groups read the colour alone; the rest mostly the albedo
+/// alone.
+inline constexpr uint8_t kReadsColour = 1, kReadsAlbedo = 2, kReadsEmission = 4, kReadsAll = 7;
+
+/// The flags of one pixel, as remodulate() reads (non-finite emission counts as 0).
+inline uint8_t remodulationReads(ImageView<const glm::vec4> color, ImageView<const glm::vec4> emission,
+                                 ImageView<const glm::vec2> linearZ, bool split, uint32_t x, uint32_t y) {
+    const bool hit = linearZ.at(x, y).x >= 0.f;
+    uint8_t reads = (split || !hit || !(color.at(x, y).a == 1.f)) ? kReadsColour : 0;
+    if (hit) reads |= kReadsAlbedo;
+    if (hit && emission.data && finiteOrZero(glm::vec3(emission.at(x, y))) != glm::vec3(0.f)) reads |= kReadsEmission;
+    return reads;
+}
 
 /// Where one level writes: its planes (skipped when planes.r is null), up to two rgb + variance images, and the
 /// remodulated result (skipped when modulate.views.dst is null). variance = false: nobody reads the level's variance,

@@ -293,6 +293,10 @@ void SVGFPass::execute(PassContext& ctx) {
         to.variance = outputView<float>(ctx, kVariance);
         mShortRows.resize(h);
         to.shortRows = mShortRows.data();
+        if (fused) {
+            mRemodulationGroups.resize(size_t(simd::remodulationGroupsPerRow(w)) * h);
+            to.remodulationGroups = mRemodulationGroups.data();
+        }
         // Only the variance stage's short histories read the estimate images on the fused path (the à-trous input
         // planes hold every estimate), unless the images are dumped or the levels take the unfiltered signal
         // itself (no levels, or feedback of the unfiltered signal).
@@ -375,7 +379,9 @@ void SVGFPass::execute(PassContext& ctx) {
     mv.linearZ = tv.linearZ;
     mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
     const bool fusedModulation = fused && levels > 0;
-    const simd::Remodulation remodulation{mv, split};  // split: signal 0's result is in integrated0 by then
+    // split: signal 0's result is in integrated0 by then. The groups say which images each group of pixels reads.
+    const simd::Remodulation remodulation{mv, split, fusedModulation ? mRemodulationGroups.data() : nullptr,
+                                          simd::remodulationGroupsPerRow(w)};
     auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback,
                       const simd::Remodulation* modulate, int slot) {
         AtrousTimings timings;

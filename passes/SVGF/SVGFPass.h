@@ -55,6 +55,7 @@ private:
     bool mEstimateObserved = false;    ///< the estimate images are dumped: written for every pixel
     bool mIntegratedObserved = false;  ///< likewise the integrated images
     std::vector<uint8_t> mShortRows;   ///< per row of the frame: a short history in it (the fused stages' shortcut)
+    std::vector<uint8_t> mRemodulationGroups;  ///< what the fused remodulation reads (simd::Remodulation::groups)
 };
 
 }  // namespace loom

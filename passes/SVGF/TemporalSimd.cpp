@@ -1,6 +1,7 @@
 // Compiled once per Highway target (foreach_target) and dispatched at run time, as AtrousSimd.cpp.
 #include "TemporalSimd.h"
 
+#include <algorithm>
 #include <atomic>
 
 #include "loom/Parallel.h"
@@ -165,7 +166,7 @@ constexpr LaneBits kEveryLane = ~LaneBits(0);
 /// N pixels from x on row y in the vector path. Returns the lanes the reference must (re)do: kEveryLane when nothing
 /// was written (a non-finite colour or motion vector), else the hits whose footprint needs the 3x3 fallback, which
 /// the vector path writes with the others and the reference then overwrites.
-LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
+LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, uint8_t& reads) {
     const TemporalViews& v = j.v;
     const TemporalParams& p = j.p;
     const D d;
@@ -186,6 +187,10 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
     V z, dz;
     hn::LoadInterleaved2(d, &v.linearZ.at(x, y).x, z, dz);
     const M hit = hn::Ge(z, zero);
+    // What the remodulation of these pixels reads (remodulationReads): the colour for a miss or an alpha other than
+    // 1, the albedo for a hit (the emission below).
+    if (split || !hn::AllTrue(d, hit) || !hn::AllTrue(d, hn::Eq(ca, one))) reads |= kReadsColour;
+    if (!hn::AllFalse(d, hit)) reads |= kReadsAlbedo;
     V nx, ny, nz, nw;
     hn::LoadInterleaved4(d, &v.normW.at(x, y).x, nx, ny, nz, nw);
     const auto mesh = v.meshId.data ? hn::LoadU(du, &v.meshId.at(x, y)) : hn::Zero(du);
@@ -325,6 +330,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort) {
         er = hn::IfThenElseZero(hn::IsFinite(er), er);
         eg = hn::IfThenElseZero(hn::IsFinite(eg), eg);
         eb = hn::IfThenElseZero(hn::IsFinite(eb), eb);
+        const M lit = hn::Or(hn::Ne(er, zero), hn::Or(hn::Ne(eg, zero), hn::Ne(eb, zero)));
+        if (!hn::AllFalse(d, hn::And(hit, lit))) reads |= kReadsEmission;
     }
     const V minAlbedo = hn::Set(d, kMinAlbedo), maxIllum = hn::Set(d, kMaxIllumination);
     auto demodulate = [&](V c, V e, V a) HWY_ATTR {
@@ -384,15 +391,25 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
     TemporalCounts counts;
     for (uint32_t y = t.y0; y < t.y1; ++y) {
         bool rowShort = false;
+        uint8_t* groups = j.out.remodulationGroups;
+        if (groups) {
+            groups += size_t(y) * remodulationGroupsPerRow(j.v.color.width);
+            std::fill_n(groups, remodulationGroupsPerRow(j.v.color.width), uint8_t(0));
+        }
         // A pixel the reference ran: its history length is in curLength.
         const auto scalarShort = [&](uint32_t px) {
             rowShort |= needsSpatialVariance(j.v.linearZ.at(px, y).x, j.v.curLength.at(px, y));
+            if (groups)
+                groups[px / kRemodulationGroup] |=
+                    remodulationReads(j.v.color, j.v.emission, j.v.linearZ, j.p.split, px, y);
         };
         uint32_t x = t.x0;
         for (; x + N <= t.x1; x += N) {
             bool anyShort = false;
-            const LaneBits redo = vectorPixels(j, x, y, anyShort);
+            uint8_t reads = 0;
+            const LaneBits redo = vectorPixels(j, x, y, anyShort, reads);
             rowShort |= anyShort;
+            if (groups) groups[x / kRemodulationGroup] |= reads;  // N divides the group
             if (redo == 0) continue;
             // Lanes the vector path wrote are overwritten below: its streamed stores go first.
             if (redo != kEveryLane) hwy::FlushStream();

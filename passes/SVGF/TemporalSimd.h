@@ -39,6 +39,9 @@ struct TemporalOutputs {
     /// Optional, one entry per row: set to 1 where a pixel of the row needs the spatial variance estimate
     /// (needsSpatialVariance), else 0, so the variance stage visits only those rows.
     uint8_t* shortRows = nullptr;
+    /// Optional, remodulationGroupsPerRow(width) entries per row: what the remodulation of each group of
+    /// kRemodulationGroup pixels reads (Remodulation::groups), from this frame's colour, alpha, misses and emission.
+    uint8_t* remodulationGroups = nullptr;
     /// false: the estimate images are written only for groups of N pixels with a short history, the only ones the
     /// variance stage reads and completes (the à-trous input planes hold every pixel's estimate). true: every pixel,
     /// for whoever reads the images (the reference à-trous path, a dump).
