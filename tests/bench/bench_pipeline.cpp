@@ -111,8 +111,9 @@ void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b) {
         state.counters[name + " b"] = bMs[name] / double(timed);
         state.counters[name + " b/a"] = bMs[name] / ms;
     }
-    for (const char* stage : {"SVGF.ms.reproject", "SVGF.ms.atrous"})
-        state.counters[std::string(stage) + " b/a"] = bStages[stage] / aStages[stage];
+    // Every SVGF stage's ratio (reprojection, variance, each level, ...).
+    for (const auto& [stage, ms] : aStages)
+        if (ms > 0.0) state.counters[stage + " b/a"] = bStages[stage] / ms;
 }
 
 /// The default graph twice in one process, memory advised against huge pages in one and for them in the other
