@@ -351,8 +351,9 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
             // miss centre does in weighCentre: nothing to weigh.
             V r = rc, g = gc, b = bc, v = kVariance ? vc : zero;
             if (!hn::AllTrue(d, hn::Lt(zc, zero)))
-                weighCentre<kSeries, kVariance, kPadded>(d, TapContext{G, in, c, W, H, int(y), ptrdiff_t(o), stride, G.dz - G.z},
-                                                zc, dzc, ncx, ncy, ncz, rc, gc, bc, vc, lc, r, g, b, v);
+                weighCentre<kSeries, kVariance, kPadded>(
+                    d, TapContext{G, in, c, W, H, int(y), ptrdiff_t(o), stride, G.dz - G.z}, zc, dzc, ncx, ncy, ncz, rc,
+                    gc, bc, vc, lc, r, g, b, v);
 
             if (out.planes.r) {
                 // Lanes past the frame's right edge have miss centres: they store the margin's zeros back.

@@ -129,7 +129,8 @@ inline uint32_t remodulationGroupsPerRow(uint32_t width) {
 /// What a group's remodulation reads: the colour for a miss (passed through) or an alpha other than 1 (split:
 /// always, the temporal stage does not read the colour there); the albedo for a hit; the emission for a hit that
 /// has some. Half the default scene's pixels are sky: their groups read the colour alone; the rest mostly the albedo
-/// alone.
+/// alone. Hits and misses could be told from the depth the remodulation loads, but the prefetch of the next row's
+/// inputs decides before any of it is loaded, so the flags carry them too.
 inline constexpr uint8_t kReadsColour = 1, kReadsAlbedo = 2, kReadsEmission = 4, kReadsAll = 7;
 
 /// The flags of one pixel, as remodulate() reads (non-finite emission counts as 0).

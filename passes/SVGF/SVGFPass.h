@@ -15,7 +15,8 @@
 //   prevLinearZ, prevNormW, prevMeshId   this frame's guides, for next frame's disocclusion tests; not written when
 //                         the graph feeds last frame's G-buffer outputs instead (inputs linearZPrev, normWPrev,
 //                         meshIdPrev from "GBuffer.linearZ@prev" ... edges: no copy, as the shipped graphs do)
-// The pass object holds only parameters, the à-trous scratch and which rows hold a short history this frame.
+// The pass object holds only parameters, the à-trous scratch and two maps of this frame that the fused stages pass
+// on: which rows hold a short history, and what each group of 16 pixels' remodulation reads.
 #include <cstdint>
 #include <vector>
 

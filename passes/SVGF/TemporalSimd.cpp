@@ -388,16 +388,18 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
 
 TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
     const uint32_t N = uint32_t(hn::Lanes(D()));
+    const uint32_t groupsPerRow = remodulationGroupsPerRow(j.v.color.width);
     TemporalCounts counts;
     for (uint32_t y = t.y0; y < t.y1; ++y) {
         bool rowShort = false;
         uint8_t* groups = j.out.remodulationGroups;
         if (groups) {
-            groups += size_t(y) * remodulationGroupsPerRow(j.v.color.width);
-            std::fill_n(groups, remodulationGroupsPerRow(j.v.color.width), uint8_t(0));
+            groups += size_t(y) * groupsPerRow;
+            std::fill_n(groups, groupsPerRow, uint8_t(0));
         }
-        // A pixel the reference ran: its history length is in curLength.
-        const auto scalarShort = [&](uint32_t px) {
+        // A pixel the reference ran: the row's short-history flag and its group's remodulation reads from what the
+        // reference wrote (its history length is in curLength).
+        const auto noteScalarPixel = [&](uint32_t px) {
             rowShort |= needsSpatialVariance(j.v.linearZ.at(px, y).x, j.v.curLength.at(px, y));
             if (groups)
                 groups[px / kRemodulationGroup] |=
@@ -416,13 +418,13 @@ TemporalCounts temporalTile(const RowJob& j, const Tile& t) {
             for (uint32_t k = 0; k < N; ++k) {
                 if (!((redo >> k) & 1)) continue;
                 counts.rejected += scalarPixel(j, x + k, y) ? 1 : 0;
-                scalarShort(x + k);
+                noteScalarPixel(x + k);
                 ++counts.reference;
             }
         }
         for (; x < t.x1; ++x, ++counts.reference) {
             counts.rejected += scalarPixel(j, x, y) ? 1 : 0;
-            scalarShort(x);
+            noteScalarPixel(x);
         }
         if (j.out.shortRows) j.out.shortRows[y] = rowShort ? 1 : 0;
     }
