@@ -13,6 +13,7 @@
 #include <hwy/highway.h>
 #include <hwy/cache_control.h>
 #include "SimdCommon-inl.h"
+#include "../common/LaneIndex-inl.h"
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
@@ -212,7 +213,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         hn::LoadInterleaved2(d, &v.mvec.at(x, y).x, mx, my);
         if (!hn::AllTrue(d, hn::And(hn::IsFinite(mx), hn::IsFinite(my)))) return kEveryLane;
         const float W = float(v.color.width), H = float(v.color.height);
-        const V xf = hn::ConvertTo(d, hn::Iota(di, int32_t(x))), yf = hn::Set(d, float(y));
+        const V xf = lanes::HWY_NAMESPACE::firstPlusLane(d, float(x)), yf = hn::Set(d, float(y));
         const V px = hn::Add(xf, hn::Mul(mx, hn::Set(d, W))), py = hn::Add(yf, hn::Mul(my, hn::Set(d, H)));
         const V fx0 = hn::Floor(px), fy0 = hn::Floor(py);
         const V ox = hn::Sub(fx0, xf), oy = hn::Sub(fy0, yf);

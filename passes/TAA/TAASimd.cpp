@@ -48,12 +48,14 @@ uint32_t clampIndex(int v, uint32_t size) {
 #include <hwy/foreach_target.h>  // must come first: it includes this file once per target
 #include <hwy/highway.h>
 #include <hwy/cache_control.h>
+#include "../common/LaneIndex-inl.h"
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
 namespace loom::taa::HWY_NAMESPACE {
 
 using namespace detail;
+using lanes::HWY_NAMESPACE::firstPlusLane;
 
 namespace hn = hwy::HWY_NAMESPACE;
 using FloatTag = hn::ScalableTag<float>;
@@ -65,19 +67,6 @@ using Float4Tag = hn::FixedTag<float, 4>;
 constexpr uint32_t kLanes = uint32_t(hn::MaxLanes(FloatTag()));
 constexpr uint32_t kBlocks = kLanes / 4, kChunks = 4 / kBlocks;
 static_assert(kLanes <= kMaxLanes && kTileW % kLanes == 0, "scratch and tiles are sized for at most kMaxLanes");
-
-/// first, first + 1, ... in the lanes: Highway's Iota writes its lanes to memory one by one here, which stalls the
-/// vector load that follows; this adds `first` to a constant.
-template <class D, typename T>
-HWY_INLINE hn::Vec<D> firstPlusLane(D d, T first) {
-    alignas(64) static constexpr int32_t kLane[kMaxLanes] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
-    const hn::RebindToSigned<D> di;
-    const auto lane = hn::Load(di, kLane);
-    if constexpr (hwy::IsFloat<T>())
-        return hn::Add(hn::ConvertTo(d, lane), hn::Set(d, first));
-    else
-        return hn::Add(lane, hn::Set(d, first));
-}
 
 /// YCoCg + alpha of structure-of-arrays RGBA (toYCoCg, lane-wise).
 HWY_INLINE void toYCoCgVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, FloatVec& y, FloatVec& co, FloatVec& cg) {
@@ -110,10 +99,13 @@ HWY_INLINE void expandVec(FloatTag d, FloatVec& r, FloatVec& g, FloatVec& b) {
     b = hn::Mul(b, k);
 }
 
-HWY_INLINE FloatMask finiteVec(FloatTag d, FloatVec v) {
-    const hn::RebindToSigned<FloatTag> di;
-    const auto exponent = hn::Set(di, 0x7F800000);
-    return hn::RebindMask(d, hn::Ne(hn::And(hn::BitCast(di, v), exponent), exponent));
+/// Lanes where every one of the vectors is finite: x * 0 is NaN exactly where x is infinite or NaN and a sum of
+/// zeros is a zero, so one comparison tests them all (against two operations per vector and the masks' conjunction).
+template <class... Vs>
+HWY_INLINE FloatMask allFiniteVec(FloatTag d, FloatVec v, Vs... rest) {
+    FloatVec t = hn::Mul(v, hn::Zero(d));
+    ((t = hn::MulAdd(rest, hn::Zero(d), t)), ...);
+    return hn::Eq(t, t);
 }
 
 /// 1 / x for finite x > 0: the hardware estimate (relative error < 1.5 2^-12) refined by one Newton step
@@ -425,9 +417,7 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
             same = hn::And(same, hn::And(hn::Eq(r, r0), hn::And(hn::Eq(g, g0), hn::Eq(b, b0))));
             if (in.compress) compressVec(d, r, g, b);  // finite colours stay finite, non-finite ones non-finite
             hn::LoadInterleaved2(d, reinterpret_cast<const float*>(mvecBase + rx), mx, my);
-            ok = hn::And(ok, hn::And(hn::And(finiteVec(d, r), finiteVec(d, g)),
-                                     hn::And(hn::And(finiteVec(d, b), hn::Eq(a, a0)),
-                                             hn::And(finiteVec(d, mx), finiteVec(d, my)))));
+            ok = hn::And(ok, hn::And(hn::Eq(a, a0), allFiniteVec(d, r, g, b, mx, my)));
             toYCoCgVec(d, r, g, b, y, co, cg);
             hn::StoreU(y, d, &s.v[0][ry][rx]);
             hn::StoreU(co, d, &s.v[1][ry][rx]);
@@ -636,8 +626,7 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 og = hn::MulAdd(k, hn::Sub(hg, cgr), cgr);
                 ob = hn::MulAdd(k, hn::Sub(hb, cb), cb);
                 oa = hn::MulAdd(k, hn::Sub(ha, ca), ca);
-                const FloatMask keep = hn::And(resolveHistory, hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)),
-                                                                       hn::And(finiteVec(d, ob), finiteVec(d, oa))));
+                const FloatMask keep = hn::And(resolveHistory, allFiniteVec(d, orr, og, ob, oa));
                 orr = hn::IfThenElse(keep, orr, cr);
                 og = hn::IfThenElse(keep, og, cgr);
                 ob = hn::IfThenElse(keep, ob, cb);
@@ -651,8 +640,7 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 const FloatMask same =
                     hn::And(hn::And(hn::Eq(orr, cr), hn::Eq(og, cgr)), hn::And(hn::Eq(ob, cb), hn::Eq(oa, ca)));
                 expandVec(d, orr, og, ob);
-                const FloatMask finiteOut =
-                    hn::And(hn::And(finiteVec(d, orr), finiteVec(d, og)), hn::And(finiteVec(d, ob), finiteVec(d, oa)));
+                const FloatMask finiteOut = allFiniteVec(d, orr, og, ob, oa);
                 orr = hn::IfThenElse(same, lr, hn::IfThenElseZero(finiteOut, orr));
                 og = hn::IfThenElse(same, lg, hn::IfThenElseZero(finiteOut, og));
                 ob = hn::IfThenElse(same, lb, hn::IfThenElseZero(finiteOut, ob));

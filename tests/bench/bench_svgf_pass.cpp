@@ -118,6 +118,9 @@ struct SvgfRun {
 
 /// Arg 0: temporal (1) or the a-trous-only baseline (0); arg 1: threads (0 = all); arg 2: width (height = 9/16 of it);
 /// arg 3: 1 runs the scalar reference stages one after the other (referenceStages), the baseline of the fused path.
+/// The single-thread runs at widths 640, 960 and 1280 (ms/MP and the stages per megapixel) show how the cost scales
+/// with the frame: planes that fit the last-level cache at 640 but not at 1280 would make the larger frame slower per
+/// pixel if a stage were bound by memory.
 void BM_SVGF(benchmark::State& state) {
     ThreadLimit limit(unsigned(state.range(1)));
     const uint32_t W = uint32_t(state.range(2));
@@ -132,6 +135,8 @@ BENCHMARK(BM_SVGF)
     ->Args({0, 0, 1280, 0})
     ->Args({1, 1, 1280, 0})
     ->Args({1, 0, 320, 0})
+    ->Args({1, 1, 640, 0})
+    ->Args({1, 1, 960, 0})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
