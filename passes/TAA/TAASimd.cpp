@@ -343,6 +343,103 @@ HWY_INLINE void sampleHistoryVec(const ClampedImage<glm::vec4>& history, FloatVe
     });
 }
 
+/// A tile whose region (the tile and its one-pixel border) holds one colour, the same bits everywhere, resolves to it:
+/// every neighbourhood is flat, so the general path reads no history and returns each pixel's input, and its history
+/// is that colour compressed (when the resolve compresses). Here that costs one pass of loads and comparisons over the
+/// region and the two stores per pixel, without the YCoCg planes, the statistics, the motion dilation and the
+/// per-pixel resolve. The motion still decides the noHistory count: if every motion vector of the region keeps every
+/// pixel of the tile inside the frame (floating-point rounding is monotonic, so the extremes decide for all), no
+/// pixel lacks history; otherwise, and for a colour or motion that is not finite or a region narrower than a vector,
+/// this returns false having written nothing, and the general path takes the tile.
+HWY_INLINE bool resolveOneColourTile(const TaaInputs& in, const Tile& t, const ImageView<glm::vec4>& out,
+                                     const ImageView<glm::vec4>& history, Counts& counts) {
+    const FloatTag d;
+    const hn::RebindToSigned<FloatTag> di;
+    const uint32_t N = kLanes, W = in.color.width, H = in.color.height;
+    // The region's pixels inside the frame (the repeated edges copy them).
+    const uint32_t cx0 = t.x0 == 0 ? 0 : t.x0 - 1, cx1 = std::min(t.x1 + 1, W);
+    const uint32_t cy0 = t.y0 == 0 ? 0 : t.y0 - 1, cy1 = std::min(t.y1 + 1, H);
+    if (cx1 - cx0 < N) return false;
+    const glm::vec4 c0 = in.color.at(int(cx0), int(cy0));
+    if (!isFinite(c0)) return false;
+    // Four more pixels first (the other corners and the centre): most tiles that are not one colour stop here.
+    const auto sameBits = [&](uint32_t x, uint32_t y) {
+        return std::memcmp(&in.color.at(int(x), int(y)), &c0, sizeof(glm::vec4)) == 0;
+    };
+    if (!sameBits(cx1 - 1, cy0) || !sameBits(cx0, cy1 - 1) || !sameBits(cx1 - 1, cy1 - 1) ||
+        !sameBits((cx0 + cx1) / 2, (cy0 + cy1) / 2))
+        return false;
+    // The pixels as they lie in memory, N / 4 to a vector: colour bits against c0 repeated, motion (x, y pairs) into
+    // running extremes per lane, even lanes x and odd ones y.
+    alignas(64) float pattern[kLanes];
+    for (uint32_t i = 0; i < N; ++i) pattern[i] = c0[int(i % 4)];
+    const auto c0Bits = hn::BitCast(di, hn::Load(d, pattern));
+    auto same = hn::FirstN(di, N);
+    FloatVec mvMin = hn::Set(d, kHuge), mvMax = hn::Set(d, -kHuge);
+    FloatMask finite = hn::FirstN(d, N);
+    for (uint32_t y = cy0; y < cy1; ++y) {
+        const float* colorRow = &in.color.at(0, int(y)).x;
+        const float* mvecRow = &in.mvec.at(0, int(y)).x;
+        for (uint32_t x = cx0; x < cx1; x += N) {
+            x = std::min(x, cx1 - N);  // the last vector overlaps the one before
+            for (uint32_t k = 0; k < 4; ++k)
+                same = hn::And(same, hn::Eq(hn::BitCast(di, hn::LoadU(d, colorRow + 4 * x + k * N)), c0Bits));
+            for (uint32_t k = 0; k < 2; ++k) {
+                const FloatVec m = hn::LoadU(d, mvecRow + 2 * x + k * N);
+                finite = hn::And(finite, allFiniteVec(d, m));
+                mvMin = hn::Min(mvMin, m);
+                mvMax = hn::Max(mvMax, m);
+            }
+        }
+        if (!hn::AllTrue(di, same)) return false;
+    }
+    if (!hn::AllTrue(d, finite)) return false;
+    if (in.historyValid) {
+        // The general path's previous position, x + mvx W (and y + mvy H), at the tile's extreme pixels and motion.
+        alignas(64) float lo[kLanes], hi[kLanes];
+        hn::Store(mvMin, d, lo);
+        hn::Store(mvMax, d, hi);
+        float mn[2] = {lo[0], lo[1]}, mx[2] = {hi[0], hi[1]};
+        for (uint32_t i = 2; i < N; ++i) {
+            mn[i % 2] = std::min(mn[i % 2], lo[i]);
+            mx[i % 2] = std::max(mx[i % 2], hi[i]);
+        }
+        const float fw = float(W), fh = float(H);
+        const float left = float(t.x0) + mn[0] * fw, right = float(t.x1 - 1) + mx[0] * fw;
+        const float top = float(t.y0) + mn[1] * fh, bottom = float(t.y1 - 1) + mx[1] * fh;
+        if (!(left >= -0.5f && right <= fw - 0.5f && top >= -0.5f && bottom <= fh - 0.5f)) return false;
+    } else {
+        counts.noHistory += uint64_t(t.x1 - t.x0) * (t.y1 - t.y0);
+    }
+    // The output is the input colour; the history the colour the resolve works in (compressed or not). Both are one
+    // pixel repeated: a vector of it (N / 4 pixels) is stored again and again.
+    FloatVec hr = hn::Set(d, c0.x), hg = hn::Set(d, c0.y), hb = hn::Set(d, c0.z);
+    if (in.compress) compressVec(d, hr, hg, hb);
+    alignas(64) float historyPixels[4 * kLanes];
+    hn::StoreInterleaved4(hr, hg, hb, hn::Set(d, c0.w), d, historyPixels);
+    const FloatVec outVec = hn::Load(d, pattern), historyVec = hn::Load(d, historyPixels);
+    const uint32_t w = t.x1 - t.x0, floats = 4 * w;
+    for (uint32_t y = t.y0; y < t.y1; ++y) {
+        float* o = &out.row(y)[t.x0].x;
+        float* h = &history.row(y)[t.x0].x;
+        const bool stream = reinterpret_cast<uintptr_t>(h) % 64 == 0;  // whole cache lines: no read for ownership
+        uint32_t i = 0;
+        for (; i + N <= floats; i += N) {
+            hn::StoreU(outVec, d, o + i);
+            if (stream)
+                hn::Stream(historyVec, d, h + i);
+            else
+                hn::StoreU(historyVec, d, h + i);
+        }
+        if (i < floats) {  // a partial tile's last pixels
+            std::memcpy(o + i, pattern, sizeof(float) * (floats - i));
+            std::memcpy(h + i, historyPixels, sizeof(float) * (floats - i));
+        }
+    }
+    hwy::FlushStream();
+    return true;
+}
+
 /// The tiled path. The 3x3 statistics and the motion dilation are separable: each current pixel is converted to
 /// YCoCg once (not nine times), sums, minima, maxima and the longest vector are formed over rows, then over
 /// columns, and the rest runs on vectors of kLanes pixels (8 on AVX2, 16 on AVX-512). The bicubic history is fetched
@@ -352,9 +449,10 @@ HWY_INLINE void sampleHistoryVec(const ClampedImage<glm::vec4>& history, FloatVe
 /// it) rather than to the bit; minima, maxima, comparisons, the clipping decision and the motion dilation are exact,
 /// and every pixel runs the same arithmetic wherever it lies, so a constant image passes through exactly and integer
 /// motion reprojects exactly. A tile with a non-finite colour or motion vector in reach runs the reference kernel
-/// instead (it skips those samples).
+/// instead (it skips those samples); a tile of one colour is done by resolveOneColourTile where it can.
 void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, const ImageView<glm::vec4>& out,
                        const ImageView<glm::vec4>& history, Counts& counts) {
+    if (resolveOneColourTile(in, t, out, history, counts)) return;
     TileScratch& s = scratch();
     const FloatTag d;
     const uint32_t N = kLanes;

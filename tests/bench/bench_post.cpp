@@ -22,11 +22,11 @@ namespace {
 constexpr uint32_t kWidth = 1280, kHeight = 720;
 constexpr double kMegapixels = double(kWidth) * kHeight / 1e6;
 
-/// Writes "color" (an HDR texture with noise) and "mvec" once, on its first frame: the benchmarks time the
-/// consumer only.
+/// Writes "color" (an HDR texture with noise; with `sky`, its top 45 % one black colour) and "mvec" once, on its first
+/// frame: the benchmarks time the consumer only.
 class BenchSource final : public RenderPass {
 public:
-    explicit BenchSource(bool moving) : mMoving(moving) {}
+    explicit BenchSource(bool moving, bool sky = false) : mMoving(moving), mSky(sky) {}
     void reflect(Reflection& r, const CompileInfo&) const override {
         r.output("color", Format::RGBA32F);
         r.output("mvec", Format::RG32F);
@@ -42,6 +42,7 @@ public:
                 const float noise = float(h % 1024u) / 1024.f;
                 const float base = 2.f + 1.5f * std::sin(0.05f * float(x)) * std::cos(0.031f * float(y));
                 c.at(x, y) = glm::vec4(base * (0.8f + 0.4f * noise), base * 0.6f, 4.f - base, 1.f);
+                if (mSky && y < c.height * 9 / 20) c.at(x, y) = glm::vec4(0.f, 0.f, 0.f, 1.f);
                 // A camera pan plus a slow zoom: fractional, varying motion (every pixel takes the bicubic path).
                 m.at(x, y) = mMoving ? glm::vec2((1.37f + 0.002f * (float(x) - 640.f)) / float(c.width),
                                                  (0.43f + 0.002f * (float(y) - 360.f)) / float(c.height))
@@ -50,7 +51,7 @@ public:
     }
 
 private:
-    bool mMoving;
+    bool mMoving, mSky;
     bool mWritten = false;
 };
 
@@ -59,6 +60,7 @@ PluginRegistry& registry() {
     static const bool registered = [] {
         r.registerPass("BenchSourceMoving", "bench input", [] { return std::make_unique<BenchSource>(true); });
         r.registerPass("BenchSourceStatic", "bench input", [] { return std::make_unique<BenchSource>(false); });
+        r.registerPass("BenchSourceMovingSky", "bench input", [] { return std::make_unique<BenchSource>(true, true); });
         return true;
     }();
     (void)registered;
@@ -187,6 +189,15 @@ BENCHMARK(BM_TAATargets)
     ->Args({0, 1})
     ->UseManualTime()
     ->Unit(benchmark::kMillisecond);
+
+/// TAA on a moving frame whose top 45 % is one colour (a black sky, as about half of the default scene's frame): the
+/// one-colour tiles take their short path. Arg: threads (0 = all).
+void BM_TAASky(benchmark::State& state) {
+    ThreadLimit limit(unsigned(state.range(0)));
+    auto graph = makeGraph("BenchSourceMovingSky", "TAAPass", nlohmann::json::object(), "colorIn", {"Pass.colorOut"});
+    runFrames(state, *graph);
+}
+BENCHMARK(BM_TAASky)->Arg(0)->Arg(1)->UseManualTime()->Unit(benchmark::kMillisecond);
 
 void BM_ToneMap(benchmark::State& state) {
     const bool autoExposure = state.range(0) != 0, withFloat = state.range(1) != 0;
