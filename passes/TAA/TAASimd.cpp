@@ -579,6 +579,9 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
     const FloatVec zero = hn::Zero(d), one = hn::Set(d, 1.f), half = hn::Set(d, 0.5f);
     const FloatVec infinity = hn::Set(d, std::numeric_limits<float>::infinity());
     const FloatVec sigma = hn::Set(d, p.sigma), ninth = hn::Set(d, 1.f / 9.f);
+    // A constant alpha's box, [alpha0, alpha0], as centre and half extent (the operations phase 1 would use).
+    const FloatVec alphaCenter = hn::Mul(half, hn::Add(hn::Set(d, alpha0), hn::Set(d, alpha0)));
+    const FloatVec alphaExtent = hn::Mul(half, hn::Sub(hn::Set(d, alpha0), hn::Set(d, alpha0)));
     alignas(64) glm::vec4 current[kLanes];
     // Each output row runs in three phases over its vectors, their results passed through the row scratch: the
     // box and the motion, the history, the clip and blend. One vector's chain from its loads to its stores is long
@@ -632,24 +635,20 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
             hn::Store(pyv, d, &s.py[x]);
             // The box (makeClipBox with n = 9) channel by channel, as centre and half extent (clipToBox); the
             // inverse extent for the ratio is the refined reciprocal, infinite for a flat channel, which pulls the
-            // point exactly onto the centre. A constant alpha is the box [alpha0, alpha0].
-            for (int ch = 0; ch < 4; ++ch) {
-                FloatVec lo, hi;
-                if (ch == 3 && alphaConstant) {
-                    lo = hi = hn::Set(d, alpha0);
-                } else {
-                    FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
-                    for (uint32_t r = y + 1; r < y + 3; ++r) {
-                        sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
-                        sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
-                    }
-                    const FloatVec mn = boxMin[ch], mx = boxMax[ch];
-                    const FloatVec mean = hn::Mul(sum, ninth);
-                    const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
-                    const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
-                    lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
-                    hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
+            // point exactly onto the centre. A constant alpha's box, [alpha0, alpha0], is the same for every pixel:
+            // phase 3 takes it from alphaCenter and alphaExtent.
+            for (int ch = 0; ch < (alphaConstant ? 3 : 4); ++ch) {
+                FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
+                for (uint32_t r = y + 1; r < y + 3; ++r) {
+                    sum = hn::Add(sum, hn::LoadU(d, &s.rowSum[ch][r][x]));
+                    sumSq = hn::Add(sumSq, hn::LoadU(d, &s.rowSumSq[ch][r][x]));
                 }
+                const FloatVec mn = boxMin[ch], mx = boxMax[ch];
+                const FloatVec mean = hn::Mul(sum, ninth);
+                const FloatVec var = hn::Max(hn::NegMulAdd(mean, mean, hn::Mul(sumSq, ninth)), zero);
+                const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
+                const FloatVec lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
+                const FloatVec hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
                 const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
                 hn::Store(hn::Mul(half, hn::Add(lo, hi)), d, &s.center[ch][x]);
                 hn::Store(extent, d, &s.extent[ch][x]);
@@ -694,11 +693,14 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 hv[3] = ha;
                 FloatVec unit = zero, delta[4], center[4];
                 for (int ch = 0; ch < 4; ++ch) {
-                    center[ch] = hn::Load(d, &s.center[ch][x]);
+                    const bool constant = ch == 3 && alphaConstant;  // [alpha0, alpha0], not stored by phase 1
+                    center[ch] = constant ? alphaCenter : hn::Load(d, &s.center[ch][x]);
                     delta[ch] = hn::Sub(hv[ch], center[ch]);
                     const FloatVec a = hn::Abs(delta[ch]);
-                    const FloatMask outside = hn::Gt(a, hn::Load(d, &s.extent[ch][x]));
-                    unit = hn::IfThenElse(outside, hn::Max(unit, hn::Mul(a, hn::Load(d, &s.invExtent[ch][x]))), unit);
+                    const FloatMask outside = hn::Gt(a, constant ? alphaExtent : hn::Load(d, &s.extent[ch][x]));
+                    unit = hn::IfThenElse(
+                        outside, hn::Max(unit, hn::Mul(a, constant ? infinity : hn::Load(d, &s.invExtent[ch][x]))),
+                        unit);
                 }
                 clipped = hn::And(resolveHistory, hn::Gt(unit, zero));
                 const FloatVec inv = hn::IfThenElseZero(hn::Lt(unit, infinity), reciprocal(d, unit));
@@ -733,7 +735,12 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
             // History streams: it is read again only next frame, long after it has left the caches, and streaming
             // skips the read-for-ownership of its lines. (Streaming the output too measured no gain.)
             storePixels(orr, og, ob, oa, historyRow + t.x0 + x, n, true);
-            if (in.compress) {
+            if (in.compress && !s.anyHistory[x]) {
+                // Every lane resolved to its current colour: the output is the linear input (outputColor()).
+                orr = lr;
+                og = lg;
+                ob = lb;
+            } else if (in.compress) {
                 // outputColor(): the linear input where the resolve returned the compressed input, else expanded.
                 const FloatMask same =
                     hn::And(hn::And(hn::Eq(orr, cr), hn::Eq(og, cgr)), hn::And(hn::Eq(ob, cb), hn::Eq(oa, ca)));
