@@ -228,22 +228,30 @@ HWY_INLINE void transposeBlocks(const FloatVec (&q)[4], FloatVec& r, FloatVec& g
     a = hn::BitCast(d, hn::InterleaveUpper(dd, t1, t3));
 }
 
-/// Writes the first n of the vector's pixels (r, g, b, a) interleaved to p; streaming when all of them go to a
-/// 64-byte aligned place.
-HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm::vec4* p, uint32_t n, bool stream) {
+/// Writes the first n of kLanes interleaved RGBA pixels (`packed`, 64-byte aligned) to p; streaming (`stream`) when
+/// all of them go to a 64-byte aligned place.
+HWY_INLINE void storePacked(const float* packed, glm::vec4* p, uint32_t n, bool stream) {
     const FloatTag d;
     float* o = reinterpret_cast<float*>(p);
+    if (n < kLanes) {
+        std::memcpy(o, packed, sizeof(glm::vec4) * n);
+    } else if (stream && reinterpret_cast<uintptr_t>(o) % 64 == 0) {
+        for (uint32_t k = 0; k < 4; ++k) hn::Stream(hn::Load(d, packed + k * kLanes), d, o + k * kLanes);
+    } else {
+        for (uint32_t k = 0; k < 4; ++k) hn::StoreU(hn::Load(d, packed + k * kLanes), d, o + k * kLanes);
+    }
+}
+
+/// Writes the first n of the vector's pixels (r, g, b, a) interleaved to p, as storePacked.
+HWY_INLINE void storePixels(FloatVec r, FloatVec g, FloatVec b, FloatVec a, glm::vec4* p, uint32_t n, bool stream) {
+    const FloatTag d;
     if (n == kLanes && !stream) {
-        hn::StoreInterleaved4(r, g, b, a, d, o);
+        hn::StoreInterleaved4(r, g, b, a, d, reinterpret_cast<float*>(p));
         return;
     }
     alignas(64) float packed[4 * kLanes];
     hn::StoreInterleaved4(r, g, b, a, d, packed);
-    if (n == kLanes && reinterpret_cast<uintptr_t>(o) % 64 == 0) {
-        for (uint32_t k = 0; k < 4; ++k) hn::Stream(hn::Load(d, packed + k * kLanes), d, o + k * kLanes);
-    } else {
-        std::memcpy(o, packed, sizeof(glm::vec4) * n);
-    }
+    storePacked(packed, p, n, stream);
 }
 
 /// How many region rows ahead the load asks for.
@@ -371,8 +379,8 @@ HWY_INLINE bool resolveOneColourTile(const TaaInputs& in, const Tile& t, const I
         return false;
     // The pixels as they lie in memory, N / 4 to a vector: colour bits against c0 repeated, motion (x, y pairs) into
     // running extremes per lane, even lanes x and odd ones y.
-    alignas(64) float pattern[kLanes];
-    for (uint32_t i = 0; i < N; ++i) pattern[i] = c0[int(i % 4)];
+    alignas(64) float pattern[4 * kLanes];  // c0, kLanes times: the output
+    for (uint32_t i = 0; i < 4 * N; ++i) pattern[i] = c0[int(i % 4)];
     const auto c0Bits = hn::BitCast(di, hn::Load(d, pattern));
     auto same = hn::FirstN(di, N);
     FloatVec mvMin = hn::Set(d, kHuge), mvMax = hn::Set(d, -kHuge);
@@ -411,31 +419,19 @@ HWY_INLINE bool resolveOneColourTile(const TaaInputs& in, const Tile& t, const I
     } else {
         counts.noHistory += uint64_t(t.x1 - t.x0) * (t.y1 - t.y0);
     }
-    // The output is the input colour; the history the colour the resolve works in (compressed or not). Both are one
-    // pixel repeated: a vector of it (N / 4 pixels) is stored again and again.
+    // The output is the input colour; the history the colour the resolve works in (compressed or not), streamed as
+    // the general path streams it.
     FloatVec hr = hn::Set(d, c0.x), hg = hn::Set(d, c0.y), hb = hn::Set(d, c0.z);
     if (in.compress) compressVec(d, hr, hg, hb);
     alignas(64) float historyPixels[4 * kLanes];
     hn::StoreInterleaved4(hr, hg, hb, hn::Set(d, c0.w), d, historyPixels);
-    const FloatVec outVec = hn::Load(d, pattern), historyVec = hn::Load(d, historyPixels);
-    const uint32_t w = t.x1 - t.x0, floats = 4 * w;
-    for (uint32_t y = t.y0; y < t.y1; ++y) {
-        float* o = &out.row(y)[t.x0].x;
-        float* h = &history.row(y)[t.x0].x;
-        const bool stream = reinterpret_cast<uintptr_t>(h) % 64 == 0;  // whole cache lines: no read for ownership
-        uint32_t i = 0;
-        for (; i + N <= floats; i += N) {
-            hn::StoreU(outVec, d, o + i);
-            if (stream)
-                hn::Stream(historyVec, d, h + i);
-            else
-                hn::StoreU(historyVec, d, h + i);
+    const uint32_t w = t.x1 - t.x0;
+    for (uint32_t y = t.y0; y < t.y1; ++y)
+        for (uint32_t x = 0; x < w; x += N) {
+            const uint32_t n = std::min(N, w - x);
+            storePacked(historyPixels, history.row(y) + t.x0 + x, n, true);
+            storePacked(pattern, out.row(y) + t.x0 + x, n, false);
         }
-        if (i < floats) {  // a partial tile's last pixels
-            std::memcpy(o + i, pattern, sizeof(float) * (floats - i));
-            std::memcpy(h + i, historyPixels, sizeof(float) * (floats - i));
-        }
-    }
     hwy::FlushStream();
     return true;
 }
@@ -579,9 +575,19 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
     const FloatVec zero = hn::Zero(d), one = hn::Set(d, 1.f), half = hn::Set(d, 0.5f);
     const FloatVec infinity = hn::Set(d, std::numeric_limits<float>::infinity());
     const FloatVec sigma = hn::Set(d, p.sigma), ninth = hn::Set(d, 1.f / 9.f);
-    // A constant alpha's box, [alpha0, alpha0], as centre and half extent (the operations phase 1 would use).
-    const FloatVec alphaCenter = hn::Mul(half, hn::Add(hn::Set(d, alpha0), hn::Set(d, alpha0)));
-    const FloatVec alphaExtent = hn::Mul(half, hn::Sub(hn::Set(d, alpha0), hn::Set(d, alpha0)));
+    // The box of channel ch for the row's vector at x, from its bounds (makeClipBox with n = 9), as centre and half
+    // extent (clipToBox); the inverse extent for the ratio is the refined reciprocal, infinite for a flat channel,
+    // which pulls the point exactly onto the centre.
+    const auto storeBox = [&](int ch, uint32_t x, FloatVec lo, FloatVec hi) {
+        const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
+        hn::Store(hn::Mul(half, hn::Add(lo, hi)), d, &s.center[ch][x]);
+        hn::Store(extent, d, &s.extent[ch][x]);
+        hn::Store(hn::IfThenElse(hn::Gt(extent, zero), reciprocal(d, extent), infinity), d, &s.invExtent[ch][x]);
+    };
+    // A constant alpha's box, [alpha0, alpha0], is the same for every pixel of the tile: stored once here, and the box
+    // phase below leaves channel 3 alone.
+    if (alphaConstant)
+        for (uint32_t x = 0; x < wv; x += N) storeBox(3, x, hn::Set(d, alpha0), hn::Set(d, alpha0));
     alignas(64) glm::vec4 current[kLanes];
     // Each output row runs in three phases over its vectors, their results passed through the row scratch: the
     // box and the motion, the history, the clip and blend. One vector's chain from its loads to its stores is long
@@ -633,10 +639,7 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
             hn::Store(hn::VecFromMask(d, hn::AndNot(flat, useHistory)), d, &s.resolveHistory[x]);
             hn::Store(px, d, &s.px[x]);
             hn::Store(pyv, d, &s.py[x]);
-            // The box (makeClipBox with n = 9) channel by channel, as centre and half extent (clipToBox); the
-            // inverse extent for the ratio is the refined reciprocal, infinite for a flat channel, which pulls the
-            // point exactly onto the centre. A constant alpha's box, [alpha0, alpha0], is the same for every pixel:
-            // phase 3 takes it from alphaCenter and alphaExtent.
+            // The box channel by channel (storeBox); a constant alpha's is stored once for the tile.
             for (int ch = 0; ch < (alphaConstant ? 3 : 4); ++ch) {
                 FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
                 for (uint32_t r = y + 1; r < y + 3; ++r) {
@@ -649,11 +652,7 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
                 const FloatVec lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
                 const FloatVec hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
-                const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
-                hn::Store(hn::Mul(half, hn::Add(lo, hi)), d, &s.center[ch][x]);
-                hn::Store(extent, d, &s.extent[ch][x]);
-                hn::Store(hn::IfThenElse(hn::Gt(extent, zero), reciprocal(d, extent), infinity), d,
-                          &s.invExtent[ch][x]);
+                storeBox(ch, x, lo, hi);
             }
         }
         // Phase 2: the history (compressed when the resolve is) where a lane resolves against it.
@@ -693,14 +692,11 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 hv[3] = ha;
                 FloatVec unit = zero, delta[4], center[4];
                 for (int ch = 0; ch < 4; ++ch) {
-                    const bool constant = ch == 3 && alphaConstant;  // [alpha0, alpha0], not stored by phase 1
-                    center[ch] = constant ? alphaCenter : hn::Load(d, &s.center[ch][x]);
+                    center[ch] = hn::Load(d, &s.center[ch][x]);
                     delta[ch] = hn::Sub(hv[ch], center[ch]);
                     const FloatVec a = hn::Abs(delta[ch]);
-                    const FloatMask outside = hn::Gt(a, constant ? alphaExtent : hn::Load(d, &s.extent[ch][x]));
-                    unit = hn::IfThenElse(
-                        outside, hn::Max(unit, hn::Mul(a, constant ? infinity : hn::Load(d, &s.invExtent[ch][x]))),
-                        unit);
+                    const FloatMask outside = hn::Gt(a, hn::Load(d, &s.extent[ch][x]));
+                    unit = hn::IfThenElse(outside, hn::Max(unit, hn::Mul(a, hn::Load(d, &s.invExtent[ch][x]))), unit);
                 }
                 clipped = hn::And(resolveHistory, hn::Gt(unit, zero));
                 const FloatVec inv = hn::IfThenElseZero(hn::Lt(unit, infinity), reciprocal(d, unit));

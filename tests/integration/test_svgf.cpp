@@ -598,7 +598,7 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
 
     // A pan of 0.37 px a frame (bilinear weights of every kind), sky, and bad samples in frame 3. Emission on
     // every fourth row only, and one pixel with alpha 0.5 and one with a NaN alpha among hits, so the remodulation
-    // reads colour and emission on some rows and skips them on others (Remodulation::rows).
+    // reads colour and emission on some rows and skips them on others (Remodulation::groups).
     auto fn = [](uint64_t frame, uint32_t x, uint32_t y) {
         GPixel p = noisyPixel(frame, x, y);
         p.mvec = glm::vec2(-0.37f / 48.f, 0.21f / 40.f);
