@@ -403,19 +403,18 @@ HWY_INLINE bool resolveOneColourTile(const TaaInputs& in, const Tile& t, const I
     }
     if (!hn::AllTrue(d, finite)) return false;
     if (in.historyValid) {
-        // The general path's previous position, x + mvx W (and y + mvy H), at the tile's extreme pixels and motion.
+        // The general path's previousPosition at the tile's extreme pixels and motion: the first and the last pixel
+        // with the least and the greatest motion bound every pixel's position, so both inside the frame means all are.
         alignas(64) float lo[kLanes], hi[kLanes];
         hn::Store(mvMin, d, lo);
         hn::Store(mvMax, d, hi);
-        float mn[2] = {lo[0], lo[1]}, mx[2] = {hi[0], hi[1]};
+        glm::vec2 mn(lo[0], lo[1]), mx(hi[0], hi[1]), pos;
         for (uint32_t i = 2; i < N; ++i) {
-            mn[i % 2] = std::min(mn[i % 2], lo[i]);
-            mx[i % 2] = std::max(mx[i % 2], hi[i]);
+            mn[int(i % 2)] = std::min(mn[int(i % 2)], lo[i]);
+            mx[int(i % 2)] = std::max(mx[int(i % 2)], hi[i]);
         }
-        const float fw = float(W), fh = float(H);
-        const float left = float(t.x0) + mn[0] * fw, right = float(t.x1 - 1) + mx[0] * fw;
-        const float top = float(t.y0) + mn[1] * fh, bottom = float(t.y1 - 1) + mx[1] * fh;
-        if (!(left >= -0.5f && right <= fw - 0.5f && top >= -0.5f && bottom <= fh - 0.5f)) return false;
+        if (!previousPosition(t.x0, t.y0, W, H, mn, pos) || !previousPosition(t.x1 - 1, t.y1 - 1, W, H, mx, pos))
+            return false;
     } else {
         counts.noHistory += uint64_t(t.x1 - t.x0) * (t.y1 - t.y0);
     }

@@ -8,6 +8,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -63,9 +64,16 @@ struct Pipeline {
     }
 };
 
-/// Adds the last frame's pass times and SVGF stage times ("ms.*") of p to the sums.
-void addTimes(const Pipeline& p, std::map<std::string, double>& passMs, std::map<std::string, double>& stageMs) {
-    for (const auto& t : p.graph->timings()) passMs[t.name] += t.lastMs;
+/// Each pass's time in every frame.
+using FrameTimes = std::map<std::string, std::vector<double>>;
+
+double sum(const std::vector<double>& v) {
+    return std::accumulate(v.begin(), v.end(), 0.0);
+}
+
+/// Appends the last frame's pass times of p and adds its SVGF stage times ("ms.*") to the sums.
+void addTimes(const Pipeline& p, FrameTimes& passMs, std::map<std::string, double>& stageMs) {
+    for (const auto& t : p.graph->timings()) passMs[t.name].push_back(t.lastMs);
     for (const auto& [pass, counters] : p.graph->lastStats())
         for (const auto& [name, value] : counters)
             if (name.rfind("ms.", 0) == 0) stageMs[pass + "." + name] += value;
@@ -75,23 +83,21 @@ void runGraph(benchmark::State& state, const std::string& graphName, uint32_t wi
     Pipeline p(graphName, width, height);
     p.warmUp();
 
-    std::map<std::string, double> passMs, stageMs;
-    std::map<std::string, std::vector<double>> frameMs;  // each pass's time in every frame
+    FrameTimes passMs;
+    std::map<std::string, double> stageMs;
     uint64_t timed = 0;
     for (auto _ : state) {
         p.step();
         addTimes(p, passMs, stageMs);
-        for (const auto& t : p.graph->timings()) frameMs[t.name].push_back(t.lastMs);
         ++timed;
     }
     const double megapixels = double(width) * height * 1e-6;
-    for (const auto& [name, ms] : passMs) {
-        state.counters[name + " ms"] = ms / double(timed);
-        state.counters[name + " ms/MP"] = ms / double(timed) / megapixels;
-    }
-    // The median frame besides the mean: on a virtual machine a frame now and then runs while the host takes the
-    // core away, which the mean carries and the median does not.
-    for (auto& [name, times] : frameMs) {
+    for (auto& [name, times] : passMs) {
+        const double mean = sum(times) / double(timed);
+        state.counters[name + " ms"] = mean;
+        state.counters[name + " ms/MP"] = mean / megapixels;
+        // The median frame besides the mean: on a virtual machine a frame now and then runs while the host takes
+        // the core away, which the mean carries and the median does not.
         std::nth_element(times.begin(), times.begin() + ptrdiff_t(times.size() / 2), times.end());
         state.counters[name + " ms median"] = times[times.size() / 2];
     }
@@ -102,7 +108,8 @@ void runGraph(benchmark::State& state, const std::string& graphName, uint32_t wi
 /// as "<pass> a", "<pass> b" and "<pass> b/a", and the SVGF stages' ratios. Which of the two goes first alternates
 /// too: the second of a pair otherwise finds caches and clocks in a different state (a measured bias of up to 5 %).
 void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b) {
-    std::map<std::string, double> aMs, bMs, aStages, bStages;
+    FrameTimes aMs, bMs;
+    std::map<std::string, double> aStages, bStages;
     uint64_t timed = 0;
     for (auto _ : state) {
         for (int i = 0; i < 2; ++i) {
@@ -116,10 +123,11 @@ void compareAlternating(benchmark::State& state, Pipeline& a, Pipeline& b) {
         }
         ++timed;
     }
-    for (const auto& [name, ms] : aMs) {
+    for (const auto& [name, times] : aMs) {
+        const double ms = sum(times), other = sum(bMs[name]);
         state.counters[name + " a"] = ms / double(timed);
-        state.counters[name + " b"] = bMs[name] / double(timed);
-        state.counters[name + " b/a"] = bMs[name] / ms;
+        state.counters[name + " b"] = other / double(timed);
+        state.counters[name + " b/a"] = other / ms;
     }
     // Every SVGF stage's ratio (reprojection, variance, each level, ...).
     for (const auto& [stage, ms] : aStages)

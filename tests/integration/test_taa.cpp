@@ -137,6 +137,15 @@ bool allFinite(const Texture& t) {
     return glm::vec4(base + n, 0.5f * base + n, 1.f - base, 1.f);
 }
 
+/// Restricts Highway's run-time dispatch to `targets` (0: what the CPU has) for its scope, however the scope ends (a
+/// failed ASSERT returns from the test).
+struct DispatchTargets {
+    explicit DispatchTargets(int64_t targets) { hwy::SetSupportedTargetsForTest(targets); }
+    ~DispatchTargets() { hwy::SetSupportedTargetsForTest(0); }
+    DispatchTargets(const DispatchTargets&) = delete;
+    DispatchTargets& operator=(const DispatchTargets&) = delete;
+};
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -452,7 +461,7 @@ TEST(TAAPass, OneColourTilesResolveToTheirInputBitForBit) {
     for (const Run run : {Run{"reference", true, 0}, Run{"tiled, AVX2", false, HWY_AVX2}, Run{"tiled", false, 0}}) {
         if (run.target && (hwy::SupportedTargets() & run.target) == 0) continue;
         SCOPED_TRACE(run.name);
-        hwy::SetSupportedTargetsForTest(run.target);
+        const DispatchTargets dispatch(run.target);
         Harness h(nlohmann::json{{"reference", run.reference}}, W, H);
         h.source->color = [&](uint64_t, uint32_t x, uint32_t y) {
             return x == 20 && y == 30 ? glm::vec4(-0.f, 0.f, 0.f, 1.f) : sky;
@@ -473,7 +482,6 @@ TEST(TAAPass, OneColourTilesResolveToTheirInputBitForBit) {
                 ASSERT_EQ(std::memcmp(&history.at(x, y), &input, sizeof(glm::vec4)), 0) << x << "," << y;
             }
         EXPECT_TRUE(std::signbit(out.at(20, 30).x));
-        hwy::SetSupportedTargetsForTest(0);
     }
 }
 
@@ -598,9 +606,11 @@ TEST(TAAPass, TiledPathAgreesWithTheReferenceKernelOnEveryTarget) {
     for (const Target t : {Target{HWY_AVX2, 8}, Target{HWY_AVX3, 16}}) {
         if ((hwy::SupportedTargets() & t.bit) == 0) continue;
         SCOPED_TRACE(hwy::TargetName(t.bit));
-        hwy::SetSupportedTargetsForTest(t.bit);
-        const double lanes = tiledPathAgainstReference(1000, 37);
-        hwy::SetSupportedTargetsForTest(0);  // the best target again
+        double lanes = 0.0;
+        {
+            const DispatchTargets dispatch(t.bit);
+            lanes = tiledPathAgainstReference(1000, 37);
+        }
         EXPECT_EQ(lanes, t.lanes) << "the dispatch should follow the supported targets";
         ++tested;
     }
