@@ -81,9 +81,16 @@ RayScene::~RayScene() {
 void RayScene::updateInstances(const Scene& scene) {
     Impl& m = *mImpl;
     for (size_t i = 0; i < m.instanceGeoms.size() && i < scene.instances.size(); ++i) {
-        const glm::mat4& w = scene.instances[i].world;
-        rtcSetGeometryTransform(m.instanceGeoms[i], 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR, &w[0][0]);
+        const Instance& inst = scene.instances[i];
+        // Embree carries rays into an instance through its inverse; a singular transform would make them
+        // invalid, and a point-sized instance breaks the top-level build.
+        if (!inst.visible()) {
+            rtcDisableGeometry(m.instanceGeoms[i]);
+            continue;
+        }
+        rtcSetGeometryTransform(m.instanceGeoms[i], 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR, &inst.world[0][0]);
         rtcCommitGeometry(m.instanceGeoms[i]);
+        rtcEnableGeometry(m.instanceGeoms[i]);
     }
     rtcCommitScene(m.top);
 }

@@ -167,6 +167,19 @@ std::string nodeLabel(const std::vector<Node>& nodes, size_t i) {
 Scene::Scene() = default;
 Scene::~Scene() = default;
 
+bool Instance::visible() const {
+    const glm::mat3 m(world);
+    const float det = glm::determinant(m);
+    if (!(std::fabs(det) > 0.f) || !std::isfinite(det)) return false;
+    // Rays enter the instance through the inverse: it must stay far below float's range (Embree rejects rays
+    // whose components exceed about 1.8e38).
+    const glm::mat3 inv = glm::inverse(m);
+    for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r)
+            if (!(std::fabs(inv[c][r]) <= 1e18f)) return false;
+    return std::isfinite(world[3][0]) && std::isfinite(world[3][1]) && std::isfinite(world[3][2]);
+}
+
 void Scene::updateWorldTransforms() {
     mNodeWorld.assign(nodes.size(), glm::mat4(1.f));
     // Parents before children: a stack seeded with every parentless node.
@@ -503,11 +516,8 @@ void Scene::rebuildView() {
         InstanceView& v = mInstanceViews[i];
         v.world = inst.world;
         v.prevWorld = inst.prevWorld;
-        const glm::mat3 m(inst.world);
-        const float det = glm::determinant(m);
-        // A zero scale (a common way to hide an object in an animation) has no inverse; the instance
-        // is then invisible anyway, so any finite matrix will do.
-        v.normalMatrix = (det != 0.f && std::isfinite(det)) ? glm::transpose(glm::inverse(m)) : glm::mat3(1.f);
+        // A hidden instance (Instance::visible) is never hit; any finite matrix will do.
+        v.normalMatrix = inst.visible() ? glm::transpose(glm::inverse(glm::mat3(inst.world))) : glm::mat3(1.f);
         v.mesh = inst.mesh;
     }
     mView.meshes = mMeshViews.data();

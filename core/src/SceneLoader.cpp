@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
+#include <type_traits>
 
 #include "loom/Error.h"
 #include "loom/Scene.h"
@@ -684,6 +685,18 @@ void Importer::convertMaterials() {
             warn(label + ": negative emissive factor clamped to 0");
             mat.emissiveFactor = glm::max(mat.emissiveFactor, glm::vec3(0.f));
         }
+        // glTF bounds these factors to [0, 1]. A base colour above 1 reflects more light than arrives: a path
+        // gains energy at every bounce, and a filter that remodulates by the albedo can overflow.
+        const auto unitRange = [&](auto& factor, const char* name) {
+            using T = std::decay_t<decltype(factor)>;
+            const T clamped = glm::clamp(factor, T(0.f), T(1.f));
+            if (clamped == factor) return;
+            warn(label + ": " + name + " outside [0, 1] clamped to it");
+            factor = clamped;
+        };
+        unitRange(mat.baseColorFactor, "baseColorFactor");
+        unitRange(mat.metallicFactor, "metallicFactor");
+        unitRange(mat.roughnessFactor, "roughnessFactor");
         // Images are kept as stored; the slot decides the decoding when sampled (base colour and emission
         // are sRGB, metallic-roughness and normal maps linear), so one image may serve both kinds of slot.
         mat.baseColorTexture = textureImage(pbr.baseColorTexture, label, "baseColorTexture");

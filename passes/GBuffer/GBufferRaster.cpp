@@ -1004,7 +1004,7 @@ void GBufferRaster::execute(PassContext& ctx) {
     order.reserve(scene->instances.size());
     for (size_t i = 0; i < scene->instances.size(); ++i) {
         const Instance& inst = scene->instances[i];
-        if (inst.mesh >= g.meshes.size() || !g.meshes[inst.mesh].vao) continue;
+        if (inst.mesh >= g.meshes.size() || !g.meshes[inst.mesh].vao || !inst.visible()) continue;
         const glm::vec3 c = glm::vec3(inst.world * glm::vec4(g.meshes[inst.mesh].center, 1.f));
         order.emplace_back(glm::dot(c - camera.position(), camera.forward()), uint32_t(i));
     }

@@ -233,7 +233,7 @@ void PathTracer::buildLights(const Scene& scene) {
         const Instance& inst = scene.instances[i];
         const Mesh& mesh = scene.meshes[inst.mesh];
         const Material& mat = scene.materials[mesh.material];
-        if (!mat.isEmissive()) continue;
+        if (!mat.isEmissive() || !inst.visible()) continue;
         mInstanceTriBase[i] = uint32_t(mTris.size());
         const MaterialData& md = view.materials[mesh.material];
         // Selection weight: mean emitted luminance (texture mean when textured) times area.

@@ -698,9 +698,19 @@ FineDerivatives fineDerivatives(const Scene& scene, const Camera& cam, uint32_t 
 
 /// Renders a shipped scene with GBufferRaster and GBufferRT in one graph and
 /// compares them pixel by pixel where both see the same triangle.
-void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, glm::vec2 jitter) {
+/// `hide`: a node whose scale is set to (1, 1, 0) first; neither pass may show its instances.
+void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, glm::vec2 jitter,
+                          const std::string& hide = {}) {
     auto scene = Scene::load(std::string(LOOM_TEST_SOURCE_DIR) + "/data/scenes/" + sceneFile);
     const uint32_t w = 160, h = 120;
+    std::vector<uint32_t> hidden;
+    if (!hide.empty()) {
+        for (size_t i = 0; i < scene->nodes.size(); ++i)
+            if (scene->nodes[i].name == hide) scene->nodes[i].scale = glm::vec3(1.f, 1.f, 0.f);
+        for (size_t i = 0; i < scene->instances.size(); ++i)
+            if (scene->nodes[scene->instances[i].node].name == hide) hidden.push_back(uint32_t(i));
+        ASSERT_FALSE(hidden.empty()) << "no instance of node " << hide;
+    }
     scene->update(t0);
     scene->update(t1);
     Camera cam = scene->camera;
@@ -736,6 +746,10 @@ void compareWithRayTracer(const std::string& sceneFile, double t0, double t1, gl
         for (uint32_t x = 0; x < w; ++x) {
             const glm::uvec4 vr = texel<glm::uvec4>(tex("Raster", "vbuffer"), x, y);
             const glm::uvec4 vt = texel<glm::uvec4>(tex("RT", "vbuffer"), x, y);
+            for (uint32_t i : hidden) {
+                EXPECT_NE(vr.x, i) << "Raster shows hidden instance " << i << " at " << x << ", " << y;
+                EXPECT_NE(vt.x, i) << "RT shows hidden instance " << i << " at " << x << ", " << y;
+            }
             if (vr.x != vt.x || vr.y != vt.y) {
                 ++differ;  // a silhouette or shared edge: either triangle is right
                 continue;
@@ -804,6 +818,12 @@ TEST(GBufferRaster, MatchesGBufferRTOnCornellDynamic) {
 
 TEST(GBufferRaster, MatchesGBufferRTOnCornellBox) {
     compareWithRayTracer("cornell_box.gltf", 0.0, 0.0, glm::vec2(-0.3f, 0.15f));
+}
+
+// A node scaled to 0 along one axis has no inverse transform: both passes hide it (Instance::visible), though
+// the sphere, flattened along the view axis, would still cover its disc.
+TEST(GBufferRaster, MatchesGBufferRTWithAFlattenedInstance) {
+    compareWithRayTracer("cornell_dynamic.gltf", 1.0, 1.0, glm::vec2(0.f), "Sphere");
 }
 
 TEST(GBufferRaster, MatchesGBufferRTOnMaterials) {

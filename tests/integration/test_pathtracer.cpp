@@ -343,6 +343,29 @@ TEST(PathTracer, NonFiniteSamplesAreDroppedAndCounted) {
     EXPECT_GT(g->lastStats().at("PT").at("nonFiniteSamplesDropped"), 0.0);
 }
 
+// The only light, on a node scaled to 0 along its normal, keeps its area but is hidden (Instance::visible):
+// next-event estimation must not sample it either, so the frame is black. Unflattened, it lights the floor.
+TEST(PathTracer, AHiddenLightCastsNoLight) {
+    for (bool flattened : {false, true}) {
+        auto scene = sceneOf({quad({-2.f, 0.f, -2.f}, {4.f, 0.f, 0.f}, {0.f, 0.f, 4.f}),
+                              quad({-0.5f, 0.f, -0.5f}, {1.f, 0.f, 0.f}, {0.f, 0.f, 1.f})},
+                             {lambert(glm::vec3(0.8f)), lambert(glm::vec3(0.f), glm::vec3(5.f))});
+        scene->nodes[0].translation = glm::vec3(0.f, -1.f, 0.f);  // the floor faces up, the light down
+        scene->nodes[0].rotation = glm::angleAxis(3.14159265f, glm::vec3(1.f, 0.f, 0.f));
+        scene->nodes[1].translation = glm::vec3(0.f, 1.f, 0.f);
+        if (flattened) scene->nodes[1].scale = glm::vec3(1.f, 0.f, 1.f);
+        scene->finalize();
+        lookAt(*scene, glm::vec3(3.f, 0.5f, 0.f), glm::vec3(0.f, -1.f, 0.f), 1.2f);
+        const uint32_t W = 16, H = 16;
+        auto g = ptGraph({{"maxBounces", 2}, {"samplesPerPixel", 4}}, W, H, scene);
+        const double mean = meanLuminance(averageFrames(*g, *scene, W, H, 0, 2));
+        if (flattened)
+            EXPECT_EQ(mean, 0.0);
+        else
+            EXPECT_GT(mean, 0.05);
+    }
+}
+
 // color = direct + indirect.
 TEST(PathTracer, DirectPlusIndirectIsColor) {
     const uint32_t W = 16, H = 16;

@@ -461,6 +461,28 @@ TEST_F(SceneFiles, MaterialDefaultsFollowGltf) {
     EXPECT_EQ(s->view().materials[1].roughnessFactor, 0.25f);
 }
 
+// glTF bounds base colour, metallic and roughness to [0, 1]; a factor outside is clamped to it, with a warning
+// naming the material. A base colour of 1e30 would otherwise multiply a path's energy at every bounce.
+TEST_F(SceneFiles, MaterialFactorsOutsideTheirRangeAreClampedWithAWarning) {
+    Gltf g = triangleScene();
+    g.j["materials"] = json::array(
+        {{{"name", "Glowing"},
+          {"pbrMetallicRoughness",
+           {{"baseColorFactor", {0.5, 1e30, -2.0, 1.0}}, {"metallicFactor", -0.5}, {"roughnessFactor", 7.0}}}},
+         {{"name", "Valid"}, {"pbrMetallicRoughness", {{"baseColorFactor", {0.0, 1.0, 0.25, 1.0}}}}}});
+    g.j["meshes"][0]["primitives"][0]["material"] = 0;
+    auto s = load(g);
+    ASSERT_EQ(s->materials.size(), 2u);
+    const Material& m = s->materials[0];
+    EXPECT_EQ(m.baseColorFactor, glm::vec4(0.5f, 1.f, 0.f, 1.f));
+    EXPECT_EQ(m.metallicFactor, 0.f);
+    EXPECT_EQ(m.roughnessFactor, 1.f);
+    EXPECT_EQ(s->materials[1].baseColorFactor, glm::vec4(0.f, 1.f, 0.25f, 1.f));
+    ASSERT_EQ(s->warnings.size(), 3u);
+    for (const char* factor : {"baseColorFactor", "metallicFactor", "roughnessFactor"})
+        EXPECT_TRUE(hasWarning(*s, "'Glowing'", factor)) << factor;
+}
+
 TEST_F(SceneFiles, EmissiveStrengthMultipliesEmissiveFactor) {
     Gltf g = triangleScene();
     g.j["extensionsUsed"] = {"KHR_materials_emissive_strength"};
@@ -733,6 +755,73 @@ TEST_F(SceneFiles, RayHitsTheRightInstanceAndFollowsAnimation) {
     EXPECT_NEAR(hit.t, 6.f, 1e-4f);
     EXPECT_TRUE(s->rayScene().occluded({10.f, 0.5f, -0.5f}, {-1, 0, 0}, 0.f, 100.f));
     EXPECT_FALSE(s->rayScene().occluded({10.f, 0.5f, -0.5f}, {-1, 0, 0}, 0.f, 5.f));
+}
+
+// A transform without an inverse (a zero scale on some axis, a common way to hide an object in an animation)
+// hides its instance: rays pass it, single and in packets, and it is back once the scale recovers. Embree would
+// carry rays into it through the inverse and reject them.
+TEST_F(SceneFiles, InstancesWithASingularTransformAreHiddenUntilTheyRecover) {
+    Gltf g;
+    const int pos = g.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
+    const int mesh = g.mesh("Tri", {{"POSITION", pos}});
+    const int shrinking = g.node({{"name", "Shrinking"}, {"mesh", mesh}});
+    const int behind = g.node({{"name", "Behind"}, {"mesh", mesh}, {"translation", {0, 0, -1}}});
+    g.scene({shrinking, behind});
+    // Flattened along z, the axis the triangle lies across: it would keep its whole area.
+    const int in = g.floats({0, 1, 2}, "SCALAR");
+    const int out = g.floats({1, 1, 1, 1, 1, 0, 1, 1, 1}, "VEC3");
+    g.j["animations"] = json::array(
+        {{{"name", "Squash"},
+          {"samplers", json::array({{{"input", in}, {"output", out}}})},
+          {"channels", json::array({{{"sampler", 0}, {"target", {{"node", shrinking}, {"path", "scale"}}}}})}}});
+    auto s = load(g);
+    ASSERT_EQ(s->instances.size(), 2u);
+    const auto firstHit = [&](bool packet) {
+        if (!packet) return s->rayScene().intersect({0.25f, 0.25f, 5.f}, {0, 0, -1});
+        glm::vec3 origins[16], dirs[16];
+        bool valid[16];
+        RayHit hits[16];
+        for (int i = 0; i < 16; ++i) {
+            origins[i] = {0.05f + 0.04f * float(i % 4), 0.05f + 0.04f * float(i / 4), 5.f};
+            dirs[i] = {0, 0, -1};
+            valid[i] = true;
+        }
+        s->rayScene().intersect16(origins, dirs, valid, 1e30f, hits);
+        for (int i = 1; i < 16; ++i) EXPECT_EQ(hits[i].instance, hits[0].instance) << i;
+        return hits[5];
+    };
+    for (double t : {0.0, 1.0, 2.0}) {
+        s->update(t);
+        const bool hidden = t == 1.0;
+        EXPECT_EQ(s->instances[0].visible(), !hidden) << t;
+        EXPECT_TRUE(s->instances[1].visible()) << t;
+        for (bool packet : {false, true}) {
+            const RayHit hit = firstHit(packet);
+            ASSERT_TRUE(hit.hit()) << t;
+            EXPECT_EQ(hit.instance, hidden ? 1u : 0u) << "t " << t << " packet " << packet;
+            EXPECT_NEAR(hit.t, hidden ? 6.f : 5.f, 1e-4f);
+        }
+        const glm::mat3& nm = s->view().instances[0].normalMatrix;
+        for (int c = 0; c < 3; ++c)
+            for (int r = 0; r < 3; ++r) EXPECT_TRUE(std::isfinite(nm[c][r])) << t;
+    }
+}
+
+TEST(SceneInCode, InstanceVisibilityNeedsAFiniteModerateInverse) {
+    const auto visible = [](const glm::mat4& world) {
+        Instance inst;
+        inst.world = world;
+        return inst.visible();
+    };
+    EXPECT_TRUE(visible(glm::mat4(1.f)));
+    EXPECT_TRUE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1e-5f))));
+    EXPECT_TRUE(visible(glm::scale(glm::mat4(1.f), glm::vec3(-2.f, 3.f, 1e4f))));  // mirrored
+    EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(0.f))));
+    EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1.f, 0.f, 1.f))));
+    EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1e-30f))));              // determinant rounds to 0
+    EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1e-20f, 1e20f, 1.f))));  // inverse beyond 1e18
+    EXPECT_FALSE(visible(glm::translate(glm::mat4(1.f), glm::vec3(NAN, 0.f, 0.f))));
+    EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(INFINITY, 1.f, 1.f))));
 }
 
 TEST_F(SceneFiles, CubicSplineAnimationFromFile) {
