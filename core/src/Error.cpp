@@ -5,15 +5,57 @@
 
 namespace loom {
 
+namespace {
+
+/// The length of the well-formed UTF-8 sequence at s[i] (a printable character), or 0.
+size_t utf8Length(std::string_view s, size_t i) {
+    const auto byte = [&](size_t k) { return static_cast<unsigned char>(s[k]); };
+    const unsigned char b = byte(i);
+    if (b >= 0x20 && b < 0x7f) return 1;
+    const size_t n = b >= 0xc2 && b <= 0xdf ? 2 : b >= 0xe0 && b <= 0xef ? 3 : b >= 0xf0 && b <= 0xf4 ? 4 : 0;
+    if (n == 0 || i + n > s.size()) return 0;
+    for (size_t k = 1; k < n; ++k)
+        if ((byte(i + k) & 0xc0) != 0x80) return 0;
+    // Overlong forms, UTF-16 surrogates and code points past U+10FFFF.
+    const unsigned char b1 = byte(i + 1);
+    if ((b == 0xe0 && b1 < 0xa0) || (b == 0xed && b1 >= 0xa0) || (b == 0xf0 && b1 < 0x90) || (b == 0xf4 && b1 >= 0x90))
+        return 0;
+    return n;
+}
+
+}  // namespace
+
+std::string printable(std::string_view s) {
+    std::string out;
+    out.reserve(s.size());
+    for (size_t i = 0; i < s.size();) {
+        if (s[i] == '\n' || s[i] == '\t') {
+            out += s[i++];
+            continue;
+        }
+        if (const size_t n = utf8Length(s, i)) {
+            out.append(s, i, n);
+            i += n;
+            continue;
+        }
+        static const char kHex[] = "0123456789abcdef";
+        const unsigned char b = static_cast<unsigned char>(s[i++]);
+        out += "\\x";
+        out += kHex[b >> 4];
+        out += kHex[b & 15];
+    }
+    return out;
+}
+
 Error::Error(Info info) : std::runtime_error(format(info)), mInfo(std::move(info)) {}
 
 std::string Error::format(const Info& info) {
     std::ostringstream s;
-    if (!info.file.empty()) s << info.file << ": ";
-    if (!info.where.empty()) s << info.where << ": ";
-    s << info.what;
-    if (!info.expected.empty()) s << "\n  expected: " << info.expected;
-    if (!info.suggestion.empty()) s << "\n  hint: " << info.suggestion;
+    if (!info.file.empty()) s << printable(info.file) << ": ";
+    if (!info.where.empty()) s << printable(info.where) << ": ";
+    s << printable(info.what);
+    if (!info.expected.empty()) s << "\n  expected: " << printable(info.expected);
+    if (!info.suggestion.empty()) s << "\n  hint: " << printable(info.suggestion);
     return s.str();
 }
 

@@ -1,7 +1,5 @@
 #include "loom/ImageIO.h"
 
-#include <atomic>
-
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
@@ -15,11 +13,15 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cctype>
 #include <cerrno>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <memory>
 #include <system_error>
@@ -73,9 +75,11 @@ void writeAtomically(const fs::path& path, const std::function<void(std::ofstrea
     checkOutputFolder(path);
     static std::atomic<uint64_t> counter{0};
     // A hidden sibling ".<name>.<pid>.<n>.partial": never mistaken for an output, never a glob match.
-    const std::string tmp = (path.parent_path() / ("." + path.filename().string() + "." + std::to_string(::getpid()) +
-                                                   "." + std::to_string(counter++) + ".partial"))
-                                .string();
+    std::string name = ".";  // appended piece by piece: GCC 12 warns falsely (-Wrestrict) on "." + string
+    name += path.filename().string();
+    for (const std::string& part : {std::to_string(::getpid()), std::to_string(counter++), std::string("partial")})
+        name += '.' + part;
+    const std::string tmp = (path.parent_path() / name).string();
     auto removeTmp = [&] {
         std::error_code ignored;
         fs::remove(tmp, ignored);
@@ -249,6 +253,123 @@ Texture readStb(const fs::path& path) {
     return tex;
 }
 
+/// Radiance RGBE (.hdr): the header's lines up to an empty one, the resolution line "-Y height +X width", then
+/// rows either flat (4 bytes a pixel) or run-length encoded per channel (a row opening with 2, 2 and its width).
+/// Every count is checked against what is left of the row and of the file, so a damaged file is an error, never a
+/// loop that does not advance. A texel is m 2^(e - 136) per channel (0 when e = 0), alpha 1.
+class RadianceReader {
+public:
+    RadianceReader(const fs::path& path, std::string bytes) : mPath(path), mBytes(std::move(bytes)) {}
+
+    Texture read() {
+        header();
+        Texture tex(mWidth, mHeight, Format::RGBA32F);
+        std::vector<uint8_t> rgbe(size_t(mWidth) * 4);
+        for (uint32_t y = 0; y < mHeight; ++y) {
+            row(y, rgbe);
+            auto* out = reinterpret_cast<float*>(tex.row(y));
+            for (uint32_t x = 0; x < mWidth; ++x) {
+                const uint8_t* p = &rgbe[size_t(x) * 4];
+                const float scale = p[3] == 0 ? 0.f : std::ldexp(1.f, int(p[3]) - 136);
+                for (int c = 0; c < 3; ++c) out[4 * x + c] = float(p[c]) * scale;
+                out[4 * x + 3] = 1.f;
+            }
+        }
+        return tex;
+    }
+
+private:
+    [[noreturn]] void fail(const std::string& what, const std::string& expected,
+                           const std::string& suggestion = {}) const {
+        throwBadInput("", what, expected, suggestion, mPath.string());
+    }
+    /// A header line as an error quotes it: at most 40 bytes (the message escapes what is not text).
+    static std::string quoted(const std::string& l) {
+        return "'" + (l.size() > 40 ? l.substr(0, 40) + "..." : l) + "'";
+    }
+    std::string line() {
+        const size_t end = mBytes.find('\n', mPos);
+        if (end == std::string::npos) fail("the header ends before the image size", "a complete Radiance header");
+        std::string l = mBytes.substr(mPos, end - mPos);
+        mPos = end + 1;
+        if (!l.empty() && l.back() == '\r') l.pop_back();
+        return l;
+    }
+    void header() {
+        const std::string signature = line();
+        if (signature != "#?RADIANCE" && signature != "#?RGBE")
+            fail("not a Radiance HDR image (it does not start with #?RADIANCE)", "a Radiance .hdr file",
+                 "convert the map to .hdr or .exr");
+        for (std::string l = line(); !l.empty(); l = line()) {
+            if (l.rfind("FORMAT=", 0) == 0 && l != "FORMAT=32-bit_rle_rgbe")
+                fail("unsupported pixel format " + quoted(l.substr(7)), "FORMAT=32-bit_rle_rgbe",
+                     "convert the map to RGB (not XYZ) .hdr or to .exr");
+        }
+        const std::string size = line();
+        char ySign = 0, xSign = 0, yAxis = 0, xAxis = 0, rest = 0;
+        unsigned long h = 0, w = 0;
+        if (std::sscanf(size.c_str(), "%c%c %lu %c%c %lu %c", &ySign, &yAxis, &h, &xSign, &xAxis, &w, &rest) != 6 ||
+            ySign != '-' || yAxis != 'Y' || xSign != '+' || xAxis != 'X')
+            fail("unsupported image size line " + quoted(size), "-Y <height> +X <width> (rows top to bottom)",
+                 "re-save the map in the usual orientation");
+        if (w == 0 || h == 0 || w > kMaxSide || h > kMaxSide)
+            fail("image size " + std::to_string(w) + "x" + std::to_string(h) + " out of range",
+                 "1 to " + std::to_string(kMaxSide) + " pixels a side");
+        mWidth = uint32_t(w);
+        mHeight = uint32_t(h);
+    }
+    void truncated(uint32_t y) const {
+        fail("the file ends in row " + std::to_string(y) + " of " + std::to_string(mHeight), "a complete image",
+             "the file is truncated; copy or download it again");
+    }
+    void row(uint32_t y, std::vector<uint8_t>& rgbe) {
+        const size_t left = mBytes.size() - mPos;
+        const auto* in = reinterpret_cast<const uint8_t*>(mBytes.data()) + mPos;
+        const bool encoded =
+            mWidth >= 8 && mWidth < 32768 && left >= 4 && in[0] == 2 && in[1] == 2 && (in[2] & 0x80) == 0;
+        if (!encoded) {
+            if (left < rgbe.size()) truncated(y);
+            std::memcpy(rgbe.data(), in, rgbe.size());
+            mPos += rgbe.size();
+            return;
+        }
+        if ((uint32_t(in[2]) << 8 | in[3]) != mWidth)
+            fail("row " + std::to_string(y) + " is encoded for a width of " + std::to_string(in[2] << 8 | in[3]),
+                 "rows of the header's width, " + std::to_string(mWidth), "the file is damaged");
+        size_t pos = 4;
+        for (uint32_t c = 0; c < 4; ++c) {
+            for (uint32_t x = 0; x < mWidth;) {
+                if (pos >= left) truncated(y);
+                const uint32_t count = in[pos++];
+                const bool run = count > 128;
+                const uint32_t n = run ? count - 128 : count;
+                if (n == 0 || n > mWidth - x)
+                    fail("row " + std::to_string(y) + " holds a run of " + std::to_string(n) + " at column " +
+                             std::to_string(x),
+                         "runs of 1 to the " + std::to_string(mWidth - x) + " pixels left in the row",
+                         "the file is damaged");
+                if (pos + (run ? 1 : n) > left) truncated(y);
+                for (uint32_t k = 0; k < n; ++k) rgbe[size_t(x + k) * 4 + c] = in[run ? pos : pos + k];
+                pos += run ? 1 : n;
+                x += n;
+            }
+        }
+        mPos += pos;
+    }
+
+    static constexpr unsigned long kMaxSide = 1u << 16;
+    fs::path mPath;
+    std::string mBytes;
+    size_t mPos = 0;
+    uint32_t mWidth = 0, mHeight = 0;
+};
+
+bool hasRadianceMagic(const fs::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    char magic[2] = {};
+    return in.read(magic, 2) && magic[0] == '#' && magic[1] == '?';
+}
+
 }  // namespace
 
 const char* imageExtension(Format f) { return formatInfo(f).component == ComponentType::Unorm8 ? "png" : "exr"; }
@@ -272,7 +393,9 @@ void writeImage(const fs::path& path, const Texture& tex) {
     }
 }
 
-Texture readImage(const fs::path& path) {
+namespace {
+
+void checkReadable(const fs::path& path) {
     std::error_code ec;
     if (!fs::exists(path, ec)) {
         throwBadInput("", "image file not found", "an existing image file",
@@ -285,7 +408,23 @@ Texture readImage(const fs::path& path) {
         throwBadInput("", std::string("cannot read the file: ") + std::strerror(errno), "a readable image file",
                       "check the file's permissions", path.string());
     }
-    return hasExrMagic(path) ? readExr(path) : readStb(path);
+}
+
+}  // namespace
+
+Texture readImage(const fs::path& path) {
+    checkReadable(path);
+    if (hasExrMagic(path)) return readExr(path);
+    if (hasRadianceMagic(path)) return readRadianceHdr(path);
+    return readStb(path);
+}
+
+Texture readRadianceHdr(const fs::path& path) {
+    checkReadable(path);
+    std::ifstream in(path, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) throwRuntime(path, "cannot read the file");
+    return RadianceReader(path, std::move(bytes)).read();
 }
 
 void writeFileAtomic(const fs::path& path, const std::string& bytes) {

@@ -4,7 +4,6 @@
 #include "loom/Scene.h"
 
 #include <spdlog/spdlog.h>
-#include <stb/stb_image.h>
 
 #include <algorithm>
 #include <cmath>
@@ -422,40 +421,17 @@ void Scene::loadEnvironmentMap(const std::filesystem::path& path) {
     if (!std::filesystem::is_regular_file(path, ec))
         throwBadInput("environment map", "file not found", "an equirectangular .hdr or .exr image", "check the path",
                       name);
-    std::vector<glm::vec3> texels;
-    uint32_t width = 0, height = 0;
     std::string ext = path.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    if (ext == ".exr") {
-        const Texture tex = readImage(path);
-        if (tex.format() != Format::RGBA32F)
-            throwBadInput("environment map", "the EXR holds integer channels, not radiance",
-                          "an RGB(A) float or half EXR", {}, name);
-        width = tex.width();
-        height = tex.height();
-        texels.resize(size_t(width) * height);
-        const auto view = tex.view<glm::vec4>();
-        for (uint32_t y = 0; y < height; ++y)
-            for (uint32_t x = 0; x < width; ++x) texels[size_t(y) * width + x] = glm::vec3(view.at(x, y));
-    } else {
-        // stbi_loadf would also accept PNG/JPEG and guess a gamma; a radiance map must be HDR data.
-        if (!stbi_is_hdr(name.c_str()))
-            throwBadInput("environment map", "not a Radiance HDR (.hdr) or OpenEXR (.exr) image",
-                          "an equirectangular .hdr or .exr image with linear radiance",
-                          "convert the map to .hdr or .exr", name);
-        int w = 0, h = 0, channels = 0;
-        float* data = stbi_loadf(name.c_str(), &w, &h, &channels, 3);
-        if (!data) {
-            const char* reason = stbi_failure_reason();
-            throwBadInput("environment map", std::string("cannot decode the HDR image: ") + (reason ? reason : "?"),
-                          "a valid Radiance .hdr file", {}, name);
-        }
-        width = uint32_t(w);
-        height = uint32_t(h);
-        texels.resize(size_t(width) * height);
-        for (size_t i = 0; i < texels.size(); ++i) texels[i] = glm::vec3(data[3 * i], data[3 * i + 1], data[3 * i + 2]);
-        stbi_image_free(data);
-    }
+    const Texture tex = ext == ".exr" ? readImage(path) : readRadianceHdr(path);
+    if (tex.format() != Format::RGBA32F)
+        throwBadInput("environment map", "the image holds integer or 8-bit channels, not radiance",
+                      "an RGB(A) float or half EXR", {}, name);
+    const uint32_t width = tex.width(), height = tex.height();
+    std::vector<glm::vec3> texels(size_t(width) * height);
+    const auto view = tex.view<glm::vec4>();
+    for (uint32_t y = 0; y < height; ++y)
+        for (uint32_t x = 0; x < width; ++x) texels[size_t(y) * width + x] = glm::vec3(view.at(x, y));
     // Light sampling builds a distribution from these values: a NaN, Inf or negative texel would poison it.
     size_t fixed = 0;
     for (glm::vec3& t : texels) {

@@ -465,7 +465,8 @@ private:
         throwBadInput(where, what, expected, suggestion, mFile);
     }
     void warn(std::string msg) {
-        spdlog::warn("{}: {}", mFile, msg);
+        msg = printable(msg);  // it may quote a decoder's reason, bytes of the file
+        spdlog::warn("{}: {}", printable(mFile), msg);
         s.warnings.push_back(std::move(msg));
     }
 

@@ -318,6 +318,41 @@ TEST(GraphJsonErrors, MalformedJsonEmptyAndTruncated) {
     expectGraphError("{\"loom_graph\": 1,\n \"passes\": [", "line 2, column 13", "unexpected end of input");
 }
 
+// A message quotes bytes of the file (the parser's "last read"); bytes that are not UTF-8 reach the terminal as
+// \xNN, while well-formed UTF-8 (a pass named in another script) stays as it is.
+TEST(GraphJsonErrors, MessagesAreUtf8WhateverTheFileHolds) {
+    const auto wellFormedUtf8 = [](const std::string& s) {
+        for (size_t i = 0; i < s.size();) {
+            const auto b = static_cast<unsigned char>(s[i]);
+            const size_t n = b < 0x80             ? 1
+                             : (b & 0xe0) == 0xc0 ? 2
+                             : (b & 0xf0) == 0xe0 ? 3
+                             : (b & 0xf8) == 0xf0 ? 4
+                                                  : 0;
+            if (n == 0 || i + n > s.size()) return false;
+            for (size_t k = 1; k < n; ++k)
+                if ((static_cast<unsigned char>(s[i + k]) & 0xc0) != 0x80) return false;
+            i += n;
+        }
+        return true;
+    };
+    Error binary =
+        expectError([&] { (void)parseGraph(std::string("{\"loom_graph\": 1, \"name\": \"\xff\xfe\"}"), kFile); });
+    EXPECT_TRUE(wellFormedUtf8(binary.what())) << binary.what();
+    EXPECT_TRUE(contains(binary.what(), "\\xff")) << binary.what();
+    EXPECT_EQ(binary.info().what.find("\\xff"), std::string::npos);  // the info keeps the bytes
+    Error lead = expectError([&] { (void)parseGraph(std::string("\xd0\x01garbage"), kFile); });
+    EXPECT_TRUE(wellFormedUtf8(lead.what())) << lead.what();
+    // Two passes named alike in Cyrillic: the message names them in their own letters.
+    const std::string cyrillic = "\xd0\x9f\xd1\x80\xd0\xbe\xd1\x85\xd0\xbe\xd0\xb4";
+    const std::string pass = "{\"name\": \"" + cyrillic + "\", \"type\": \"Constant\"}";
+    Error e = expectError([&] {
+        (void)parseGraph("{\"loom_graph\": 1, \"passes\": [" + pass + ", " + pass + "], \"outputs\": []}", kFile);
+    });
+    EXPECT_TRUE(wellFormedUtf8(e.what())) << e.what();
+    EXPECT_TRUE(contains(e.what(), cyrillic)) << e.what();
+}
+
 TEST(GraphJsonErrors, NotAnObject) {
     expectGraphError("[1, 2]", "/", "must be a JSON object");
     expectGraphError("42", "/", "must be a JSON object");

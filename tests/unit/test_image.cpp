@@ -1,5 +1,7 @@
 // Formats, textures, half conversion and image files (EXR and PNG).
 #include <gtest/gtest.h>
+#include <stb/stb_image.h>
+#include <stb/stb_image_write.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -10,6 +12,7 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -568,4 +571,107 @@ TEST_F(ImageFiles, ReadingTruncatedExrIsBadInput) {
     } catch (const Error& e) {
         EXPECT_EQ(e.kind(), ErrorKind::BadInput);
     }
+}
+
+// ---- Radiance .hdr -------------------------------------------------------------------------------------------
+
+namespace {
+
+/// A w x h RGB image over many magnitudes, with runs of equal pixels (which the writer run-length encodes).
+std::vector<float> hdrPixels(uint32_t w, uint32_t h) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    std::vector<float> rgb(size_t(w) * h * 3);
+    for (size_t i = 0; i < rgb.size(); ++i) {
+        const size_t pixel = i / 3;
+        if (pixel % 11 >= 6 && pixel > 0) {
+            rgb[i] = rgb[i - 3];  // runs of five equal pixels
+        } else {
+            rgb[i] = pixel % 13 == 0 ? 0.f : unit(rng) * std::exp2(float(int(pixel % 40) - 20));
+        }
+    }
+    return rgb;
+}
+
+std::string fileBytes(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+// Rows narrower than 8 are stored flat, wider ones run-length encoded per channel: both decode to what stb decodes
+// (m 2^(e - 136) per channel), with alpha 1.
+TEST_F(ImageFiles, RadianceHdrFlatAndEncodedRowsDecodeLikeStb) {
+    for (uint32_t w : {5u, 37u, 300u}) {
+        const uint32_t h = 4;
+        const fs::path file = mDir / ("sky" + std::to_string(w) + ".hdr");
+        const std::vector<float> rgb = hdrPixels(w, h);
+        ASSERT_NE(stbi_write_hdr(file.c_str(), int(w), int(h), 3, rgb.data()), 0);
+        int sw = 0, sh = 0, sc = 0;
+        std::unique_ptr<float, void (*)(void*)> expected(stbi_loadf(file.c_str(), &sw, &sh, &sc, 3), stbi_image_free);
+        ASSERT_TRUE(expected) << stbi_failure_reason();
+        for (const Texture& tex : {readImage(file), readRadianceHdr(file)}) {
+            ASSERT_EQ(tex.format(), Format::RGBA32F);
+            ASSERT_EQ(tex.width(), w);
+            ASSERT_EQ(tex.height(), h);
+            size_t zeros = 0;
+            for (uint32_t y = 0; y < h; ++y)
+                for (uint32_t x = 0; x < w; ++x) {
+                    for (uint32_t c = 0; c < 3; ++c) {
+                        const float e = expected.get()[(size_t(y) * w + x) * 3 + c];
+                        EXPECT_EQ(bitsOf(tex.texel(x, y, c)), bitsOf(e)) << w << ": " << x << "," << y << " c" << c;
+                        zeros += e == 0.f;
+                    }
+                    EXPECT_EQ(tex.texel(x, y, 3), 1.f);
+                }
+            EXPECT_GT(zeros, 0u);  // the test covers e = 0
+        }
+    }
+}
+
+// Every prefix of a file is an error that names it (the decoder never reads past the end, nor loops on a run of
+// length 0), and so are damaged runs, other pixel formats and orientations, and absurd sizes.
+TEST_F(ImageFiles, DamagedOrTruncatedRadianceHdrIsBadInput) {
+    const uint32_t w = 37, h = 3;
+    const fs::path whole = mDir / "whole.hdr";
+    const std::vector<float> rgb = hdrPixels(w, h);
+    ASSERT_NE(stbi_write_hdr(whole.c_str(), int(w), int(h), 3, rgb.data()), 0);
+    const std::string bytes = fileBytes(whole);
+    const size_t dataStart = bytes.find("+X 37\n") + 6;
+    ASSERT_NE(dataStart, std::string::npos + 6);
+    ASSERT_EQ(bytes.substr(dataStart, 4), std::string("\x02\x02\x00\x25", 4));  // an encoded row of width 37
+    const auto expectBadInput = [&](const std::string& content, const std::string& label) {
+        const fs::path f = mDir / "bad.hdr";
+        writeFileAtomic(f, content);
+        try {
+            readRadianceHdr(f);
+            ADD_FAILURE() << "no error for " << label;
+        } catch (const Error& e) {
+            EXPECT_EQ(e.kind(), ErrorKind::BadInput) << label;
+            EXPECT_NE(std::string(e.what()).find("bad.hdr"), std::string::npos) << e.what();
+        }
+    };
+    for (size_t n = 0; n < bytes.size(); ++n) expectBadInput(bytes.substr(0, n), "prefix " + std::to_string(n));
+    std::string zeroRun = bytes, longRun = bytes, narrow = bytes;
+    zeroRun[dataStart + 4] = 0;               // a literal run of no pixels: no progress
+    longRun[dataStart + 4] = char(128 + 38);  // a repeated run one longer than the row
+    narrow[dataStart + 3] = 36;               // a row encoded for another width
+    expectBadInput(zeroRun, "run of 0");
+    expectBadInput(longRun, "run past the row");
+    expectBadInput(narrow, "row of another width");
+    const std::string header = bytes.substr(0, dataStart), data = bytes.substr(dataStart);
+    const auto withSize = [&](const std::string& size) {
+        return header.substr(0, header.find("-Y 3 +X 37")) + size + "\n" + data;
+    };
+    expectBadInput(withSize("+Y 3 +X 37"), "bottom-up rows");
+    expectBadInput(withSize("-Y 0 +X 37"), "no rows");
+    expectBadInput(withSize("-Y 70000 +X 70000"), "too large");
+    expectBadInput(withSize("-Y 3"), "no width");
+    std::string xyz = bytes;
+    const size_t format = xyz.find("FORMAT=32-bit_rle_rgbe");
+    ASSERT_NE(format, std::string::npos);
+    xyz.replace(format, 22, "FORMAT=32-bit_rle_xyze");
+    expectBadInput(xyz, "XYZ pixels");
+    expectBadInput("P6\n1 1\n255\n\x01\x02\x03", "another format");
 }

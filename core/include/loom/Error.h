@@ -51,6 +51,10 @@ std::string closestMatch(std::string_view name, const std::vector<std::string>& 
 std::string didYouMean(std::string_view name, const std::vector<std::string>& candidates,
                        std::string_view listLabel = "known");
 
+/// Text from files (a JSON parser's "last read" bytes, a header line, a decoder's reason) as a terminal shows it:
+/// well-formed UTF-8, line breaks and tabs kept, every other byte written as \xNN. Error messages pass through it.
+std::string printable(std::string_view s);
+
 /// Joins strings with a separator.
 std::string join(const std::vector<std::string>& items, std::string_view sep = ", ");
 

@@ -21,9 +21,15 @@ const char* imageExtension(Format f);
 void writeImage(const std::filesystem::path& path, const Texture& tex);
 
 /// Reads an EXR (into RGBA32F, or RGBA32U when all channels are UINT; missing
-/// channels are 0, alpha 1) or a PNG (RGBA8Unorm). Throws loom::Error
-/// (BadInput) for a missing or malformed file.
+/// channels are 0, alpha 1), a Radiance RGBE .hdr (RGBA32F, alpha 1) or a PNG
+/// (RGBA8Unorm), told apart by their first bytes. Throws loom::Error
+/// (BadInput) for a missing, malformed or truncated file.
 Texture readImage(const std::filesystem::path& path);
+
+/// Reads a Radiance RGBE .hdr (flat or run-length encoded rows, "-Y h +X w")
+/// into RGBA32F, alpha 1. Throws loom::Error (BadInput) for a missing file,
+/// another format, or a damaged or truncated one.
+Texture readRadianceHdr(const std::filesystem::path& path);
 
 /// Writes bytes to a file atomically (temporary + rename). Throws loom::Error.
 void writeFileAtomic(const std::filesystem::path& path, const std::string& bytes);
