@@ -50,14 +50,15 @@ void ensureWritableDir(const std::string& dir, const std::string& option) {
     namespace fs = std::filesystem;
     std::error_code ec;
     if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
-        throwBadInput(option, "'" + dir + "' exists and is not a folder", "a folder to write images into");
+        throwBadInput(option, "'" + dir + "' exists and is not a folder", "a folder to write into",
+                      "choose another " + option + " folder");
     fs::create_directories(dir, ec);
     if (ec)
         throwBadInput(option, "cannot create folder '" + dir + "': " + ec.message(), "a writable location",
-                      "choose another --out folder");
+                      "choose another " + option + " folder");
     if (access(dir.c_str(), W_OK) != 0)
         throwBadInput(option, "folder '" + dir + "' is not writable", "a writable folder",
-                      "choose another --out folder or fix its permissions");
+                      "choose another " + option + " folder or fix its permissions");
 }
 
 CameraPath parseCameraPath(const std::string& text, const std::string& option) {
