@@ -1,0 +1,319 @@
+#!/usr/bin/env python3
+"""Renders mutated inputs through the loom CLI and checks the bad-input contract on every run.
+
+Mutations (seeded, so a run is reproducible): values, deletions and truncation of the shipped glTF scenes and
+graphs, edges and outputs between the fields of their passes, out-of-range --set values, and damaged Radiance .hdr
+environment maps (written here). Each run must
+
+  - exit with 0, or with 2 and one message that starts with "error:" (a crash, a hang past --timeout or exit code 1
+    fail the run);
+  - write messages that are UTF-8, whatever bytes the input held;
+  - leave no half-written file (".partial") in its output folder;
+  - on success, dump only finite values: every float or half channel of every EXR.
+
+Usage: mutate_inputs.py --loom build/release/bin/loom --source . [--seed 1] [--runs 12] [--timeout 60]
+Prints each failing run with its command; exit code 1 when any failed.
+"""
+import argparse
+import copy
+import json
+import math
+import os
+import random
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+import zlib
+
+WEIRD = [-1, 0, 1e30, -1e30, 99999, 2**31, 2**63, 0.5, "", "x", None, [], {}, True, [1e30, -1e30, 0], "NaN", 1e-45,
+         -0.0, [0] * 16]
+
+
+# ---- EXR: every float and half channel finite ----------------------------------------------------------------
+
+def _exr_unzip(data, size):
+    raw = bytearray(zlib.decompress(data))
+    for i in range(1, len(raw)):  # the predictor: differences of consecutive bytes, offset by 128
+        raw[i] = (raw[i - 1] + raw[i] - 128) & 0xFF
+    half = (len(raw) + 1) // 2
+    out = bytearray(len(raw))
+    out[0::2] = raw[:half]
+    out[1::2] = raw[half:]
+    if len(out) != size:
+        raise ValueError("ZIP block of %d bytes, expected %d" % (len(out), size))
+    return out
+
+
+def exr_nonfinite(path):
+    """Counts the non-finite values of a scanline EXR (uncompressed or ZIP/ZIPS), as {channel: count}."""
+    b = open(path, "rb").read()
+    if struct.unpack_from("<I", b, 0)[0] != 20000630:
+        raise ValueError("not an EXR")
+    pos, channels, window, compression = 8, [], None, 0
+    while b[pos] != 0:
+        name_end = b.index(b"\0", pos)
+        name = b[pos:name_end].decode()
+        type_end = b.index(b"\0", name_end + 1)
+        size = struct.unpack_from("<i", b, type_end + 1)[0]
+        value = b[type_end + 5:type_end + 5 + size]
+        if name == "channels":
+            p = 0
+            while value[p] != 0:
+                e = value.index(b"\0", p)
+                channels.append((value[p:e].decode(), struct.unpack_from("<i", value, e + 1)[0]))
+                p = e + 1 + 16
+        elif name == "dataWindow":
+            window = struct.unpack_from("<4i", value, 0)
+        elif name == "compression":
+            compression = value[0]
+        pos = type_end + 5 + size
+    pos += 1
+    if compression not in (0, 2, 3):
+        raise ValueError("compression %d not handled" % compression)
+    lines_per_block = {0: 1, 2: 1, 3: 16}[compression]
+    width, height = window[2] - window[0] + 1, window[3] - window[1] + 1
+    blocks = (height + lines_per_block - 1) // lines_per_block
+    offsets = struct.unpack_from("<%dQ" % blocks, b, pos)
+    channels.sort()
+    sizes = {0: 4, 1: 2, 2: 4}  # UINT, HALF, FLOAT
+    bad = {}
+    for k, off in enumerate(offsets):
+        lines = min(lines_per_block, height - k * lines_per_block)
+        size = struct.unpack_from("<i", b, off + 4)[0]
+        data = b[off + 8:off + 8 + size]
+        expected = lines * width * sum(sizes[t] for _, t in channels)
+        if size < expected:
+            data = _exr_unzip(data, expected)
+        p = 0
+        for _ in range(lines):
+            for name, t in channels:
+                n = width * sizes[t]
+                if t == 2:
+                    values = struct.unpack_from("<%df" % width, data, p)
+                    count = sum(1 for v in values if not math.isfinite(v))
+                elif t == 1:
+                    halves = struct.unpack_from("<%dH" % width, data, p)
+                    count = sum(1 for h in halves if (h & 0x7C00) == 0x7C00)
+                else:
+                    count = 0
+                if count:
+                    bad[name] = bad.get(name, 0) + count
+                p += n
+    return bad
+
+
+# ---- Radiance .hdr written here -------------------------------------------------------------------------------
+
+def write_hdr(path, width, height, rng):
+    """A run-length encoded RGBE map with runs and literal stretches."""
+    rows = []
+    for y in range(height):
+        pixels = []
+        for x in range(width):
+            if x % 9 >= 5 and pixels:
+                pixels.append(pixels[-1])
+            else:
+                pixels.append(bytes([rng.randrange(256), rng.randrange(256), rng.randrange(256),
+                                     rng.choice([0, 100, 128, 140, 200])]))
+        row = bytearray([2, 2, width >> 8, width & 0xFF])
+        for c in range(4):
+            values = [p[c] for p in pixels]
+            x = 0
+            while x < width:
+                run = 1
+                while x + run < width and run < 127 and values[x + run] == values[x]:
+                    run += 1
+                if run >= 3:
+                    row += bytes([128 + run, values[x]])
+                    x += run
+                else:
+                    n = min(128, width - x)
+                    row += bytes([n]) + bytes(values[x:x + n])
+                    x += n
+        rows.append(bytes(row))
+    header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n" % (height, width)
+    data = header + b"".join(rows)
+    with open(path, "wb") as f:
+        f.write(data)
+    return data, len(header)
+
+
+# ---- mutations ------------------------------------------------------------------------------------------------
+
+def json_paths(node, prefix=()):
+    yield prefix
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from json_paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from json_paths(v, prefix + (i,))
+
+
+def mutate_values(doc, rng):
+    d = copy.deepcopy(doc)
+    for _ in range(rng.randint(1, 3)):
+        paths = [p for p in json_paths(d) if p and p[-1] != "uri"]
+        p = rng.choice(paths)
+        parent = d
+        for k in p[:-1]:
+            parent = parent[k]
+        if rng.random() < 0.2:
+            del parent[p[-1]]
+        else:
+            parent[p[-1]] = copy.deepcopy(rng.choice(WEIRD))
+    return d
+
+
+def dump_json(doc, rng):
+    text = json.dumps(doc)
+    if rng.random() < 0.1:
+        text = text[:rng.randint(0, len(text))]
+    return text
+
+
+def pass_fields(loom):
+    """{type: {kind: [field, ...]}} from `loom passes`."""
+    fields, current = {}, None
+    for line in subprocess.run([loom, "passes"], capture_output=True, text=True).stdout.splitlines():
+        words = line.split()
+        if len(words) >= 2 and words[1] == "-" and not line.startswith(" "):
+            current = fields.setdefault(words[0], {})
+        elif current is not None and len(words) >= 2 and words[0] in ("input", "output", "history", "internal"):
+            current.setdefault(words[0], []).append(words[1])
+    return fields
+
+
+def mutate_graph(graph, fields, rng):
+    g = copy.deepcopy(graph)
+    passes = g["passes"]
+    for _ in range(rng.randint(1, 3)):
+        a, b = rng.choice(passes), rng.choice(passes)
+        fa, fb = fields.get(a["type"], {}), fields.get(b["type"], {})
+        src = rng.choice(fa.get("output", ["x"]) + fa.get("history", []) + ["nope"])
+        dst = rng.choice(fb.get("input", ["y"]) + ["nope"])
+        op = rng.choice(["edge", "edge", "prev", "output", "remove"])
+        if op == "remove" and len(passes) > 1:
+            passes.pop(rng.randrange(len(passes)))
+        elif op == "output":
+            g.setdefault("outputs", []).append(a["name"] + "." + rng.choice(
+                fa.get("history", []) + fa.get("internal", []) + fa.get("output", []) + ["nope"]))
+        else:
+            g.setdefault("edges", []).append([a["name"] + "." + src + ("@prev" if op == "prev" else ""),
+                                              b["name"] + "." + dst])
+    return g
+
+
+# ---- runs -----------------------------------------------------------------------------------------------------
+
+def check_run(loom, args, out, timeout):
+    """Returns (exit code, a failure description or None)."""
+    shutil.rmtree(out, ignore_errors=True)
+    try:
+        r = subprocess.run([loom] + args + ["--out", out, "--quiet"], capture_output=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, "no exit within %d s" % timeout
+    try:
+        err = r.stderr.decode("utf-8")
+    except UnicodeDecodeError:
+        return r.returncode, "a message that is not UTF-8: %r" % r.stderr[-300:]
+    errors = [l for l in err.splitlines() if l.startswith("error:")]
+    if r.returncode not in (0, 2):
+        return r.returncode, "exit code %d: %s" % (r.returncode, err[-400:])
+    if r.returncode == 2 and len(errors) != 1:
+        return r.returncode, "exit code 2 with %d error lines: %s" % (len(errors), err[-400:])
+    files = os.listdir(out) if os.path.isdir(out) else []
+    partial = [f for f in files if f.endswith(".partial")]
+    if partial:
+        return r.returncode, "half-written files left: %s" % partial[:3]
+    if r.returncode == 0:
+        for f in sorted(files):
+            if f.endswith(".exr"):
+                bad = exr_nonfinite(os.path.join(out, f))
+                if bad:
+                    return r.returncode, "non-finite values in %s: %s" % (f, bad)
+    return r.returncode, None
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--loom", required=True)
+    ap.add_argument("--source", required=True, help="the source tree (graphs/, data/scenes/)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--runs", type=int, default=12, help="runs per kind of mutation")
+    ap.add_argument("--timeout", type=int, default=60)
+    o = ap.parse_args()
+    rng = random.Random(o.seed)
+    graphs_dir = os.path.join(o.source, "graphs")
+    scenes_dir = os.path.join(o.source, "data", "scenes")
+    shipped = sorted(f for f in os.listdir(graphs_dir) if f.startswith("PathTracer") and f.endswith(".json"))
+    scenes = sorted(f for f in os.listdir(scenes_dir) if f.endswith(".gltf"))
+    fields = pass_fields(o.loom)
+    work = tempfile.mkdtemp(prefix="loom_mutate_")
+    out = os.path.join(work, "out")
+    failures, codes = [], []
+
+    def run(label, args):
+        code, why = check_run(o.loom, args, out, o.timeout)
+        codes.append(code)
+        if why:
+            failures.append("%s: loom %s\n    %s" % (label, " ".join(args), why))
+
+    dynamic = os.path.join(scenes_dir, "cornell_dynamic.gltf")
+    small = ["--size", "48x32", "--frames", "3", "--dump", "*", "--jitter", "halton"]
+    for i in range(o.runs):
+        scene = json.load(open(os.path.join(scenes_dir, rng.choice(scenes))))
+        path = os.path.join(work, "scene%d.gltf" % i)
+        with open(path, "w") as f:
+            f.write(dump_json(mutate_values(scene, rng), rng))
+        graph = os.path.join(graphs_dir, rng.choice(shipped))
+        run("scene %d" % i, ["render", "--graph", graph, "--scene", path, "--camera-path",
+                             rng.choice(["static", "orbit"])] + small)
+    for i in range(o.runs):
+        graph = json.load(open(os.path.join(graphs_dir, rng.choice(shipped))))
+        mutated = mutate_graph(graph, fields, rng) if rng.random() < 0.5 else mutate_values(graph, rng)
+        path = os.path.join(work, "graph%d.json" % i)
+        with open(path, "w") as f:
+            f.write(dump_json(mutated, rng))
+        run("graph %d" % i, ["render", "--graph", path, "--scene", dynamic] + small)
+    params = ["SVGF.alpha", "SVGF.momentsAlpha", "SVGF.phiColor", "SVGF.phiNormal", "SVGF.phiDepth",
+              "SVGF.iterations", "SVGF.feedbackTap", "TAA.alpha", "TAA.sigma", "ToneMap.exposure",
+              "ToneMap.operator", "PathTracer.samplesPerPixel", "PathTracer.maxBounces", "Nope.x"]
+    values = ["nan", "inf", "-inf", "-1", "0", "1e40", "abc", "", "1e-45", "2147483648", "-0", "0.999999"]
+    for i in range(o.runs):
+        sets = []
+        for _ in range(rng.randint(1, 3)):
+            sets += ["--set", "%s=%s" % (rng.choice(params), rng.choice(values))]
+        run("set %d" % i, ["render", "--graph", os.path.join(graphs_dir, "PathTracerSVGF.json"), "--scene",
+                           dynamic] + small + sets)
+    hdr, header_size = write_hdr(os.path.join(work, "sky.hdr"), 40, 12, rng)
+    for i in range(o.runs):
+        b = bytearray(hdr)
+        kind = rng.choice(["truncate", "bytes", "header", "runs"])
+        if kind == "truncate":
+            b = b[:rng.randint(0, len(b) - 1)]
+        elif kind == "bytes":
+            for _ in range(rng.randint(1, 40)):
+                b[rng.randrange(header_size, len(b))] = rng.randrange(256)
+        elif kind == "header":
+            b[rng.randrange(header_size)] = rng.randrange(256)
+        else:  # run lengths of 0 or past the row
+            for _ in range(rng.randint(1, 4)):
+                b[rng.randrange(header_size + 4, len(b))] = rng.choice([0, 128, 255])
+        path = os.path.join(work, "sky%d.hdr" % i)
+        with open(path, "wb") as f:
+            f.write(b)
+        run("env map %d (%s)" % (i, kind), ["render", "--graph", os.path.join(graphs_dir, "PathTracerRaw.json"),
+                                            "--scene", dynamic, "--env", path, "--size", "32x24", "--dump", "*"])
+    shutil.rmtree(work, ignore_errors=True)
+    for f in failures:
+        print("FAILED " + f)
+    print("%d runs (%d rendered, %d rejected as bad input), %d failed (seed %d)" %
+          (len(codes), codes.count(0), codes.count(2), len(failures), o.seed))
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
