@@ -145,13 +145,21 @@ int cameraNode(const std::vector<Node>& nodes, int cam) {
 }
 
 /// A camera's pose without the node's scale: cameras are rigid by convention
-/// (view = inverse(world) must not distort).
+/// (view = inverse(world) must not distort). A node scaled to 0 on some axis
+/// has no orientation left: the camera then keeps the identity's axes, and a
+/// position that is not finite becomes the origin, so its rays stay valid.
 glm::mat4 rigid(const glm::mat4& m) {
     glm::mat4 r = m;
     for (int c = 0; c < 3; ++c) {
         const float len = glm::length(glm::vec3(m[c]));
-        if (len > 0.f) r[c] = glm::vec4(glm::vec3(m[c]) / len, 0.f);
+        if (!(len > 0.f) || !std::isfinite(len)) {
+            r = glm::mat4(1.f);
+            r[3] = m[3];
+            break;
+        }
+        r[c] = glm::vec4(glm::vec3(m[c]) / len, 0.f);
     }
+    if (!std::isfinite(r[3][0]) || !std::isfinite(r[3][1]) || !std::isfinite(r[3][2])) r[3] = glm::vec4(0, 0, 0, 1);
     return r;
 }
 

@@ -807,6 +807,30 @@ TEST_F(SceneFiles, InstancesWithASingularTransformAreHiddenUntilTheyRecover) {
     }
 }
 
+// A camera node scaled to 0 (or with a position beyond float's range) keeps a usable pose: orthonormal axes and a
+// finite position, so every primary ray is finite.
+TEST_F(SceneFiles, CameraOnADegenerateNodeKeepsAUsablePose) {
+    // The last: a parent scaled by 1e30 moves the camera's 1e30 translation to infinity.
+    for (const json& extra :
+         {json{{"scale", {0, 0, 0}}}, json{{"scale", {1, 0, 1}}}, json{{"translation", {1e30, 0, 0}}}}) {
+        const bool far = extra.contains("translation");
+        Gltf g = triangleScene();
+        g.j["cameras"] = json::array({{{"type", "perspective"}, {"perspective", {{"yfov", 0.8}, {"znear", 0.1}}}}});
+        json camera = {{"name", "Cam"}, {"camera", 0}, {"translation", {0, 0, 3}}};
+        camera.update(extra);
+        g.j["nodes"].push_back(camera);
+        if (far) g.j["nodes"].push_back({{"name", "Huge"}, {"scale", {1e30, 1e30, 1e30}}, {"children", {1}}});
+        g.j["scenes"][0]["nodes"].push_back(far ? 2 : 1);
+        auto s = load(g);
+        s->update(0.0);
+        const glm::mat4& w = s->camera.world;
+        SCOPED_TRACE(extra.dump());
+        for (int c = 0; c < 4; ++c)
+            for (int r = 0; r < 4; ++r) ASSERT_TRUE(std::isfinite(w[c][r])) << c << "," << r;
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(glm::length(glm::vec3(w[c])), 1.f, 1e-5f) << c;
+    }
+}
+
 TEST(SceneInCode, InstanceVisibilityNeedsAFiniteModerateInverse) {
     const auto visible = [](const glm::mat4& world) {
         Instance inst;
