@@ -113,13 +113,14 @@ void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, cons
     alignas(64) RTCRayHit16 rh;
     alignas(64) int mask[16];
     for (int i = 0; i < 16; ++i) {
-        mask[i] = valid[i] ? -1 : 0;
-        rh.ray.org_x[i] = origins[i].x;
-        rh.ray.org_y[i] = origins[i].y;
-        rh.ray.org_z[i] = origins[i].z;
-        rh.ray.dir_x[i] = dirs[i].x;
-        rh.ray.dir_y[i] = dirs[i].y;
-        rh.ray.dir_z[i] = dirs[i].z;
+        const bool active = valid[i] && traceable(origins[i], dirs[i]);  // an untraceable ray hits nothing
+        mask[i] = active ? -1 : 0;
+        rh.ray.org_x[i] = active ? origins[i].x : 0.f;
+        rh.ray.org_y[i] = active ? origins[i].y : 0.f;
+        rh.ray.org_z[i] = active ? origins[i].z : 0.f;
+        rh.ray.dir_x[i] = active ? dirs[i].x : 0.f;
+        rh.ray.dir_y[i] = active ? dirs[i].y : 0.f;
+        rh.ray.dir_z[i] = active ? dirs[i].z : 1.f;
         rh.ray.tnear[i] = 0.f;
         rh.ray.tfar[i] = tMax;
         rh.ray.time[i] = 0.f;
@@ -132,7 +133,7 @@ void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, cons
     rtcIntersect16(mask, mImpl->top, &ctx, &rh);
     for (int i = 0; i < 16; ++i) {
         RayHit h;
-        if (valid[i] && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) {
+        if (mask[i] && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) {
             h.instance = rh.hit.instID[0][i];
             h.primitive = rh.hit.primID[i];
             h.u = rh.hit.u[i];

@@ -178,13 +178,15 @@ bool Instance::visible() const {
     const glm::mat3 m(world);
     const float det = glm::determinant(m);
     if (!(std::fabs(det) > 0.f) || !std::isfinite(det)) return false;
-    // Rays enter the instance through the inverse: it must stay far below float's range (Embree rejects rays
-    // whose components exceed about 1.8e38).
+    // Rays enter the instance through the inverse: with the translation it must keep them in Embree's range
+    // (kWorldLimit).
     const glm::mat3 inv = glm::inverse(m);
     for (int c = 0; c < 3; ++c)
         for (int r = 0; r < 3; ++r)
-            if (!(std::fabs(inv[c][r]) <= 1e18f)) return false;
-    return std::isfinite(world[3][0]) && std::isfinite(world[3][1]) && std::isfinite(world[3][2]);
+            if (!(std::fabs(inv[c][r]) <= 1e9f)) return false;
+    for (int r = 0; r < 3; ++r)
+        if (!(std::fabs(world[3][r]) <= kWorldLimit)) return false;
+    return true;
 }
 
 void Scene::updateWorldTransforms() {

@@ -74,19 +74,7 @@ void traceShadowRays(RTCScene scene, TileScratch& ts, uint32_t n) {
     if (n == 0) return;
     for (uint32_t j = 0; j < n; ++j) {
         const pt::PathState& st = ts.paths[ts.shadow[j]];
-        RTCRay& r = ts.shadowRays[j];
-        r.org_x = st.rayOrigin.x;
-        r.org_y = st.rayOrigin.y;
-        r.org_z = st.rayOrigin.z;
-        r.tnear = 0.f;
-        r.dir_x = st.shadowDir.x;
-        r.dir_y = st.shadowDir.y;
-        r.dir_z = st.shadowDir.z;
-        r.time = 0.f;
-        r.tfar = st.shadowTMax;
-        r.mask = 0xFFFFFFFFu;
-        r.id = j;
-        r.flags = 0;
+        setStreamRay(ts.shadowRays[j], st.rayOrigin, st.shadowDir, st.shadowTMax, j);
     }
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
@@ -103,18 +91,7 @@ void traceNextRays(RTCScene scene, TileScratch& ts, uint32_t n) {
     for (uint32_t j = 0; j < n; ++j) {
         const pt::PathState& st = ts.paths[ts.live[j]];
         RTCRayHit& rh = ts.nextRays[j];
-        rh.ray.org_x = st.rayOrigin.x;
-        rh.ray.org_y = st.rayOrigin.y;
-        rh.ray.org_z = st.rayOrigin.z;
-        rh.ray.tnear = 0.f;
-        rh.ray.dir_x = st.rayDir.x;
-        rh.ray.dir_y = st.rayDir.y;
-        rh.ray.dir_z = st.rayDir.z;
-        rh.ray.time = 0.f;
-        rh.ray.tfar = 1e30f;
-        rh.ray.mask = 0xFFFFFFFFu;
-        rh.ray.id = j;
-        rh.ray.flags = 0;
+        setStreamRay(rh.ray, st.rayOrigin, st.rayDir, 1e30f, j);
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     }

@@ -176,7 +176,9 @@ void SVGFPass::declareParams(ParamList& p) {
         .range(0.0, 1.0)
         .doc("temporal blend factor of the luminance moments (at least 1 / history)");
     p.add("phiColor", &mPhiColor, 10.f).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
-    p.add("phiNormal", &mPhiNormal, 128.f).min(0.0).doc("normal edge-stopping exponent (eq. 4)");
+    // Bounded: a normal's dot product with itself is 1 only to a few units in the last place, so past about 1e8
+    // even a pixel's own weight vanishes, and with it the variance's (sum of weights)^2.
+    p.add("phiNormal", &mPhiNormal, 128.f).range(0.0, 1e5).doc("normal edge-stopping exponent (eq. 4)");
     p.add("phiDepth", &mPhiDepth, 1.f).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
     p.add("maxHistory", &mMaxHistory, 32).range(1, 1024).doc("cap of the history length in frames");
     p.add("referenceAtrous", &mReferenceAtrous, false)

@@ -2,7 +2,7 @@
 """Renders mutated inputs through the loom CLI and checks the bad-input contract on every run.
 
 Mutations (seeded, so a run is reproducible): values, deletions and truncation of the shipped glTF scenes and
-graphs, edges and outputs between the fields of their passes, out-of-range --set values, and damaged Radiance .hdr
+graphs, degenerate node transforms (scales of 0, far translations), edges and outputs between the fields of their passes, out-of-range --set values, and damaged Radiance .hdr
 environment maps (written here). Each run must
 
   - exit with 0, or with 2 and one message that starts with "error:" (a crash, a hang past --timeout or exit code 1
@@ -167,6 +167,19 @@ def mutate_values(doc, rng):
     return d
 
 
+def mutate_transforms(scene, rng):
+    """Degenerate node transforms: scales of 0 (whole or on one axis), tiny or huge scales, far translations."""
+    d = copy.deepcopy(scene)
+    for _ in range(rng.randint(1, 2)):
+        node = rng.choice(d["nodes"])
+        node.pop("matrix", None)
+        if rng.random() < 0.7:
+            node["scale"] = rng.choice([[0, 0, 0], [1, 0, 1], [0, 1, 1], [1e-30] * 3, [1e20] * 3, [1e-20, 1e20, 1]])
+        else:
+            node["translation"] = rng.choice([[1e30, 0, 0], [0, 1e20, 0], [0, 0, -1e19]])
+    return d
+
+
 def dump_json(doc, rng):
     text = json.dumps(doc)
     if rng.random() < 0.1:
@@ -244,6 +257,7 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--runs", type=int, default=12, help="runs per kind of mutation")
     ap.add_argument("--timeout", type=int, default=60)
+    ap.add_argument("--keep", help="copy the inputs of failing runs into this folder")
     o = ap.parse_args()
     rng = random.Random(o.seed)
     graphs_dir = os.path.join(o.source, "graphs")
@@ -260,6 +274,11 @@ def main():
         codes.append(code)
         if why:
             failures.append("%s: loom %s\n    %s" % (label, " ".join(args), why))
+            if o.keep:
+                os.makedirs(o.keep, exist_ok=True)
+                for a in args:
+                    if a.startswith(work) and os.path.isfile(a):
+                        shutil.copy(a, o.keep)
 
     dynamic = os.path.join(scenes_dir, "cornell_dynamic.gltf")
     small = ["--size", "48x32", "--frames", "3", "--dump", "*", "--jitter", "halton"]
@@ -267,8 +286,8 @@ def main():
         scene = json.load(open(os.path.join(scenes_dir, rng.choice(scenes))))
         path = os.path.join(work, "scene%d.gltf" % i)
         with open(path, "w") as f:
-            f.write(dump_json(mutate_values(scene, rng), rng))
-        graph = os.path.join(graphs_dir, rng.choice(shipped))
+            f.write(dump_json(mutate_transforms(scene, rng) if rng.random() < 0.3 else mutate_values(scene, rng), rng))
+        graph = os.path.join(graphs_dir, rng.choice(shipped + ["GBufferRT.json"]))
         run("scene %d" % i, ["render", "--graph", graph, "--scene", path, "--camera-path",
                              rng.choice(["static", "orbit"])] + small)
     for i in range(o.runs):

@@ -860,9 +860,12 @@ TEST(SVGF, VarianceWeightMatchesItsClosedForm) {
 // stops the filter, or none does) keep every output and history finite, through the spatial variance of the
 // first frames and the temporal one after, on the vector stages and the reference ones.
 TEST(SVGF, ExtremeEdgeStoppingParametersStayFinite) {
-    for (const char* phi : {"phiColor", "phiNormal", "phiDepth"})
+    // 0 and the largest value each accepts (phiNormal's bound keeps a pixel's own weight from vanishing).
+    const std::pair<const char*, double> extremes[] = {{"phiColor", 0.0},  {"phiNormal", 0.0}, {"phiDepth", 0.0},
+                                                       {"phiColor", 3e38}, {"phiNormal", 1e5}, {"phiDepth", 3e38}};
+    for (const auto& [phi, value] : extremes)
         for (bool reference : {false, true}) {
-            Harness h({{phi, 0.0}, {"referenceStages", reference}}, noisyPixel, false, 40, 24);
+            Harness h({{phi, value}, {"referenceStages", reference}}, noisyPixel, false, 40, 24);
             for (int frame = 0; frame < 6; ++frame) {
                 h.run();
                 for (const char* out : {"filtered", "variance", "estimate"})

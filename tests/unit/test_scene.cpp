@@ -831,6 +831,34 @@ TEST_F(SceneFiles, CameraOnADegenerateNodeKeepsAUsablePose) {
     }
 }
 
+// Rays beyond the traced world (kWorldLimit) or not finite hit nothing and are occluded by nothing, single or in a
+// packet, where Embree would reject them; the other lanes of a packet are unaffected.
+TEST_F(SceneFiles, UntraceableRaysHitNothing) {
+    auto s = load(triangleScene());
+    const RayScene& rt = s->rayScene();
+    const glm::vec3 down(0, 0, -1), o(0.25f, 0.25f, 5.f);
+    ASSERT_TRUE(rt.intersect(o, down).hit());
+    for (const auto& [origin, dir] :
+         {std::pair{glm::vec3(0.25f, 0.25f, 2e8f), down}, std::pair{glm::vec3(0.25f, 0.25f, 1e30f), down},
+          std::pair{o, glm::vec3(0.f, 0.f, -1e9f)}, std::pair{o, glm::vec3(NAN, 0.f, -1.f)},
+          std::pair{glm::vec3(INFINITY, 0.f, 0.f), down}}) {
+        EXPECT_FALSE(traceable(origin, dir));
+        EXPECT_FALSE(rt.intersect(origin, dir).hit());
+        EXPECT_FALSE(rt.occluded(origin, dir, 0.f, 1e30f));
+        glm::vec3 origins[16], dirs[16];
+        bool valid[16];
+        RayHit hits[16];
+        for (int i = 0; i < 16; ++i) {
+            origins[i] = i == 7 ? origin : o;
+            dirs[i] = i == 7 ? dir : down;
+            valid[i] = true;
+        }
+        rt.intersect16(origins, dirs, valid, 1e30f, hits);
+        for (int i = 0; i < 16; ++i) EXPECT_EQ(hits[i].hit(), i != 7) << i;
+    }
+    EXPECT_TRUE(traceable(glm::vec3(-kWorldLimit), glm::vec3(kWorldLimit)));
+}
+
 TEST(SceneInCode, InstanceVisibilityNeedsAFiniteModerateInverse) {
     const auto visible = [](const glm::mat4& world) {
         Instance inst;
@@ -845,6 +873,9 @@ TEST(SceneInCode, InstanceVisibilityNeedsAFiniteModerateInverse) {
     EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1e-30f))));              // determinant rounds to 0
     EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1e-20f, 1e20f, 1.f))));  // inverse beyond 1e18
     EXPECT_FALSE(visible(glm::translate(glm::mat4(1.f), glm::vec3(NAN, 0.f, 0.f))));
+    EXPECT_TRUE(visible(glm::translate(glm::mat4(1.f), glm::vec3(0.f, -kWorldLimit, 0.f))));
+    EXPECT_FALSE(visible(glm::translate(glm::mat4(1.f), glm::vec3(0.f, -2.f * kWorldLimit, 0.f))));
+    EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(1e-10f))));  // inverse 1e10
     EXPECT_FALSE(visible(glm::scale(glm::mat4(1.f), glm::vec3(INFINITY, 1.f, 1.f))));
 }
 

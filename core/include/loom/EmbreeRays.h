@@ -11,8 +11,9 @@
 
 namespace loom {
 
-/// Closest hit of o + t d, t in (tMin, tMax).
+/// Closest hit of o + t d, t in (tMin, tMax); none for a ray that is not traceable().
 inline RayHit embreeIntersect(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+    if (!traceable(o, d)) return {};
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
@@ -42,8 +43,9 @@ inline RayHit embreeIntersect(RTCScene scene, glm::vec3 o, glm::vec3 d, float tM
     return h;
 }
 
-/// Any hit of o + t d, t in (tMin, tMax).
+/// Any hit of o + t d, t in (tMin, tMax); none for a ray that is not traceable().
 inline bool embreeOccluded(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+    if (!traceable(o, d)) return false;
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r;
@@ -61,6 +63,24 @@ inline bool embreeOccluded(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin,
     r.flags = 0;
     rtcOccluded1(scene, &ctx, &r);
     return r.tfar < 0.f;  // Embree sets tfar to -inf on a hit
+}
+
+/// Sets up ray r of a stream (rtcIntersect1M, rtcOccluded1M): o + t d for t in (0, tMax), or, for a ray that is
+/// not traceable(), an inactive one (tnear > tfar), which Embree leaves as it is: no hit, no occluder.
+inline void setStreamRay(RTCRay& r, glm::vec3 o, glm::vec3 d, float tMax, unsigned id) {
+    const bool active = traceable(o, d);
+    r.org_x = active ? o.x : 0.f;
+    r.org_y = active ? o.y : 0.f;
+    r.org_z = active ? o.z : 0.f;
+    r.tnear = active ? 0.f : 1.f;
+    r.dir_x = active ? d.x : 0.f;
+    r.dir_y = active ? d.y : 0.f;
+    r.dir_z = active ? d.z : 1.f;
+    r.time = 0.f;
+    r.tfar = active ? tMax : 0.f;
+    r.mask = 0xFFFFFFFFu;
+    r.id = id;
+    r.flags = 0;
 }
 
 }  // namespace loom

@@ -15,6 +15,18 @@ class Scene;
 
 inline constexpr uint32_t kInvalidId = 0xFFFFFFFFu;
 
+/// The world Loom traces in: ray origins and directions with a component beyond this (or not finite) are not
+/// traced (no hit, no occluder), and an instance whose translation exceeds it is hidden (Instance::visible).
+/// Embree rejects rays beyond about 1.8e18, also after it carries them into an instance: with origins, directions
+/// and translations within 1e8 and inverse transforms within 1e9 (Instance::visible), that stays below 6e17.
+inline constexpr float kWorldLimit = 1e8f;
+
+/// Whether a ray is traced: every component of its origin and direction finite and within kWorldLimit.
+LOOM_HD inline bool traceable(const glm::vec3& o, const glm::vec3& d) {
+    const glm::vec3 limit(kWorldLimit);  // a comparison with NaN is false
+    return glm::all(glm::lessThanEqual(glm::abs(o), limit)) && glm::all(glm::lessThanEqual(glm::abs(d), limit));
+}
+
 struct RayHit {
     uint32_t instance = kInvalidId;  ///< index into Scene::instances; kInvalidId on a miss
     uint32_t primitive = kInvalidId; ///< triangle index within the instance's mesh

@@ -91,9 +91,10 @@ struct Instance {
     uint32_t mesh = 0;
     glm::mat4 world{1.f};
     glm::mat4 prevWorld{1.f};
-    /// Whether the instance is drawn, intersected and lit this frame: its world transform has a finite inverse.
-    /// A zero scale on any axis (a common way to hide an object in an animation) hides the instance; it has no
-    /// object space a ray or a normal could be carried into.
+    /// Whether the instance is drawn, intersected and lit this frame: its world transform has an inverse whose
+    /// entries stay within 1e9, and its translation within kWorldLimit (RayScene.h). A zero scale on any axis (a
+    /// common way to hide an object in an animation) hides the instance; it has no object space a ray or a normal
+    /// could be carried into.
     bool visible() const;
 };
 
