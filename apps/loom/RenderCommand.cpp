@@ -59,6 +59,13 @@ void runRender(const RenderOptions& o) {
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
     ensureWritableDir(o.out, "--out");
+    if (!o.statsFile.empty()) {
+        try {
+            checkOutputFile(o.statsFile);  // before the frames, not after them
+        } catch (const Error& e) {
+            throwBadInput("--stats", e.info().what, e.info().expected, e.info().suggestion, o.statsFile);
+        }
+    }
 
     ThreadLimit threadLimit(o.threads);
     PluginRegistry registry = makeRegistry();

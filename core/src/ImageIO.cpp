@@ -427,6 +427,13 @@ Texture readRadianceHdr(const fs::path& path) {
     return RadianceReader(path, std::move(bytes)).read();
 }
 
+void checkOutputFile(const fs::path& path) {
+    checkOutputFolder(path);
+    std::error_code ec;
+    if (fs::is_directory(path, ec))
+        throwBadInput("", "the output path is a folder", "a file name", "name a file inside the folder", path.string());
+}
+
 void writeFileAtomic(const fs::path& path, const std::string& bytes) {
     writeAtomically(path, [&](std::ofstream& out, const std::string&) {
         out.write(bytes.data(), std::streamsize(bytes.size()));

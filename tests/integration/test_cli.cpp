@@ -159,6 +159,14 @@ TEST_F(Cli, RenderWritesStatsForEveryFrame) {
     expectNoTemporaries();
 }
 
+// A --stats path that cannot be written is bad input found before the first frame, not after the last.
+TEST_F(Cli, StatsPathIsCheckedBeforeRendering) {
+    fs::create_directories(mDir / "statsdir");
+    expectBadInput(render("--frames 3 -q --stats statsdir"), {"--stats", "statsdir", "is a folder"});
+    expectBadInput(render("--frames 3 -q --stats missing/stats.json"), {"--stats", "folder does not exist"});
+    expectNoTemporaries();
+}
+
 TEST_F(Cli, RenderWithPoisonSucceeds) {
     RunResult r = render("--frames 1 -q --poison --set Blur.radius=1");
     ASSERT_EQ(r.code, 0) << r.output;
