@@ -159,11 +159,19 @@ TEST_F(Cli, RenderWritesStatsForEveryFrame) {
     expectNoTemporaries();
 }
 
-// A --stats path that cannot be written is bad input found before the first frame, not after the last.
-TEST_F(Cli, StatsPathIsCheckedBeforeRendering) {
-    fs::create_directories(mDir / "statsdir");
-    expectBadInput(render("--frames 3 -q --stats statsdir"), {"--stats", "statsdir", "is a folder"});
+// An output file that cannot be written (a folder, a missing folder) is bad input; --stats is checked before the
+// first frame, not after the last.
+TEST_F(Cli, OutputFilePathsAreCheckedFirst) {
+    fs::create_directories(mDir / "taken");
+    expectBadInput(render("--frames 3 -q --stats taken"), {"--stats", "taken", "is a folder"});
     expectBadInput(render("--frames 3 -q --stats missing/stats.json"), {"--stats", "folder does not exist"});
+    RunResult dot = loom("check " + quoted(kTestPattern) + " --dot taken");
+    EXPECT_EQ(dot.code, 2) << dot.output;
+    EXPECT_CONTAINS(dot.output, "is a folder");
+    loom::writeImage(mDir / "a.png", loom::Texture(4, 4, loom::Format::RGBA8Unorm));
+    RunResult montage = loom("image montage a.png a.png -o taken");
+    EXPECT_EQ(montage.code, 2) << montage.output;
+    EXPECT_CONTAINS(montage.output, "is a folder");
     expectNoTemporaries();
 }
 
