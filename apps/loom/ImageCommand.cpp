@@ -38,7 +38,7 @@ void pixel8(const Texture& t, uint32_t x, uint32_t y, uint8_t out[4]) {
 
 void runMontage(const std::vector<std::string>& inputs, const std::string& output, uint32_t gap) {
     if (inputs.size() < 2) throwBadInput("loom image montage", "fewer than two input images", "two or more images");
-    checkOutputFile(output);
+    checkOutputFile(output, "--out");
     std::vector<Texture> images;
     for (const std::string& path : inputs) images.push_back(readImage(path));
     const uint32_t height = images.front().height();

@@ -36,7 +36,7 @@ void runCheck(const CheckOptions& o) {
         if (o.dot == "-") {
             std::cout << graph.planDot();
         } else {
-            checkOutputFile(o.dot);  // a folder is bad input, not a failed rename
+            checkOutputFile(o.dot, "--dot");  // a folder is bad input, not a failed rename
             writeFileAtomic(o.dot, graph.planDot());
             std::cout << "Graphviz written to " << o.dot << "\n";
         }

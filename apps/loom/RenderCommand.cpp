@@ -59,13 +59,7 @@ void runRender(const RenderOptions& o) {
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
     ensureWritableDir(o.out, "--out");
-    if (!o.statsFile.empty()) {
-        try {
-            checkOutputFile(o.statsFile);  // before the frames, not after them
-        } catch (const Error& e) {
-            throwBadInput("--stats", e.info().what, e.info().expected, e.info().suggestion, o.statsFile);
-        }
-    }
+    if (!o.statsFile.empty()) checkOutputFile(o.statsFile, "--stats");  // before the frames, not after them
 
     ThreadLimit threadLimit(o.threads);
     PluginRegistry registry = makeRegistry();

@@ -49,21 +49,21 @@ std::string lowerExtension(const fs::path& path) {
 }
 
 /// The folder a file is written into must exist and be writable: otherwise it is the user's mistake (a wrong
-/// --output path), not a runtime failure.
-void checkOutputFolder(const fs::path& path) {
+/// --output path), not a runtime failure. `where`: the option that named the file, if any.
+void checkOutputFolder(const fs::path& path, const std::string& where = {}) {
     fs::path folder = path.parent_path();
     if (folder.empty()) folder = ".";
     std::error_code ec;
     if (!fs::exists(folder, ec)) {
-        throwBadInput("", "folder does not exist: " + folder.string(), "an existing folder",
+        throwBadInput(where, "folder does not exist: " + folder.string(), "an existing folder",
                       "create the folder first or choose another output path", path.string());
     }
     if (!fs::is_directory(folder, ec)) {
-        throwBadInput("", "not a folder: " + folder.string(), "an existing folder", "choose another output path",
+        throwBadInput(where, "not a folder: " + folder.string(), "an existing folder", "choose another output path",
                       path.string());
     }
     if (::access(folder.c_str(), W_OK) != 0) {
-        throwBadInput("", "cannot write into folder " + folder.string() + ": " + std::strerror(errno),
+        throwBadInput(where, "cannot write into folder " + folder.string() + ": " + std::strerror(errno),
                       "a writable folder", "check the folder's permissions or choose another output path",
                       path.string());
     }
@@ -166,11 +166,11 @@ void writePng(const fs::path& path, const Texture& tex) {
     writeFileAtomic(path, bytes);
 }
 
-bool hasExrMagic(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    char magic[4] = {};
-    if (!in.read(magic, 4)) return false;
-    return Imf::isImfMagic(magic);
+/// The first four bytes of a file (zeros past its end), which tell the image formats apart.
+std::array<char, 4> leadingBytes(const fs::path& path) {
+    std::array<char, 4> magic{};
+    std::ifstream(path, std::ios::binary).read(magic.data(), magic.size());
+    return magic;
 }
 
 Texture readExr(const fs::path& path) {
@@ -364,12 +364,6 @@ private:
     uint32_t mWidth = 0, mHeight = 0;
 };
 
-bool hasRadianceMagic(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    char magic[2] = {};
-    return in.read(magic, 2) && magic[0] == '#' && magic[1] == '?';
-}
-
 }  // namespace
 
 const char* imageExtension(Format f) { return formatInfo(f).component == ComponentType::Unorm8 ? "png" : "exr"; }
@@ -414,24 +408,30 @@ void checkReadable(const fs::path& path) {
 
 Texture readImage(const fs::path& path) {
     checkReadable(path);
-    if (hasExrMagic(path)) return readExr(path);
-    if (hasRadianceMagic(path)) return readRadianceHdr(path);
+    const std::array<char, 4> magic = leadingBytes(path);
+    if (Imf::isImfMagic(magic.data())) return readExr(path);
+    if (magic[0] == '#' && magic[1] == '?') return readRadianceHdr(path);  // "#?RADIANCE"
     return readStb(path);
 }
 
 Texture readRadianceHdr(const fs::path& path) {
     checkReadable(path);
+    return RadianceReader(path, readFileBytes(path)).read();
+}
+
+std::string readFileBytes(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
     std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (in.bad()) throwRuntime(path, "cannot read the file");
-    return RadianceReader(path, std::move(bytes)).read();
+    return bytes;
 }
 
-void checkOutputFile(const fs::path& path) {
-    checkOutputFolder(path);
+void checkOutputFile(const fs::path& path, const std::string& where) {
+    checkOutputFolder(path, where);
     std::error_code ec;
     if (fs::is_directory(path, ec))
-        throwBadInput("", "the output path is a folder", "a file name", "name a file inside the folder", path.string());
+        throwBadInput(where, "the output path is a folder", "a file name", "name a file inside the folder",
+                      path.string());
 }
 
 void writeFileAtomic(const fs::path& path, const std::string& bytes) {

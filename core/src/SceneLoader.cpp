@@ -19,6 +19,7 @@
 #include <type_traits>
 
 #include "loom/Error.h"
+#include "loom/ImageIO.h"
 #include "loom/Scene.h"
 
 namespace loom {
@@ -99,11 +100,6 @@ bool decodeImage(tinygltf::Image* image, const int index, std::string* /*err*/, 
 // ---------------------------------------------------------------------------
 // Diagnosis when tinygltf refuses a file
 
-std::string readWholeFile(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
 std::string percentDecode(const std::string& s) {
     std::string out;
     for (size_t i = 0; i < s.size(); ++i) {
@@ -151,7 +147,7 @@ int64_t intOr(const nlohmann::json& o, const char* key, int64_t fallback) {
 /// JSON to name the glTF object at fault, then throws.
 [[noreturn]] void failLoad(const fs::path& path, bool binary, const std::string& tinyErr) {
     const std::string file = path.string();
-    const std::string bytes = readWholeFile(path);
+    const std::string bytes = readFileBytes(path);
     std::string jsonText = bytes;
     std::optional<size_t> binChunk;  // size of a GLB BIN chunk, when there is one
     if (binary) {

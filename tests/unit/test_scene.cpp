@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "loom/Camera.h"
@@ -757,6 +758,20 @@ TEST_F(SceneFiles, RayHitsTheRightInstanceAndFollowsAnimation) {
     EXPECT_FALSE(s->rayScene().occluded({10.f, 0.5f, -0.5f}, {-1, 0, 0}, 0.f, 5.f));
 }
 
+/// A full 16-ray packet through RayScene::intersect16; ray(i) is lane i's (origin, direction).
+template <class Ray>
+std::array<RayHit, 16> tracePacket(const RayScene& rt, Ray ray) {
+    glm::vec3 origins[16], dirs[16];
+    bool valid[16];
+    for (int i = 0; i < 16; ++i) {
+        std::tie(origins[i], dirs[i]) = ray(i);
+        valid[i] = true;
+    }
+    std::array<RayHit, 16> hits;
+    rt.intersect16(origins, dirs, valid, 1e30f, hits.data());
+    return hits;
+}
+
 // A transform without an inverse (a zero scale on some axis, a common way to hide an object in an animation)
 // hides its instance: rays pass it, single and in packets, and it is back once the scale recovers. Embree would
 // carry rays into it through the inverse and reject them.
@@ -778,15 +793,10 @@ TEST_F(SceneFiles, InstancesWithASingularTransformAreHiddenUntilTheyRecover) {
     ASSERT_EQ(s->instances.size(), 2u);
     const auto firstHit = [&](bool packet) {
         if (!packet) return s->rayScene().intersect({0.25f, 0.25f, 5.f}, {0, 0, -1});
-        glm::vec3 origins[16], dirs[16];
-        bool valid[16];
-        RayHit hits[16];
-        for (int i = 0; i < 16; ++i) {
-            origins[i] = {0.05f + 0.04f * float(i % 4), 0.05f + 0.04f * float(i / 4), 5.f};
-            dirs[i] = {0, 0, -1};
-            valid[i] = true;
-        }
-        s->rayScene().intersect16(origins, dirs, valid, 1e30f, hits);
+        const auto hits = tracePacket(s->rayScene(), [](int i) {
+            return std::pair{glm::vec3(0.05f + 0.04f * float(i % 4), 0.05f + 0.04f * float(i / 4), 5.f),
+                             glm::vec3(0, 0, -1)};
+        });
         for (int i = 1; i < 16; ++i) EXPECT_EQ(hits[i].instance, hits[0].instance) << i;
         return hits[5];
     };
@@ -845,15 +855,7 @@ TEST_F(SceneFiles, UntraceableRaysHitNothing) {
         EXPECT_FALSE(traceable(origin, dir));
         EXPECT_FALSE(rt.intersect(origin, dir).hit());
         EXPECT_FALSE(rt.occluded(origin, dir, 0.f, 1e30f));
-        glm::vec3 origins[16], dirs[16];
-        bool valid[16];
-        RayHit hits[16];
-        for (int i = 0; i < 16; ++i) {
-            origins[i] = i == 7 ? origin : o;
-            dirs[i] = i == 7 ? dir : down;
-            valid[i] = true;
-        }
-        rt.intersect16(origins, dirs, valid, 1e30f, hits);
+        const auto hits = tracePacket(rt, [&](int i) { return i == 7 ? std::pair{origin, dir} : std::pair{o, down}; });
         for (int i = 0; i < 16; ++i) EXPECT_EQ(hits[i].hit(), i != 7) << i;
     }
     EXPECT_TRUE(traceable(glm::vec3(-kWorldLimit), glm::vec3(kWorldLimit)));

@@ -32,9 +32,13 @@ Texture readImage(const std::filesystem::path& path);
 Texture readRadianceHdr(const std::filesystem::path& path);
 
 /// Checks that a file can be written at `path`: its folder exists and is writable (as writeImage and
-/// writeFileAtomic check first), and the path is not a folder. Throws loom::Error (BadInput) otherwise, so a
-/// command can check its output files before it spends time on their contents.
-void checkOutputFile(const std::filesystem::path& path);
+/// writeFileAtomic check first), and the path is not a folder. Throws loom::Error (BadInput, at `where`: the
+/// option that named the file) otherwise, so a command can check its output files before it spends time on their
+/// contents.
+void checkOutputFile(const std::filesystem::path& path, const std::string& where = {});
+
+/// The whole file's bytes. Throws loom::Error (Runtime) when reading fails.
+std::string readFileBytes(const std::filesystem::path& path);
 
 /// Writes bytes to a file atomically (temporary + rename). Throws loom::Error.
 void writeFileAtomic(const std::filesystem::path& path, const std::string& bytes);
