@@ -30,6 +30,7 @@ void addPassesCommand(CLI::App& app);
 void addSceneCommand(CLI::App& app);
 void addImageCommand(CLI::App& app);
 void addBenchCommand(CLI::App& app);
+void addViewCommand(CLI::App& app);
 
 /// "orbit", "orbit:0.5", "dolly:1:0.25", "static" -> a camera path. Throws loom::Error naming the option.
 CameraPath parseCameraPath(const std::string& text, const std::string& option);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "CliUtil.h"
+#include "Display.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
 
@@ -16,24 +17,10 @@ namespace loom::cli {
 
 namespace {
 
-/// The exact sRGB encoding of a linear value, to 8 bits (round to nearest).
-uint8_t encodeSrgb8(float linear) {
-    if (!std::isfinite(linear)) linear = linear > 0.f ? 1.f : 0.f;
-    const float v = std::clamp(linear, 0.f, 1.f);
-    const float e = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.f / 2.4f) - 0.055f;
-    return uint8_t(std::lround(std::clamp(e, 0.f, 1.f) * 255.f));
-}
-
 /// 8-bit pixel (x, y) of an image read from disk: PNG bytes as they are, float images (EXR) clamped to [0, 1]
 /// and sRGB-encoded, so a linear HDR image shows as it would after a linear tone map.
 void pixel8(const Texture& t, uint32_t x, uint32_t y, uint8_t out[4]) {
-    const FormatInfo& info = formatInfo(t.format());
-    if (info.component == ComponentType::Unorm8) {
-        std::memcpy(out, t.row(y) + size_t(x) * 4, 4);
-        return;
-    }
-    for (uint32_t c = 0; c < 3; ++c) out[c] = encodeSrgb8(c < info.channels ? t.texel(x, y, c) : 0.f);
-    out[3] = 255;
+    displayPixel(t, x, y, 1.f, out);
 }
 
 void runMontage(const std::vector<std::string>& inputs, const std::string& output, uint32_t gap) {

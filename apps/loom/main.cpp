@@ -35,6 +35,7 @@ int main(int argc, char** argv) {
     loom::cli::addSceneCommand(app);
     loom::cli::addImageCommand(app);
     loom::cli::addBenchCommand(app);
+    loom::cli::addViewCommand(app);
 
     try {
         if (argc > 1 && argv[1][0] != '-') {

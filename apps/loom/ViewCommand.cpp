@@ -1,0 +1,315 @@
+// loom view: run a graph in a window, Mogwai-style. Pick any field to show (history included) without disturbing
+// the render, tune every pass's parameters from their declarations, pause, step, reset history, reload the graph
+// file when it is edited, save the shown field or the screen, record every frame. --headless runs the same session
+// without a window (scripts, tests, machines without a display).
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "CliUtil.h"
+#include "ViewSession.h"
+#include "loom/Error.h"
+#include "loom/Parallel.h"
+
+#ifdef LOOM_HAVE_VIEWER
+#define GLFW_INCLUDE_NONE
+#include <GL/gl.h>
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+#include <imgui_impl_glfw.h>
+#include <imgui_impl_opengl3.h>
+#endif
+
+namespace loom::cli {
+
+namespace {
+
+#ifdef LOOM_HAVE_VIEWER
+
+constexpr float kPanelWidth = 360.f;
+
+/// One parameter's widget, from its declaration; an edit goes through RenderGraph::setParam (never reallocates).
+/// Returns the error of a rejected edit, else empty.
+std::string paramWidget(ViewSession& session, const std::string& pass, const ParamDecl& d) {
+    nlohmann::json value = d.get(), edited;
+    const char* label = d.name.c_str();
+    switch (d.type) {
+        case ParamType::Bool: {
+            bool v = value.get<bool>();
+            if (ImGui::Checkbox(label, &v)) edited = v;
+            break;
+        }
+        case ParamType::Int: {
+            int v = value.get<int>();
+            const bool ranged = d.min && d.max && *d.max - *d.min <= 1024;
+            if (ranged ? ImGui::SliderInt(label, &v, int(*d.min), int(*d.max)) : ImGui::InputInt(label, &v)) edited = v;
+            break;
+        }
+        case ParamType::Float: {
+            float v = value.get<float>();
+            const bool ranged = d.min && d.max && *d.max - *d.min <= 1e4;
+            if (ranged ? ImGui::SliderFloat(label, &v, float(*d.min), float(*d.max), "%.4g")
+                       : ImGui::DragFloat(label, &v, 0.01f * std::max(1.f, std::fabs(v)), 0.f, 0.f, "%.4g"))
+                edited = v;
+            break;
+        }
+        case ParamType::Enum: {
+            const std::string current = value.get<std::string>();
+            if (ImGui::BeginCombo(label, current.c_str())) {
+                for (const std::string& option : d.enumValues)
+                    if (ImGui::Selectable(option.c_str(), option == current)) edited = option;
+                ImGui::EndCombo();
+            }
+            break;
+        }
+        case ParamType::Vec3:
+        case ParamType::Vec4: {
+            float v[4] = {};
+            const int n = d.type == ParamType::Vec3 ? 3 : 4;
+            for (int i = 0; i < n; ++i) v[i] = value[size_t(i)].get<float>();
+            if (n == 3 ? ImGui::DragFloat3(label, v, 0.01f) : ImGui::DragFloat4(label, v, 0.01f))
+                edited = std::vector<float>(v, v + n);
+            break;
+        }
+        case ParamType::String:
+            ImGui::Text("%s: %s", label, value.get<std::string>().c_str());
+            break;
+    }
+    if (ImGui::IsItemHovered() && !d.doc.empty()) ImGui::SetTooltip("%s", d.doc.c_str());
+    if (edited.is_null()) return {};
+    try {
+        session.graph().setParam(pass, d.name, edited, "viewer " + pass + "." + d.name);
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return {};
+}
+
+class Window {
+public:
+    explicit Window(const ViewSession& session) {
+        glfwSetErrorCallback([](int, const char* text) { spdlog::debug("GLFW: {}", text); });
+        if (!glfwInit())
+            throw Error({ErrorKind::Runtime,
+                         {},
+                         "loom view",
+                         "no display to open a window on",
+                         "",
+                         "set DISPLAY, run under xvfb-run, or use --headless"});
+        glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+        glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+        glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+        const int w = int(std::clamp<uint32_t>(session.width(), 320, 1920) + kPanelWidth);
+        const int h = int(std::clamp<uint32_t>(session.height(), 480, 1080));
+        mWindow = glfwCreateWindow(w, h, ("Loom - " + session.options().graph).c_str(), nullptr, nullptr);
+        if (!mWindow) {
+            glfwTerminate();
+            throw Error({ErrorKind::Runtime,
+                         {},
+                         "loom view",
+                         "could not create an OpenGL 3.3 window",
+                         "",
+                         "check the display's OpenGL support, or use --headless"});
+        }
+        glfwMakeContextCurrent(mWindow);
+        glfwSwapInterval(0);
+        IMGUI_CHECKVERSION();
+        ImGui::CreateContext();
+        ImGui::GetIO().IniFilename = nullptr;
+        ImGui::StyleColorsDark();
+        ImGui_ImplGlfw_InitForOpenGL(mWindow, true);
+        ImGui_ImplOpenGL3_Init("#version 330");
+        glGenTextures(1, &mTexture);
+        glBindTexture(GL_TEXTURE_2D, mTexture);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);  // magnified pixels stay pixels
+    }
+    ~Window() {
+        glfwMakeContextCurrent(mWindow);
+        glDeleteTextures(1, &mTexture);
+        ImGui_ImplOpenGL3_Shutdown();
+        ImGui_ImplGlfw_Shutdown();
+        ImGui::DestroyContext();
+        glfwDestroyWindow(mWindow);
+        glfwTerminate();
+    }
+    bool open() const { return !glfwWindowShouldClose(mWindow); }
+    /// Makes no context current: passes that render with their own (EGL) context cannot while the window's is.
+    void release() { glfwMakeContextCurrent(nullptr); }
+
+    /// Draws one frame of the window: the shown field fitted to the left, the panel on the right.
+    void draw(ViewSession& session, bool& paused, bool& stepOnce, double renderMs) {
+        glfwPollEvents();
+        glfwMakeContextCurrent(mWindow);  // released while the graph ran
+        const Texture& shown = session.viewedTexture();
+        if (!session.display().empty()) {
+            glBindTexture(GL_TEXTURE_2D, mTexture);
+            glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+            glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, GLsizei(shown.width()), GLsizei(shown.height()), 0, GL_RGBA,
+                         GL_UNSIGNED_BYTE, session.display().data());
+        }
+        ImGui_ImplOpenGL3_NewFrame();
+        ImGui_ImplGlfw_NewFrame();
+        ImGui::NewFrame();
+        int fw, fh;
+        glfwGetFramebufferSize(mWindow, &fw, &fh);
+        const ImVec2 size = ImGui::GetIO().DisplaySize;
+        const float areaW = std::max(1.f, size.x - kPanelWidth), areaH = std::max(1.f, size.y);
+        if (!session.display().empty()) {
+            const float scale = std::min(areaW / float(shown.width()), areaH / float(shown.height()));
+            const float w = float(shown.width()) * scale, h = float(shown.height()) * scale;
+            const ImVec2 p0((areaW - w) * 0.5f, (areaH - h) * 0.5f);
+            ImGui::GetBackgroundDrawList()->AddImage(reinterpret_cast<ImTextureID>(uintptr_t(mTexture)), p0,
+                                                     ImVec2(p0.x + w, p0.y + h));
+        }
+        panel(session, paused, stepOnce, renderMs, areaW, areaH);
+        ImGui::Render();
+        glViewport(0, 0, fw, fh);
+        glClearColor(0.08f, 0.08f, 0.08f, 1.f);
+        glClear(GL_COLOR_BUFFER_BIT);
+        ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+        glfwSwapBuffers(mWindow);
+    }
+
+private:
+    void panel(ViewSession& session, bool& paused, bool& stepOnce, double renderMs, float x, float height) {
+        ImGui::SetNextWindowPos(ImVec2(x, 0.f));
+        ImGui::SetNextWindowSize(ImVec2(kPanelWidth, height));
+        ImGui::Begin("Loom", nullptr,
+                     ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
+        ImGui::Text("frame %llu  %ux%u  %.1f ms", (unsigned long long)session.frame(), session.width(),
+                    session.height(), renderMs);
+        if (ImGui::Button(paused ? "Run" : "Pause")) paused = !paused;
+        ImGui::SameLine();
+        if (ImGui::Button("Step")) stepOnce = true;
+        ImGui::SameLine();
+        if (ImGui::Button("Reset history")) session.resetHistory();
+        // The field on display: any of the graph's, history included; switching keeps every pass's state.
+        if (ImGui::BeginCombo("field", session.viewed().c_str())) {
+            for (const std::string& f : session.fields())
+                if (ImGui::Selectable(f.c_str(), f == session.viewed())) act([&] { session.view(f); });
+            ImGui::EndCombo();
+        }
+        float ev = session.exposure();
+        if (ImGui::SliderFloat("exposure (EV)", &ev, -10.f, 10.f, "%.2f")) act([&] { session.setExposure(ev); });
+        if (ImGui::Button("Save field")) act([&] { saveNext(session, true); });
+        ImGui::SameLine();
+        if (ImGui::Button("Save screen")) act([&] { saveNext(session, false); });
+        if (!mMessage.empty()) ImGui::TextWrapped("%s", mMessage.c_str());
+        const auto timings = session.graph().timings();
+        const auto stats = session.graph().lastStats();
+        for (const std::string& name : session.graph().plan().order) {
+            const auto t =
+                std::find_if(timings.begin(), timings.end(), [&](const PassTiming& p) { return p.name == name; });
+            const std::string header =
+                fmt::format("{}  {:.2f} ms###{}", name, t == timings.end() ? 0.0 : t->lastMs, name);
+            if (!ImGui::CollapsingHeader(header.c_str())) continue;
+            ImGui::PushID(name.c_str());
+            RenderPass* pass = session.graph().pass(name);
+            for (const ParamDecl& d : pass->params().decls()) {
+                const std::string error = paramWidget(session, name, d);
+                if (!error.empty()) mMessage = error;
+            }
+            if (const auto s = stats.find(name); s != stats.end())
+                for (const auto& [k, v] : s->second) ImGui::Text("%s: %g", k.c_str(), v);
+            ImGui::PopID();
+        }
+        ImGui::End();
+    }
+
+    template <class F>
+    void act(F&& f) {
+        try {
+            f();
+            mMessage.clear();
+        } catch (const Error& e) {
+            mMessage = e.what();
+        }
+    }
+
+    void saveNext(const ViewSession& session, bool field) {
+        std::string name = session.viewed();
+        const bool isFloat = isFloatFormat(session.viewedTexture().format());
+        const std::string path =
+            fmt::format("loom-{}-{:04}.{}", name, session.frame(), field && isFloat ? "exr" : "png");
+        field ? session.saveField(path) : session.saveDisplay(path);
+        mMessage = "saved " + path;
+    }
+
+    GLFWwindow* mWindow = nullptr;
+    GLuint mTexture = 0;
+    std::string mMessage;
+};
+
+#endif  // LOOM_HAVE_VIEWER
+
+void runView(const ViewOptions& o) {
+    ThreadLimit threadLimit(o.threads);
+    ViewSession session(o);
+    const auto finished = [&] { return o.frames > 0 && session.frame() >= o.frames; };
+    if (o.headless) {
+        if (o.frames == 0) throwBadInput("--frames", "--headless needs a frame count", "--frames N with N > 0");
+        while (!finished()) session.step();
+    } else {
+#ifdef LOOM_HAVE_VIEWER
+        Window window(session);
+        bool paused = false, stepOnce = false;
+        double renderMs = 0.0;
+        auto lastReload = std::chrono::steady_clock::now();
+        while (window.open() && !finished()) {
+            if (!paused || stepOnce) {
+                window.release();
+                const auto t0 = std::chrono::steady_clock::now();
+                session.step();
+                renderMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+                stepOnce = false;
+            }
+            const auto now = std::chrono::steady_clock::now();
+            if (now - lastReload > std::chrono::milliseconds(500)) {
+                lastReload = now;
+                const std::string error = session.reloadIfChanged();
+                if (!error.empty()) spdlog::error("{}", error);
+            }
+            window.draw(session, paused, stepOnce, renderMs);
+        }
+#else
+        throw Error({ErrorKind::Runtime,
+                     {},
+                     "loom view",
+                     "this build has no window support (GLFW, Dear ImGui)",
+                     "",
+                     "install libglfw3-dev and libimgui-dev and rebuild, or use --headless"});
+#endif
+    }
+    if (!o.screenshot.empty()) session.saveDisplay(o.screenshot);
+}
+
+}  // namespace
+
+void addViewCommand(CLI::App& app) {
+    auto o = std::make_shared<ViewOptions>();
+    CLI::App* cmd = app.add_subcommand("view", "Run a graph in a window: show any field, tune parameters live");
+    cmd->add_option("--graph,-g", o->graph, "graph file (.json); reloaded when it changes")->required();
+    cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT")->capture_default_str();
+    cmd->add_option("--field", o->field, "field shown first, Pass.field (default: the first output)");
+    cmd->add_option("--exposure", o->exposure, "exposure of float fields on display, in EV")->capture_default_str();
+    cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
+    cmd->add_option("--frames,-n", o->frames, "stop after this many frames (0: when the window closes)")
+        ->capture_default_str();
+    cmd->add_option("--script", o->script, "timed commands, lines 'FRAME VERB [ARG]' (docs/VIEWER.md)");
+    cmd->add_option("--record", o->record, "folder: write every frame's displayed image as a numbered PNG");
+    cmd->add_option("--screenshot", o->screenshot, "write the displayed image as PNG at the end");
+    cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
+    cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
+    cmd->add_flag("--headless", o->headless, "no window: run --frames frames (with --script, --record, --screenshot)");
+    addSceneOptions(cmd, o->scene);
+    cmd->callback([o] { runView(*o); });
+}
+
+}  // namespace loom::cli

@@ -1,0 +1,251 @@
+#include "ViewSession.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "CliUtil.h"
+#include "Display.h"
+#include "loom/Error.h"
+#include "loom/ImageIO.h"
+
+namespace loom::cli {
+
+namespace {
+
+const std::vector<std::string> kVerbs = {"view", "set", "exposure", "reset", "save", "shot"};
+
+bool needsArgument(const std::string& verb) {
+    return verb != "reset";
+}
+
+std::filesystem::file_time_type modificationTime(const std::string& path) {
+    std::error_code ec;
+    const auto t = std::filesystem::last_write_time(path, ec);
+    return ec ? std::filesystem::file_time_type{} : t;
+}
+
+void checkExposure(float ev, const std::string& where) {
+    if (!std::isfinite(ev) || std::fabs(ev) > 64.f)
+        throwBadInput(where, fmt::format("exposure {} EV is out of range", ev), "a value in [-64, 64] EV");
+}
+
+}  // namespace
+
+std::vector<ScriptCommand> parseViewScript(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throwBadInput(path, "cannot read the script", "a readable text file", "check the --script path");
+    std::vector<ScriptCommand> commands;
+    std::string text;
+    int line = 0;
+    while (std::getline(in, text)) {
+        ++line;
+        const std::string where = fmt::format("{}:{}", path, line);
+        std::istringstream words(text);
+        std::string first;
+        if (!(words >> first) || first[0] == '#') continue;
+        ScriptCommand c;
+        c.line = line;
+        size_t used = 0;
+        try {
+            c.frame = std::stoull(first, &used);
+        } catch (const std::exception&) {
+            used = 0;
+        }
+        if (used != first.size() || first[0] == '-')
+            throwBadInput(where, "'" + printable(first) + "' is not a frame number",
+                          "FRAME VERB [ARGUMENT], e.g. 10 view SVGF.variance");
+        if (!(words >> c.verb))
+            throwBadInput(where, "a frame number without a command", "FRAME VERB [ARGUMENT]", "verbs: " + join(kVerbs));
+        if (std::find(kVerbs.begin(), kVerbs.end(), c.verb) == kVerbs.end())
+            throwBadInput(where, "unknown command '" + printable(c.verb) + "'", "one of: " + join(kVerbs),
+                          didYouMean(c.verb, kVerbs, "commands"));
+        std::getline(words >> std::ws, c.arg);
+        while (!c.arg.empty() && std::isspace(static_cast<unsigned char>(c.arg.back()))) c.arg.pop_back();
+        if (needsArgument(c.verb) && c.arg.empty())
+            throwBadInput(where, "'" + c.verb + "' needs an argument", "FRAME " + c.verb + " ARGUMENT");
+        if (!commands.empty() && c.frame < commands.back().frame)
+            throwBadInput(where, fmt::format("frame {} comes after frame {}", c.frame, commands.back().frame),
+                          "lines in frame order");
+        if (c.verb == "exposure") {
+            char* end = nullptr;
+            const float ev = std::strtof(c.arg.c_str(), &end);
+            if (end == c.arg.c_str() || *end != '\0')
+                throwBadInput(where, "'" + printable(c.arg) + "' is not a number", "an exposure in EV, e.g. -1.5");
+            checkExposure(ev, where);
+        }
+        commands.push_back(std::move(c));
+    }
+    return commands;
+}
+
+ViewSession::ViewSession(const ViewOptions& options)
+    : mOptions(options), mRegistry(makeRegistry()), mExposure(options.exposure) {
+    parseSize(options.size, "--size", mWidth, mHeight);
+    if (!(options.fps > 0.0) || options.fps > 1e6) throwBadInput("--fps", "frame rate must be positive", "e.g. 60");
+    checkExposure(options.exposure, "--exposure");
+    if (!options.script.empty()) mScript = parseViewScript(options.script);
+    if (!options.record.empty()) ensureWritableDir(options.record, "--record");
+    if (!options.screenshot.empty()) checkOutputFile(options.screenshot, "--screenshot");
+    mScene = loadScene(options.scene);
+    mGraph = std::make_unique<RenderGraph>(loadGraph(options.graph), mRegistry);
+    mGraphTime = modificationTime(options.graph);
+    if (mScene) mGraph->setScene(mScene);
+    applySet(*mGraph, options.set);
+    // Compile once to learn the fields, then with the one on display observed.
+    CompileOptions copts;
+    copts.width = mWidth;
+    copts.height = mHeight;
+    mGraph->compile(copts);
+    listFields();
+    std::string first = options.field;
+    if (first.empty()) {
+        const auto& outs = mGraph->outputs();
+        first = outs.empty() ? mFields.front() : outs.front().pass + "." + outs.front().channel;
+    }
+    view(first);
+    mGraph->setFieldObserver(
+        [this](const FrameInfo&, const std::string& pass, const std::string& field, const Texture& tex) {
+            if (pass + "." + field != mViewed) return;
+            if (mViewedTexture.width() != tex.width() || mViewedTexture.height() != tex.height() ||
+                mViewedTexture.format() != tex.format())
+                mViewedTexture = Texture(tex.width(), tex.height(), tex.format());
+            mViewedTexture.copyFrom(tex);
+        });
+}
+
+ViewSession::~ViewSession() = default;
+
+void ViewSession::listFields() {
+    mFields.clear();
+    const CompiledPlan& plan = mGraph->plan();
+    for (const ResourceInfo& r : plan.resources) mFields.push_back(r.name);
+    for (const std::string& s : plan.skippedOutputs)
+        if (std::find(mFields.begin(), mFields.end(), s) == mFields.end()) mFields.push_back(s);
+    const auto position = [&](const std::string& field) {
+        const std::string pass = field.substr(0, field.find('.'));
+        return std::find(plan.order.begin(), plan.order.end(), pass) - plan.order.begin();
+    };
+    std::stable_sort(mFields.begin(), mFields.end(),
+                     [&](const std::string& a, const std::string& b) { return position(a) < position(b); });
+    if (mFields.empty()) throwBadInput(mOptions.graph, "the graph computes no field", "a graph with outputs");
+}
+
+void ViewSession::compileViewing(const std::string& field) {
+    CompileOptions copts = mGraph->options();
+    copts.observe = {field};
+    mGraph->compile(copts);
+}
+
+void ViewSession::view(const std::string& field) {
+    if (std::find(mFields.begin(), mFields.end(), field) == mFields.end())
+        throwBadInput(field, "no field '" + printable(field) + "' in the graph", "a Pass.field the graph computes",
+                      didYouMean(field, mFields, "fields"));
+    if (field == mViewed) return;
+    compileViewing(field);
+    mViewed = field;
+}
+
+void ViewSession::set(const std::string& assignment) {
+    applySet(*mGraph, {assignment});
+}
+
+void ViewSession::setExposure(float ev) {
+    checkExposure(ev, "exposure");
+    mExposure = ev;
+    refreshDisplay();
+}
+
+std::string ViewSession::reloadIfChanged() {
+    const auto t = modificationTime(mOptions.graph);
+    if (t == mGraphTime) return {};
+    mGraphTime = t;
+    try {
+        mGraph->setDesc(loadGraph(mOptions.graph));
+        listFields();
+        const std::string keep = std::find(mFields.begin(), mFields.end(), mViewed) != mFields.end()
+                                     ? mViewed
+                                     : (mGraph->outputs().empty()
+                                            ? mFields.front()
+                                            : mGraph->outputs().front().pass + "." + mGraph->outputs().front().channel);
+        mViewed.clear();
+        view(keep);
+        return {};
+    } catch (const Error& e) {
+        // The graph as it ran before: setDesc keeps it when the new description does not compile.
+        try {
+            listFields();
+            if (std::find(mFields.begin(), mFields.end(), mViewed) == mFields.end()) {
+                mViewed.clear();
+                view(mFields.front());
+            }
+        } catch (const Error&) {
+        }
+        return e.what();
+    }
+}
+
+void ViewSession::runScript() {
+    while (mScriptNext < mScript.size() && mScript[mScriptNext].frame <= mFrame) {
+        const ScriptCommand& c = mScript[mScriptNext++];
+        const std::string where = fmt::format("{}:{}", mOptions.script, c.line);
+        try {
+            if (c.verb == "view")
+                view(c.arg);
+            else if (c.verb == "set")
+                set(c.arg);
+            else if (c.verb == "exposure")
+                setExposure(std::strtof(c.arg.c_str(), nullptr));
+            else if (c.verb == "reset")
+                resetHistory();
+            else if (c.verb == "save")
+                saveField(c.arg);
+            else if (c.verb == "shot")
+                saveDisplay(c.arg);
+        } catch (const Error& e) {
+            Error::Info info = e.info();  // the script line, then what the command named
+            info.where = info.where.empty() ? where : where + ": " + info.where;
+            throw Error(info);
+        }
+    }
+}
+
+void ViewSession::step() {
+    runScript();
+    FrameInfo frame;
+    if (mScene) {
+        frame = sceneFrame(*mScene, mFrame, mOptions.fps, mWidth, mHeight, mFrame == 0);
+    } else {
+        frame.frameIndex = mFrame;
+        frame.time = double(mFrame) / mOptions.fps;
+    }
+    mGraph->execute(frame);
+    ++mFrame;
+    refreshDisplay();
+    if (!mOptions.record.empty())
+        saveDisplay(std::filesystem::path(mOptions.record) / fmt::format("frame.{:04}.png", mFrame - 1));
+}
+
+void ViewSession::refreshDisplay() {
+    if (mViewedTexture.empty()) return;
+    mDisplay = displayImage(mViewedTexture, std::exp2(mExposure));
+}
+
+void ViewSession::saveField(const std::filesystem::path& path) const {
+    if (mViewedTexture.empty()) throwBadInput(path.string(), "nothing rendered yet", "a frame before saving");
+    writeImage(path, mViewedTexture);
+}
+
+void ViewSession::saveDisplay(const std::filesystem::path& path) const {
+    if (mDisplay.empty()) throwBadInput(path.string(), "nothing rendered yet", "a frame before saving");
+    const uint32_t w = mViewedTexture.width();
+    Texture t(w, mViewedTexture.height(), Format::RGBA8Srgb);
+    for (uint32_t y = 0; y < t.height(); ++y)
+        std::copy_n(&mDisplay[size_t(y) * w * 4], size_t(w) * 4, reinterpret_cast<uint8_t*>(t.row(y)));
+    writeImage(path, t);
+}
+
+}  // namespace loom::cli

@@ -1,0 +1,156 @@
+// loom view: the session behind the window, run --headless with scripts (switching the shown field leaves the render
+// bit for bit as it was, the display is the exact sRGB encoding, every frame recorded, bad scripts are bad input),
+// and the window itself under a virtual X server showing what the headless session shows.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "TestUtil.h"
+#include "loom/ImageIO.h"
+#include "loom/Texture.h"
+
+namespace fs = std::filesystem;
+
+#define EXPECT_CONTAINS(text, part) \
+    EXPECT_NE(std::string(text).find(part), std::string::npos) << "'" << (part) << "' not in:\n" << (text)
+
+namespace {
+
+using loom::test::shellQuoted;
+
+const std::string kGraphs = std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/";
+
+std::string fileBytes(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+/// The exact sRGB encoding of a linear value in [0, 1], to 8 bits, computed in double.
+int srgb8(double v) {
+    const double e = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
+    return int(std::lround(e * 255.0));
+}
+
+class View : public loom::test::TempDirTest {
+protected:
+    loom::test::CliResult loom(const std::string& args) const { return loom::test::runLoom(mDir, args); }
+    void write(const std::string& name, const std::string& text) const { std::ofstream(mDir / name) << text; }
+    /// The default graph on the dynamic scene, 64x64, orbiting and jittered: every pass has history.
+    std::string svgfRun(const std::string& extra) const {
+        return "view --headless --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+               shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
+               " --size 64x64 --camera-path orbit --jitter halton " + extra;
+    }
+};
+
+TEST_F(View, SwitchingTheShownFieldLeavesTheRenderUnchanged) {
+    // Falcor resets SVGF when a debug view is selected; here showing other fields (history ones included) on the
+    // way must give the very bytes of a run that showed TAA's output throughout, and those of `loom render`.
+    write("plain.txt", "7 save plain.exr\n");
+    write("switching.txt",
+          "# frame verb argument\n"
+          "1 view SVGF.variance\n"
+          "2 view SVGF.moments\n"
+          "3 set SVGF.phiColor=10\n"
+          "4 view TAA.colorHistory\n"
+          "5 view GBuffer.meshId\n"
+          "6 view TAA.colorOut\n"
+          "7 save switching.exr\n");
+    auto r = loom(svgfRun("--frames 8 --field TAA.colorOut --script plain.txt"));
+    ASSERT_EQ(r.code, 0) << r.output;
+    r = loom(svgfRun("--frames 8 --script switching.txt"));
+    ASSERT_EQ(r.code, 0) << r.output;
+    r = loom("render --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+             shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
+             " --size 64x64 --camera-path orbit --jitter halton --frames 7 --out out --dump TAA.colorOut "
+             "--dump-frames 6 -q");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const std::string plain = fileBytes(mDir / "plain.exr");
+    ASSERT_FALSE(plain.empty());
+    EXPECT_EQ(plain, fileBytes(mDir / "switching.exr"));
+    EXPECT_EQ(plain, fileBytes(mDir / "out" / "TAA.colorOut.0006.exr"));
+    // And the frame is not trivially equal to something static: the orbit moved it since frame 3.
+    write("early.txt", "3 save early.exr\n");
+    ASSERT_EQ(loom(svgfRun("--frames 4 --field TAA.colorOut --script early.txt")).code, 0);
+    EXPECT_NE(plain, fileBytes(mDir / "early.exr"));
+}
+
+TEST_F(View, TheDisplayIsTheExposedValueSrgbEncoded) {
+    write("constant.json", R"({"loom_graph": 1, "name": "C",
+        "passes": [{"name": "C", "type": "Constant", "params": {"color": [0.5, 0.25, 3.0, 0.5]}}],
+        "outputs": ["C.dst"]})");
+    const auto r = loom("view --headless --graph constant.json --size 8x4 --frames 2 --exposure -1 --screenshot s.png");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const loom::Texture shot = loom::readImage(mDir / "s.png");
+    ASSERT_EQ(shot.width(), 8u);
+    ASSERT_EQ(shot.height(), 4u);
+    const int expected[4] = {srgb8(0.25), srgb8(0.125), 255, 255};  // 3.0 / 2 clips to white; alpha opaque
+    for (uint32_t y = 0; y < 4; ++y)
+        for (uint32_t x = 0; x < 8; ++x)
+            for (int c = 0; c < 4; ++c)
+                ASSERT_EQ(int(std::to_integer<uint8_t>(shot.row(y)[x * 4 + c])), expected[c]) << x << "," << y;
+}
+
+TEST_F(View, RecordWritesEveryFrameAndTheLastIsTheScreenshot) {
+    const auto r = loom("view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json") +
+                        " --size 32x32 --frames 3 --record rec --screenshot last.png");
+    ASSERT_EQ(r.code, 0) << r.output;
+    for (int i = 0; i < 3; ++i) EXPECT_TRUE(fs::exists(mDir / "rec" / ("frame.000" + std::to_string(i) + ".png")));
+    EXPECT_FALSE(fs::exists(mDir / "rec" / "frame.0003.png"));
+    EXPECT_EQ(fileBytes(mDir / "rec" / "frame.0002.png"), fileBytes(mDir / "last.png"));
+    EXPECT_NE(fileBytes(mDir / "rec" / "frame.0000.png"), fileBytes(mDir / "last.png"));  // the pattern animates
+}
+
+TEST_F(View, BadScriptsAndFieldsAreBadInput) {
+    const std::string run =
+        "view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json") + " --size 16x16 --frames 4 ";
+    const auto expectBad = [&](const std::string& args, const std::vector<std::string>& parts) {
+        const auto r = loom(run + args + " --screenshot s.png");
+        EXPECT_EQ(r.code, 2) << args << "\n" << r.output;
+        EXPECT_CONTAINS(r.output, "error:");
+        for (const auto& p : parts) EXPECT_CONTAINS(r.output, p);
+        EXPECT_FALSE(fs::exists(mDir / "s.png")) << args;
+    };
+    write("verb.txt", "1 veiw Blur.dst\n");
+    expectBad("--script verb.txt", {"verb.txt:1", "unknown command 'veiw'", "did you mean 'view'"});
+    write("frame.txt", "# comment\n\nx view Blur.dst\n");
+    expectBad("--script frame.txt", {"frame.txt:3", "not a frame number"});
+    write("order.txt", "3 reset\n1 reset\n");
+    expectBad("--script order.txt", {"order.txt:2", "frame 1 comes after frame 3"});
+    write("arg.txt", "1 view\n");
+    expectBad("--script arg.txt", {"arg.txt:1", "needs an argument"});
+    write("ev.txt", "1 exposure bright\n");
+    expectBad("--script ev.txt", {"ev.txt:1", "not a number"});
+    write("field.txt", "2 view Blur.dts\n");
+    expectBad("--script field.txt", {"field.txt:1", "no field 'Blur.dts'", "did you mean 'Blur.dst'"});
+    write("set.txt", "1 set Blur.radius=-4\n");
+    expectBad("--script set.txt", {"set.txt:1", "radius"});
+    expectBad("--script missing.txt", {"missing.txt", "cannot read"});
+    expectBad("--field Blur.dts", {"no field 'Blur.dts'", "did you mean 'Blur.dst'"});
+    expectBad("--exposure 1e9", {"--exposure", "out of range"});
+    EXPECT_EQ(loom("view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json")).code, 2);  // no --frames
+}
+
+TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
+    // The window under a virtual X server (xvfb-run, installed by scripts/setup.sh): the GL window and the
+    // G-buffer rasterizer's own EGL context share the thread, and the screen is the session's display.
+    ASSERT_EQ(std::system("command -v xvfb-run >/dev/null 2>&1"), 0) << "xvfb-run is missing: run scripts/setup.sh";
+    const std::string args = "--graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+                             shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
+                             " --size 64x48 --camera-path orbit --frames 4 --field SVGF.filtered --exposure 1 ";
+    auto r = loom("view --headless " + args + "--screenshot headless.png");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const std::string cmd = "cd " + shellQuoted(mDir.string()) + " && xvfb-run -a -s '-screen 0 1024x768x24' " +
+                            shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
+                            "--screenshot window.png > window.log 2>&1";
+    const int status = std::system(cmd.c_str());
+    EXPECT_EQ(status, 0) << fileBytes(mDir / "window.log");
+    ASSERT_TRUE(fs::exists(mDir / "window.png")) << fileBytes(mDir / "window.log");
+    EXPECT_EQ(fileBytes(mDir / "headless.png"), fileBytes(mDir / "window.png"));
+}
+
+}  // namespace
