@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 namespace loom::cli {
@@ -54,6 +55,24 @@ void displayPixel(const Texture& t, uint32_t x, uint32_t y, float scale, uint8_t
     }
     if (info.channels == 1) v[1] = v[2] = v[0];
     for (int c = 0; c < 3; ++c) out[c] = encodeSrgb8(v[c]);
+}
+
+std::string pixelText(const Texture& t, uint32_t x, uint32_t y) {
+    const FormatInfo& info = formatInfo(t.format());
+    std::string text;
+    for (uint32_t c = 0; c < info.channels; ++c) {
+        if (c) text += ", ";
+        if (info.component == ComponentType::Uint32) {
+            uint32_t v;
+            std::memcpy(&v, t.row(y) + size_t(x) * info.bytesPerPixel + c * sizeof(v), sizeof(v));
+            text += std::to_string(v);
+        } else {
+            char buffer[32];
+            std::snprintf(buffer, sizeof buffer, "%.6g", t.texel(x, y, c));
+            text += buffer;
+        }
+    }
+    return text;
 }
 
 std::vector<uint8_t> displayImage(const Texture& t, float scale) {

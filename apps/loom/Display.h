@@ -1,6 +1,7 @@
 #pragma once
 // 8-bit display of any field: what `loom view` shows and `loom image montage` writes.
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "loom/Texture.h"
@@ -14,6 +15,9 @@ uint8_t encodeSrgb8(float linear);
 /// multiplied by `scale`, clamped and sRGB-encoded (one channel as grey, two as red and green), a pixel with a
 /// non-finite value magenta; integer formats (ids) as a colour hashed from the first channel, the miss value ~0 black.
 void displayPixel(const Texture& t, uint32_t x, uint32_t y, float scale, uint8_t out[4]);
+
+/// The values of pixel (x, y) as text, one per channel: "0.5, 0.25, 3, 1" (integers for integer formats).
+std::string pixelText(const Texture& t, uint32_t x, uint32_t y);
 
 /// The whole texture through displayPixel, rows top to bottom, 4 bytes a pixel, alpha 255.
 std::vector<uint8_t> displayImage(const Texture& t, float scale);

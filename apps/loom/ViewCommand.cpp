@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "CliUtil.h"
+#include "Display.h"
 #include "ViewSession.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
@@ -167,6 +168,7 @@ public:
             const ImVec2 p0((areaW - w) * 0.5f, (areaH - h) * 0.5f);
             ImGui::GetBackgroundDrawList()->AddImage(reinterpret_cast<ImTextureID>(uintptr_t(mTexture)), p0,
                                                      ImVec2(p0.x + w, p0.y + h));
+            inspect(shown, p0, scale);
         }
         panel(session, paused, stepOnce, renderMs, areaW, areaH);
         ImGui::Render();
@@ -177,7 +179,37 @@ public:
         glfwSwapBuffers(mWindow);
     }
 
+    /// The camera from the keyboard and mouse while the panel does not want them: W, A, S, D, Q, E move (a quarter
+    /// of the scene's size a second, Shift four times that), the right mouse button held turns.
+    void steer(ViewSession& session, double seconds) {
+        const ImGuiIO& io = ImGui::GetIO();
+        glm::vec3 move(0.f);
+        if (!io.WantCaptureKeyboard) {
+            const auto key = [&](int k) { return glfwGetKey(mWindow, k) == GLFW_PRESS ? 1.f : 0.f; };
+            move = glm::vec3(key(GLFW_KEY_D) - key(GLFW_KEY_A), key(GLFW_KEY_E) - key(GLFW_KEY_Q),
+                             key(GLFW_KEY_S) - key(GLFW_KEY_W));
+            const bool fast = key(GLFW_KEY_LEFT_SHIFT) + key(GLFW_KEY_RIGHT_SHIFT) > 0.f;
+            move *= float(std::min(seconds, 0.1)) * (fast ? 1.f : 0.25f);
+        }
+        float yaw = 0.f, pitch = 0.f;
+        if (!io.WantCaptureMouse && glfwGetMouseButton(mWindow, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS) {
+            yaw = -0.005f * io.MouseDelta.x;
+            pitch = -0.005f * io.MouseDelta.y;
+        }
+        if (move != glm::vec3(0.f) || yaw != 0.f || pitch != 0.f) act([&] { session.moveCamera(move, yaw, pitch); });
+    }
+
 private:
+    /// The values of the pixel under the mouse, as a tooltip.
+    void inspect(const Texture& shown, ImVec2 p0, float scale) {
+        const ImGuiIO& io = ImGui::GetIO();
+        if (io.WantCaptureMouse || scale <= 0.f) return;
+        const float fx = (io.MousePos.x - p0.x) / scale, fy = (io.MousePos.y - p0.y) / scale;
+        if (!(fx >= 0.f && fy >= 0.f && fx < float(shown.width()) && fy < float(shown.height()))) return;
+        const uint32_t x = uint32_t(fx), y = uint32_t(fy);
+        ImGui::SetTooltip("(%u, %u)  %s", x, y, pixelText(shown, x, y).c_str());
+    }
+
     void panel(ViewSession& session, bool& paused, bool& stepOnce, double renderMs, float x, float height) {
         ImGui::SetNextWindowPos(ImVec2(x, 0.f));
         ImGui::SetNextWindowSize(ImVec2(kPanelWidth, height));
@@ -261,7 +293,7 @@ void runView(const ViewOptions& o) {
         Window window(session);
         bool paused = false, stepOnce = false;
         double renderMs = 0.0;
-        auto lastReload = std::chrono::steady_clock::now();
+        auto lastReload = std::chrono::steady_clock::now(), lastLoop = lastReload;
         while (window.open() && !finished()) {
             if (!paused || stepOnce) {
                 window.release();
@@ -277,6 +309,9 @@ void runView(const ViewOptions& o) {
                 if (!error.empty()) spdlog::error("{}", error);
             }
             window.draw(session, paused, stepOnce, renderMs);
+            const auto end = std::chrono::steady_clock::now();
+            window.steer(session, std::chrono::duration<double>(end - lastLoop).count());
+            lastLoop = end;
         }
 #else
         throw Error({ErrorKind::Runtime,

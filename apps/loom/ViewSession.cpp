@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <glm/gtc/matrix_transform.hpp>
 #include <sstream>
 
 #include "CliUtil.h"
@@ -16,7 +17,23 @@ namespace loom::cli {
 
 namespace {
 
-const std::vector<std::string> kVerbs = {"view", "set", "exposure", "reset", "save", "shot"};
+const std::vector<std::string> kVerbs = {"view", "set", "exposure", "reset", "save", "shot", "move", "turn"};
+
+/// The numbers of a command's argument: exactly `count` of them, finite. Throws BadInput naming `where`.
+std::vector<float> numbers(const std::string& text, size_t count, const std::string& where, const std::string& form) {
+    std::istringstream in(text);
+    std::vector<float> values;
+    std::string word;
+    while (in >> word) {
+        char* end = nullptr;
+        const float v = std::strtof(word.c_str(), &end);
+        if (end == word.c_str() || *end != '\0' || !std::isfinite(v))
+            throwBadInput(where, "'" + printable(word) + "' is not a number", form);
+        values.push_back(v);
+    }
+    if (values.size() != count) throwBadInput(where, fmt::format("{} numbers, not {}", count, values.size()), form);
+    return values;
+}
 
 bool needsArgument(const std::string& verb) {
     return verb != "reset";
@@ -70,13 +87,9 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
         if (!commands.empty() && c.frame < commands.back().frame)
             throwBadInput(where, fmt::format("frame {} comes after frame {}", c.frame, commands.back().frame),
                           "lines in frame order");
-        if (c.verb == "exposure") {
-            char* end = nullptr;
-            const float ev = std::strtof(c.arg.c_str(), &end);
-            if (end == c.arg.c_str() || *end != '\0')
-                throwBadInput(where, "'" + printable(c.arg) + "' is not a number", "an exposure in EV, e.g. -1.5");
-            checkExposure(ev, where);
-        }
+        if (c.verb == "exposure") checkExposure(numbers(c.arg, 1, where, "an exposure in EV, e.g. -1.5")[0], where);
+        if (c.verb == "move") numbers(c.arg, 3, where, "move X Y Z, camera-local, in the scene's size");
+        if (c.verb == "turn") numbers(c.arg, 2, where, "turn YAW PITCH, in degrees");
         commands.push_back(std::move(c));
     }
     return commands;
@@ -199,7 +212,13 @@ void ViewSession::runScript() {
                 set(c.arg);
             else if (c.verb == "exposure")
                 setExposure(std::strtof(c.arg.c_str(), nullptr));
-            else if (c.verb == "reset")
+            else if (c.verb == "move") {
+                const auto v = numbers(c.arg, 3, where, "");
+                moveCamera(glm::vec3(v[0], v[1], v[2]), 0.f, 0.f);
+            } else if (c.verb == "turn") {
+                const auto v = numbers(c.arg, 2, where, "");
+                moveCamera(glm::vec3(0.f), glm::radians(v[0]), glm::radians(v[1]));
+            } else if (c.verb == "reset")
                 resetHistory();
             else if (c.verb == "save")
                 saveField(c.arg);
@@ -213,6 +232,41 @@ void ViewSession::runScript() {
     }
 }
 
+void ViewSession::moveCamera(const glm::vec3& local, float yaw, float pitch) {
+    if (!mScene) throwBadInput("camera", "the graph runs without a scene", "a --scene to move a camera in");
+    if (mScene->cameraAnimated())
+        throwBadInput("camera", "the scene animates its camera", "a scene whose camera is not animated",
+                      "choose another camera of the scene, or remove its animation");
+    // Moves before one frame add up: each starts from the pose the last one set.
+    Camera cam = mScene->camera;
+    if (mPendingPose) cam.world = *mPendingPose;
+    mScene->cameraPath.kind = CameraPathKind::Static;  // the viewer has the camera now
+    const Bounds b = mScene->bounds();
+    const float size = b.valid() ? std::max(glm::length(b.extent()), 1e-3f) : 1.f;
+    const glm::vec3 position =
+        cam.position() + size * (local.x * cam.right() + local.y * cam.up() - local.z * cam.forward());
+    // Yaw about the world's up (+Y), then pitch about the turned right axis, stopping short of the poles; the
+    // camera's own right axis keeps the frame defined whatever it looks at.
+    const glm::mat4 yawTurn = glm::rotate(glm::mat4(1.f), yaw, glm::vec3(0.f, 1.f, 0.f));
+    const glm::vec3 right = glm::normalize(glm::vec3(yawTurn * glm::vec4(cam.right(), 0.f)));
+    glm::vec3 forward = glm::normalize(glm::vec3(yawTurn * glm::vec4(cam.forward(), 0.f)));
+    const glm::vec3 pitched = glm::vec3(glm::rotate(glm::mat4(1.f), pitch, right) * glm::vec4(forward, 0.f));
+    if (std::fabs(pitched.y) < 0.995f || std::fabs(pitched.y) < std::fabs(forward.y)) forward = pitched;
+    const glm::vec3 up = glm::normalize(glm::cross(right, forward));
+    forward = glm::cross(up, right);
+    glm::mat4 world(1.f);
+    world[0] = glm::vec4(right, 0.f);
+    world[1] = glm::vec4(up, 0.f);
+    world[2] = glm::vec4(-forward, 0.f);
+    world[3] = glm::vec4(position, 1.f);
+    // The pose the next update starts from; the camera itself stays where it is until then, so that update moves it
+    // from there and the frame's motion vectors carry the move.
+    const glm::mat4 current = mScene->camera.world;
+    mScene->setCameraPose(world);
+    mScene->camera.world = current;
+    mPendingPose = world;
+}
+
 void ViewSession::step() {
     runScript();
     FrameInfo frame;
@@ -222,6 +276,7 @@ void ViewSession::step() {
         frame.frameIndex = mFrame;
         frame.time = double(mFrame) / mOptions.fps;
     }
+    mPendingPose.reset();
     mGraph->execute(frame);
     ++mFrame;
     refreshDisplay();

@@ -4,7 +4,9 @@
 // (ViewCommand.cpp) draws what this holds; `loom view --headless` runs it without one.
 #include <cstdint>
 #include <filesystem>
+#include <glm/mat4x4.hpp>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -38,7 +40,8 @@ struct ScriptCommand {
     int line = 0;
 };
 /// Lines "FRAME VERB [ARG]"; blank lines and lines starting with # are skipped. Verbs: view FIELD, set
-/// Pass.param=value, exposure EV, reset, save PATH (the viewed field's own values), shot PATH (the displayed image).
+/// Pass.param=value, exposure EV, reset, save PATH (the viewed field's own values), shot PATH (the displayed image),
+/// move X Y Z (ViewSession::moveCamera, in the scene's size), turn YAW PITCH (degrees).
 /// Throws loom::Error (BadInput) naming the file and line.
 std::vector<ScriptCommand> parseViewScript(const std::string& path);
 
@@ -67,6 +70,12 @@ public:
     float exposure() const { return mExposure; }
     void setExposure(float ev);
     void resetHistory() { mGraph->resetHistory(); }
+    /// Moves the camera in its own frame (x right, y up, z backward), `local` in units of the scene's size (the
+    /// diagonal of its bounds), and turns it: `yaw` about the world's up axis, `pitch` about the camera's right
+    /// axis, radians. The first move takes the camera off its --camera-path (static from then on). The move shows in
+    /// the next frame's motion vectors; history is kept. Throws BadInput without a scene or when the scene animates
+    /// its camera.
+    void moveCamera(const glm::vec3& local, float yaw, float pitch);
     /// Reloads the graph file if it changed on disk since it was last read. Passes whose name and type stay keep
     /// their state and history. On an error the message is returned and the running graph stays as it was.
     std::string reloadIfChanged();
@@ -101,6 +110,7 @@ private:
     std::vector<ScriptCommand> mScript;
     size_t mScriptNext = 0;
     std::filesystem::file_time_type mGraphTime{};
+    std::optional<glm::mat4> mPendingPose;  ///< the camera pose moves set since the last frame
 };
 
 }  // namespace loom::cli

@@ -121,7 +121,8 @@ std::shared_ptr<Scene> sceneOf(std::vector<Mesh> meshes, std::vector<Material> m
         meshes[i].material = uint32_t(std::min(i, materials.size() - 1));
         s->meshes.push_back(std::move(meshes[i]));
         Node n;
-        n.name = "n" + std::to_string(i);
+        n.name = "n";
+        n.name += std::to_string(i);  // not "n" + ...: GCC 12 warns falsely (-Wrestrict) on that
         n.meshes = {uint32_t(i)};
         s->nodes.push_back(n);
         s->roots.push_back(int(i));

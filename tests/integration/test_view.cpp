@@ -3,13 +3,18 @@
 // and the window itself under a virtual X server showing what the headless session shows.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include "TestUtil.h"
+#include "loom/ViewSession.h"
 #include "loom/ImageIO.h"
 #include "loom/Texture.h"
 
@@ -105,6 +110,38 @@ TEST_F(View, RecordWritesEveryFrameAndTheLastIsTheScreenshot) {
     EXPECT_NE(fileBytes(mDir / "rec" / "frame.0000.png"), fileBytes(mDir / "last.png"));  // the pattern animates
 }
 
+TEST_F(View, ACameraMovedFromTheViewerShowsInThatFramesMotionOnly) {
+    // The still Cornell box: no motion until the script moves and turns the camera before frame 2; frame 2's motion
+    // vectors carry the move, frame 3's are zero again (the camera stays where it was put).
+    write("move.txt",
+          "2 save before.exr\n"
+          "2 move 0 0 -0.05\n"
+          "2 turn 3 1\n"
+          "3 save moved.exr\n"
+          "4 save after.exr\n");
+    const auto r = loom("view --headless --graph " + shellQuoted(kGraphs + "GBufferRaster.json") + " --scene " +
+                        shellQuoted(loom::test::dataScene("cornell_box.gltf")) +
+                        " --size 64x64 --frames 5 --field GBuffer.mvec --script move.txt");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const auto largest = [&](const char* name) {
+        const loom::Texture t = loom::readImage(mDir / name);
+        float m = 0.f;
+        for (uint32_t y = 0; y < t.height(); ++y)
+            for (uint32_t x = 0; x < t.width(); ++x)
+                for (uint32_t c = 0; c < 2; ++c) {
+                    const float v = t.texel(x, y, c);
+                    if (!std::isfinite(v)) return INFINITY;
+                    m = std::max(m, std::fabs(v));
+                }
+        return m;
+    };
+    EXPECT_EQ(largest("before.exr"), 0.f);
+    const float moved = largest("moved.exr");
+    EXPECT_GT(moved, 0.01f);  // 3 degrees of yaw alone move the frame by about 4 % of its width
+    EXPECT_LT(moved, 0.2f);
+    EXPECT_EQ(largest("after.exr"), 0.f);
+}
+
 TEST_F(View, BadScriptsAndFieldsAreBadInput) {
     const std::string run =
         "view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json") + " --size 16x16 --frames 4 ";
@@ -115,24 +152,75 @@ TEST_F(View, BadScriptsAndFieldsAreBadInput) {
         for (const auto& p : parts) EXPECT_CONTAINS(r.output, p);
         EXPECT_FALSE(fs::exists(mDir / "s.png")) << args;
     };
-    write("verb.txt", "1 veiw Blur.dst\n");
-    expectBad("--script verb.txt", {"verb.txt:1", "unknown command 'veiw'", "did you mean 'view'"});
-    write("frame.txt", "# comment\n\nx view Blur.dst\n");
-    expectBad("--script frame.txt", {"frame.txt:3", "not a frame number"});
-    write("order.txt", "3 reset\n1 reset\n");
-    expectBad("--script order.txt", {"order.txt:2", "frame 1 comes after frame 3"});
-    write("arg.txt", "1 view\n");
-    expectBad("--script arg.txt", {"arg.txt:1", "needs an argument"});
-    write("ev.txt", "1 exposure bright\n");
-    expectBad("--script ev.txt", {"ev.txt:1", "not a number"});
-    write("field.txt", "2 view Blur.dts\n");
-    expectBad("--script field.txt", {"field.txt:1", "no field 'Blur.dts'", "did you mean 'Blur.dst'"});
-    write("set.txt", "1 set Blur.radius=-4\n");
-    expectBad("--script set.txt", {"set.txt:1", "radius"});
+    // Each script, named after what is wrong with it, and what its error must say.
+    const std::vector<std::tuple<std::string, std::string, std::vector<std::string>>> scripts = {
+        {"verb", "1 veiw Blur.dst\n", {"verb.txt:1", "unknown command 'veiw'", "did you mean 'view'"}},
+        {"frame", "# comment\n\nx view Blur.dst\n", {"frame.txt:3", "not a frame number"}},
+        {"order", "3 reset\n1 reset\n", {"order.txt:2", "frame 1 comes after frame 3"}},
+        {"arg", "1 view\n", {"arg.txt:1", "needs an argument"}},
+        {"ev", "1 exposure bright\n", {"ev.txt:1", "not a number"}},
+        {"field", "2 view Blur.dts\n", {"field.txt:1", "no field 'Blur.dts'", "did you mean 'Blur.dst'"}},
+        {"set", "1 set Blur.radius=-4\n", {"set.txt:1", "radius"}},
+        {"move", "1 move 0 0\n", {"move.txt:1", "3 numbers, not 2"}},
+        {"turn", "1 turn 10 nan\n", {"turn.txt:1", "'nan' is not a number"}},
+        {"noscene", "1 move 0 0 1\n", {"noscene.txt:1", "without a scene"}},
+    };
+    for (const auto& [name, text, parts] : scripts) {
+        write(name + ".txt", text);
+        expectBad("--script " + name + ".txt", parts);
+    }
     expectBad("--script missing.txt", {"missing.txt", "cannot read"});
     expectBad("--field Blur.dts", {"no field 'Blur.dts'", "did you mean 'Blur.dst'"});
     expectBad("--exposure 1e9", {"--exposure", "out of range"});
     EXPECT_EQ(loom("view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json")).code, 2);  // no --frames
+}
+
+TEST_F(View, AnEditedGraphIsReloadedAndKeepsItsHistory) {
+    // The session the window runs, in process: the graph file is edited between frames as a user would save it.
+    const fs::path graph = mDir / "g.json";
+    const auto save = [&](const std::string& blur, int radius) {
+        write("g.json", R"({"loom_graph": 1, "name": "G", "passes": [
+            {"name": "Pattern", "type": "Pattern"},
+            {"name": ")" + blur + R"(", "type": "Blur", "params": {"radius": )" + std::to_string(radius) + R"(}},
+            {"name": "Counter", "type": "FrameCounter"}],
+          "edges": [["Pattern.dst", ")" + blur + R"(.src"]],
+          "outputs": [")" + blur + R"(.dst", "Counter.dst"]})");
+        // A later modification time than the last read, as a save some time later has.
+        static int saves = 0;
+        fs::last_write_time(graph, fs::file_time_type::clock::now() + std::chrono::seconds(++saves));
+    };
+    save("Blur", 2);
+    loom::cli::ViewOptions o;
+    o.graph = graph.string();
+    o.size = "16x8";
+    o.field = "Counter.dst";
+    loom::cli::ViewSession session(o);
+    const auto counted = [&] { return session.viewedTexture().texel(3, 2, 0); };
+    for (int i = 0; i < 3; ++i) session.step();
+    EXPECT_EQ(counted(), 3.f);
+    EXPECT_EQ(session.reloadIfChanged(), "");  // not changed: nothing to do
+
+    save("Blur", 5);  // a parameter edited in the file
+    EXPECT_EQ(session.reloadIfChanged(), "");
+    EXPECT_EQ(session.graph().pass("Blur")->params().get("radius"), 5);
+    session.step();
+    EXPECT_EQ(counted(), 4.f) << "the counter's history did not survive the reload";
+
+    write("g.json", R"({"loom_graph": 1, "passes": [)");  // saved half-way: the running graph stays
+    fs::last_write_time(graph, fs::file_time_type::clock::now() + std::chrono::seconds(10));
+    EXPECT_CONTAINS(session.reloadIfChanged(), "malformed JSON");
+    session.step();
+    EXPECT_EQ(counted(), 5.f);
+
+    ASSERT_NO_THROW(session.view("Blur.dst"));
+    save("Smooth", 5);  // the shown pass renamed: the view falls back to the first output
+    EXPECT_EQ(session.reloadIfChanged(), "");
+    EXPECT_EQ(session.viewed(), "Smooth.dst");
+    session.step();
+    EXPECT_EQ(session.viewedTexture().width(), 16u);
+    ASSERT_NO_THROW(session.view("Counter.dst"));
+    session.step();
+    EXPECT_EQ(counted(), 7.f);  // frames 6 and 7 after the rename: the counter pass kept its history throughout
 }
 
 TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {

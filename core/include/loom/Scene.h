@@ -229,6 +229,7 @@ public:
     float animationLength() const;  ///< longest animation, seconds
     size_t triangleCount() const;  ///< over instances
     bool hasMotion() const;  ///< animations or a camera path
+    bool cameraAnimated() const { return mCameraAnimated; }  ///< the glTF camera is animated (setCameraPose ignored)
 
     const RayScene& rayScene() const { return *mRayScene; }
     /// Plain view for kernels; rebuilt by finalize() and update().
