@@ -16,6 +16,7 @@
 #include "Display.h"
 #include "ViewSession.h"
 #include "loom/Error.h"
+#include "loom/ImageIO.h"
 #include "loom/Parallel.h"
 
 #ifdef LOOM_HAVE_VIEWER
@@ -145,7 +146,8 @@ public:
     void release() { glfwMakeContextCurrent(nullptr); }
 
     /// Draws one frame of the window: the shown field fitted to the left, the panel on the right.
-    void draw(ViewSession& session, bool& paused, bool& stepOnce, double renderMs) {
+    /// With `capture`, the frame drawn is also read back and written there as PNG (no tooltip in it).
+    void draw(ViewSession& session, bool& paused, bool& stepOnce, double renderMs, const std::string& capture = {}) {
         glfwPollEvents();
         glfwMakeContextCurrent(mWindow);  // released while the graph ran
         const Texture& shown = session.viewedTexture();
@@ -168,7 +170,7 @@ public:
             const ImVec2 p0((areaW - w) * 0.5f, (areaH - h) * 0.5f);
             ImGui::GetBackgroundDrawList()->AddImage(reinterpret_cast<ImTextureID>(uintptr_t(mTexture)), p0,
                                                      ImVec2(p0.x + w, p0.y + h));
-            inspect(shown, p0, scale);
+            if (capture.empty()) inspect(shown, p0, scale);
         }
         panel(session, paused, stepOnce, renderMs, areaW, areaH);
         ImGui::Render();
@@ -176,6 +178,7 @@ public:
         glClearColor(0.08f, 0.08f, 0.08f, 1.f);
         glClear(GL_COLOR_BUFFER_BIT);
         ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+        if (!capture.empty()) writeFramebuffer(capture, fw, fh);
         glfwSwapBuffers(mWindow);
     }
 
@@ -200,6 +203,18 @@ public:
     }
 
 private:
+    /// The back buffer as an 8-bit PNG, top row first.
+    static void writeFramebuffer(const std::string& path, int width, int height) {
+        Texture t(uint32_t(width), uint32_t(height), Format::RGBA8Unorm);
+        std::vector<uint8_t> pixels(size_t(width) * size_t(height) * 4);
+        glPixelStorei(GL_PACK_ALIGNMENT, 1);
+        glReadBuffer(GL_BACK);
+        glReadPixels(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
+        for (int y = 0; y < height; ++y)  // GL's rows run bottom to top
+            std::memcpy(t.row(uint32_t(y)), &pixels[size_t(height - 1 - y) * size_t(width) * 4], size_t(width) * 4);
+        writeImage(path, t);
+    }
+
     /// The values of the pixel under the mouse, as a tooltip.
     void inspect(const Texture& shown, ImVec2 p0, float scale) {
         const ImGuiIO& io = ImGui::GetIO();
@@ -308,7 +323,7 @@ void runView(const ViewOptions& o) {
                 const std::string error = session.reloadIfChanged();
                 if (!error.empty()) spdlog::error("{}", error);
             }
-            window.draw(session, paused, stepOnce, renderMs);
+            window.draw(session, paused, stepOnce, renderMs, finished() ? o.windowShot : std::string());
             const auto end = std::chrono::steady_clock::now();
             window.steer(session, std::chrono::duration<double>(end - lastLoop).count());
             lastLoop = end;
@@ -340,6 +355,7 @@ void addViewCommand(CLI::App& app) {
     cmd->add_option("--script", o->script, "timed commands, lines 'FRAME VERB [ARG]' (docs/VIEWER.md)");
     cmd->add_option("--record", o->record, "folder: write every frame's displayed image as a numbered PNG");
     cmd->add_option("--screenshot", o->screenshot, "write the displayed image as PNG at the end");
+    cmd->add_option("--window-shot", o->windowShot, "with a window and --frames: write the whole window as PNG at the end");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
     cmd->add_flag("--headless", o->headless, "no window: run --frames frames (with --script, --record, --screenshot)");

@@ -103,6 +103,12 @@ ViewSession::ViewSession(const ViewOptions& options)
     if (!options.script.empty()) mScript = parseViewScript(options.script);
     if (!options.record.empty()) ensureWritableDir(options.record, "--record");
     if (!options.screenshot.empty()) checkOutputFile(options.screenshot, "--screenshot");
+    if (!options.windowShot.empty()) {
+        if (options.headless || options.frames == 0)
+            throwBadInput("--window-shot", "a window shot needs the window and a last frame",
+                          "--window-shot with --frames N and without --headless");
+        checkOutputFile(options.windowShot, "--window-shot");
+    }
     mScene = loadScene(options.scene);
     mGraph = std::make_unique<RenderGraph>(loadGraph(options.graph), mRegistry);
     mGraphTime = modificationTime(options.graph);

@@ -29,6 +29,7 @@ struct ViewOptions {
     std::string script;      ///< file of timed commands (parseViewScript)
     std::string record;      ///< folder: every frame's displayed image as a numbered PNG
     std::string screenshot;  ///< at the end: the displayed image as PNG
+    std::string windowShot;  ///< at the end: the whole window as PNG (window only)
     bool headless = false;
     SceneOptions scene;
 };

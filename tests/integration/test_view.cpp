@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -225,7 +226,8 @@ TEST_F(View, AnEditedGraphIsReloadedAndKeepsItsHistory) {
 
 TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
     // The window under a virtual X server (xvfb-run, installed by scripts/setup.sh): the GL window and the
-    // G-buffer rasterizer's own EGL context share the thread, and the screen is the session's display.
+    // G-buffer rasterizer's own EGL context share the thread; the screen is the session's display, and the window's
+    // own pixels, read back from GL, hold it magnified without a change of value.
     ASSERT_EQ(std::system("command -v xvfb-run >/dev/null 2>&1"), 0) << "xvfb-run is missing: run scripts/setup.sh";
     const std::string args = "--graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
                              shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
@@ -234,11 +236,28 @@ TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
     ASSERT_EQ(r.code, 0) << r.output;
     const std::string cmd = "cd " + shellQuoted(mDir.string()) + " && xvfb-run -a -s '-screen 0 1024x768x24' " +
                             shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
-                            "--screenshot window.png > window.log 2>&1";
+                            "--screenshot window.png --window-shot whole.png > window.log 2>&1";
     const int status = std::system(cmd.c_str());
     EXPECT_EQ(status, 0) << fileBytes(mDir / "window.log");
     ASSERT_TRUE(fs::exists(mDir / "window.png")) << fileBytes(mDir / "window.log");
     EXPECT_EQ(fileBytes(mDir / "headless.png"), fileBytes(mDir / "window.png"));
+
+    // The layout of ViewCommand.cpp: a 680x480 window (the image area at least 320x480, the panel 360 wide), the
+    // 64x48 image fitted to the area at scale 5, centred: 320x240 from (0, 120), each pixel a 5x5 block.
+    const loom::Texture whole = loom::readImage(mDir / "whole.png");
+    const loom::Texture shown = loom::readImage(mDir / "window.png");
+    ASSERT_EQ(whole.width(), 680u);
+    ASSERT_EQ(whole.height(), 480u);
+    int differing = 0, lit = 0;
+    for (uint32_t y = 0; y < 48; ++y)
+        for (uint32_t x = 0; x < 64; ++x) {
+            const std::byte* want = shown.row(y) + size_t(x) * 4;
+            const std::byte* got = whole.row(120 + 5 * y + 2) + size_t(5 * x + 2) * 4;
+            differing += std::memcmp(want, got, 3) != 0;
+            lit += std::to_integer<int>(want[0]) > 16;
+        }
+    EXPECT_EQ(differing, 0);
+    EXPECT_GT(lit, 48 * 64 / 4);  // the Cornell box, not a black frame
 }
 
 }  // namespace
