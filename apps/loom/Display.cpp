@@ -1,9 +1,13 @@
 #include "Display.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+
+#include "loom/Error.h"
 
 namespace loom::cli {
 
@@ -84,6 +88,60 @@ std::vector<uint8_t> displayImage(const Texture& t, float scale) {
             p[3] = 255;  // opaque on screen whatever an 8-bit field's alpha holds
         }
     return image;
+}
+
+void rgbToYCbCr(const uint8_t rgb[3], uint8_t ycc[3]) {
+    const float r = rgb[0], g = rgb[1], b = rgb[2];
+    const float y = 0.299f * r + 0.587f * g + 0.114f * b;
+    const float v[3] = {y, 128.f + (b - y) / 1.772f, 128.f + (r - y) / 1.402f};
+    for (int c = 0; c < 3; ++c) ycc[c] = uint8_t(std::lround(std::clamp(v[c], 0.f, 255.f)));
+}
+
+Y4mWriter::Y4mWriter(const std::filesystem::path& path, uint32_t width, uint32_t height, double fps)
+    : mPath(path), mPartial(path.string() + ".partial"), mWidth(width), mHeight(height) {
+    mFile = std::fopen(mPartial.c_str(), "wb");
+    if (!mFile)
+        throw Error({ErrorKind::BadInput, path.string(), "--record", "cannot write the video", "a writable path",
+                     "choose another --record file"});
+    const long rate = std::lround(std::clamp(fps, 0.001, 1e6) * 1000.0);
+    std::fprintf(mFile, "YUV4MPEG2 W%u H%u F%ld:1000 Ip A1:1 C444 XCOLORRANGE=FULL\n", width, height, rate);
+}
+
+Y4mWriter::~Y4mWriter() {
+    if (!mFile) return;
+    std::fclose(mFile);
+    std::error_code ec;
+    std::filesystem::remove(mPartial, ec);  // unfinished: no half-written video is left
+}
+
+void Y4mWriter::add(const std::vector<uint8_t>& rgba) {
+    const size_t n = size_t(mWidth) * mHeight;
+    if (rgba.size() != n * 4)
+        throw Error({ErrorKind::BadInput, mPath.string(), "--record",
+                     fmt::format("a frame of {} pixels, the video's are {}x{}", rgba.size() / 4, mWidth, mHeight),
+                     "fields of the video's size", "record to a folder of PNGs to mix sizes"});
+    std::vector<uint8_t> planes(n * 3);
+    for (size_t i = 0; i < n; ++i) {
+        uint8_t ycc[3];
+        rgbToYCbCr(&rgba[i * 4], ycc);
+        for (int c = 0; c < 3; ++c) planes[size_t(c) * n + i] = ycc[c];
+    }
+    std::fputs("FRAME\n", mFile);
+    if (std::fwrite(planes.data(), 1, planes.size(), mFile) != planes.size())
+        throw Error({ErrorKind::Runtime, mPath.string(), "--record", "writing the video failed", "", "check the disk"});
+}
+
+void Y4mWriter::finish() {
+    if (!mFile) return;
+    const bool ok = std::fflush(mFile) == 0;
+    std::fclose(mFile);
+    mFile = nullptr;
+    std::error_code ec;
+    if (ok) std::filesystem::rename(mPartial, mPath, ec);
+    if (!ok || ec) {
+        std::filesystem::remove(mPartial, ec);
+        throw Error({ErrorKind::Runtime, mPath.string(), "--record", "finishing the video failed", "", "check the disk"});
+    }
 }
 
 }  // namespace loom::cli

@@ -1,6 +1,8 @@
 #pragma once
 // 8-bit display of any field: what `loom view` shows and `loom image montage` writes.
 #include <cstdint>
+#include <cstdio>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -21,5 +23,29 @@ std::string pixelText(const Texture& t, uint32_t x, uint32_t y);
 
 /// The whole texture through displayPixel, rows top to bottom, 4 bytes a pixel, alpha 255.
 std::vector<uint8_t> displayImage(const Texture& t, float scale);
+
+/// A video of displayed frames as YUV4MPEG2 (.y4m): 8-bit Y'CbCr 4:4:4, full range, BT.601 coefficients on the
+/// sRGB-encoded values; players and ffmpeg read it (`ffmpeg -i in.y4m out.mp4`). Written to PATH.partial and renamed
+/// by finish(); destroyed unfinished (an error on the way), it removes the partial file.
+class Y4mWriter {
+public:
+    Y4mWriter(const std::filesystem::path& path, uint32_t width, uint32_t height, double fps);
+    ~Y4mWriter();
+    Y4mWriter(const Y4mWriter&) = delete;
+    Y4mWriter& operator=(const Y4mWriter&) = delete;
+    /// Appends a frame of width x height RGBA8 pixels (displayImage's layout).
+    void add(const std::vector<uint8_t>& rgba);
+    void finish();
+    uint32_t width() const { return mWidth; }
+    uint32_t height() const { return mHeight; }
+
+private:
+    std::filesystem::path mPath, mPartial;
+    std::FILE* mFile = nullptr;
+    uint32_t mWidth, mHeight;
+};
+
+/// BT.601 full-range Y'CbCr of an sRGB-encoded 8-bit colour, rounded: what Y4mWriter stores.
+void rgbToYCbCr(const uint8_t rgb[3], uint8_t ycc[3]);
 
 }  // namespace loom::cli

@@ -337,6 +337,7 @@ void runView(const ViewOptions& o) {
                      "install libglfw3-dev and libimgui-dev and rebuild, or use --headless"});
 #endif
     }
+    session.finish();
     if (!o.screenshot.empty()) session.saveDisplay(o.screenshot);
 }
 
@@ -353,7 +354,8 @@ void addViewCommand(CLI::App& app) {
     cmd->add_option("--frames,-n", o->frames, "stop after this many frames (0: when the window closes)")
         ->capture_default_str();
     cmd->add_option("--script", o->script, "timed commands, lines 'FRAME VERB [ARG]' (docs/VIEWER.md)");
-    cmd->add_option("--record", o->record, "folder: write every frame's displayed image as a numbered PNG");
+    cmd->add_option("--record", o->record,
+                    "every frame's displayed image: FILE.y4m (a video) or a folder of numbered PNGs");
     cmd->add_option("--screenshot", o->screenshot, "write the displayed image as PNG at the end");
     cmd->add_option("--window-shot", o->windowShot, "with a window and --frames: write the whole window as PNG at the end");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();

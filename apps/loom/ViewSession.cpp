@@ -39,6 +39,10 @@ bool needsArgument(const std::string& verb) {
     return verb != "reset";
 }
 
+bool isVideo(const std::string& record) {
+    return std::filesystem::path(record).extension() == ".y4m";
+}
+
 std::filesystem::file_time_type modificationTime(const std::string& path) {
     std::error_code ec;
     const auto t = std::filesystem::last_write_time(path, ec);
@@ -101,7 +105,10 @@ ViewSession::ViewSession(const ViewOptions& options)
     if (!(options.fps > 0.0) || options.fps > 1e6) throwBadInput("--fps", "frame rate must be positive", "e.g. 60");
     checkExposure(options.exposure, "--exposure");
     if (!options.script.empty()) mScript = parseViewScript(options.script);
-    if (!options.record.empty()) ensureWritableDir(options.record, "--record");
+    if (isVideo(options.record))
+        checkOutputFile(options.record, "--record");
+    else if (!options.record.empty())
+        ensureWritableDir(options.record, "--record");
     if (!options.screenshot.empty()) checkOutputFile(options.screenshot, "--screenshot");
     if (!options.windowShot.empty()) {
         if (options.headless || options.frames == 0)
@@ -286,8 +293,18 @@ void ViewSession::step() {
     mGraph->execute(frame);
     ++mFrame;
     refreshDisplay();
-    if (!mOptions.record.empty())
+    if (isVideo(mOptions.record)) {
+        if (!mVideo)
+            mVideo = std::make_unique<Y4mWriter>(mOptions.record, mViewedTexture.width(), mViewedTexture.height(),
+                                                 mOptions.fps);
+        mVideo->add(mDisplay);
+    } else if (!mOptions.record.empty()) {
         saveDisplay(std::filesystem::path(mOptions.record) / fmt::format("frame.{:04}.png", mFrame - 1));
+    }
+}
+
+void ViewSession::finish() {
+    if (mVideo) mVideo->finish();
 }
 
 void ViewSession::refreshDisplay() {

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "Display.h"
 #include "SceneSetup.h"
 #include "loom/Plugin.h"
 #include "loom/RenderGraph.h"
@@ -27,7 +28,7 @@ struct ViewOptions {
     unsigned threads = 0;
     uint64_t frames = 0;     ///< stop after this many frames (0: when the window closes)
     std::string script;      ///< file of timed commands (parseViewScript)
-    std::string record;      ///< folder: every frame's displayed image as a numbered PNG
+    std::string record;      ///< a .y4m video of the displayed frames, or a folder of numbered PNGs
     std::string screenshot;  ///< at the end: the displayed image as PNG
     std::string windowShot;  ///< at the end: the whole window as PNG (window only)
     bool headless = false;
@@ -54,6 +55,8 @@ public:
 
     /// Runs the script's commands due before the next frame, renders it and refreshes the display.
     void step();
+    /// Completes the outputs of a run: the --record video. Without it an unfinished video is removed.
+    void finish();
     /// Frames rendered so far.
     uint64_t frame() const { return mFrame; }
     uint32_t width() const { return mWidth; }
@@ -111,6 +114,7 @@ private:
     std::vector<ScriptCommand> mScript;
     size_t mScriptNext = 0;
     std::filesystem::file_time_type mGraphTime{};
+    std::unique_ptr<Y4mWriter> mVideo;  ///< --record FILE.y4m, opened with the first frame
     std::optional<glm::mat4> mPendingPose;  ///< the camera pose moves set since the last frame
 };
 

@@ -143,6 +143,52 @@ TEST_F(View, ACameraMovedFromTheViewerShowsInThatFramesMotionOnly) {
     EXPECT_EQ(largest("after.exr"), 0.f);
 }
 
+TEST_F(View, RecordingAVideoStoresEachShownFrameAsYCbCr) {
+    // Grey (0.5 linear: sRGB 188) is Y 188 and neutral chroma exactly, in every frame.
+    write("grey.json", R"({"loom_graph": 1, "name": "C",
+        "passes": [{"name": "C", "type": "Constant", "params": {"color": [0.5, 0.5, 0.5, 1.0]}}],
+        "outputs": ["C.dst"]})");
+    auto r = loom("view --headless --graph grey.json --size 8x4 --frames 2 --fps 30 --record grey.y4m");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const std::string header = "YUV4MPEG2 W8 H4 F30000:1000 Ip A1:1 C444 XCOLORRANGE=FULL\n";
+    const std::string grey = fileBytes(mDir / "grey.y4m");
+    const std::string frame = "FRAME\n" + std::string(32, char(188)) + std::string(64, char(128));
+    EXPECT_EQ(grey, header + frame + frame);
+    EXPECT_FALSE(fs::exists(mDir / "grey.y4m.partial"));
+
+    // A moving pattern: the video's frames are the recorded PNGs' colours in BT.601 full-range Y'CbCr.
+    const std::string pattern = "view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json") +
+                                " --size 32x16 --frames 3 --record ";
+    ASSERT_EQ(loom(pattern + "rec").code, 0);
+    ASSERT_EQ(loom(pattern + "pattern.y4m").code, 0);
+    const std::string video = fileBytes(mDir / "pattern.y4m");
+    const size_t start = video.find('\n') + 1, n = 32 * 16;
+    ASSERT_EQ(video.size(), start + 3 * (6 + 3 * n));
+    int largest = 0;
+    for (int f = 0; f < 3; ++f) {
+        const loom::Texture png = loom::readImage(mDir / "rec" / ("frame.000" + std::to_string(f) + ".png"));
+        const char* planes = video.data() + start + size_t(f) * (6 + 3 * n) + 6;
+        ASSERT_EQ(std::string(planes - 6, 6), "FRAME\n");
+        for (uint32_t i = 0; i < n; ++i) {
+            const std::byte* p = png.row(i / 32) + size_t(i % 32) * 4;
+            const double R = std::to_integer<int>(p[0]), G = std::to_integer<int>(p[1]), B = std::to_integer<int>(p[2]);
+            const double Y = 0.299 * R + 0.587 * G + 0.114 * B;
+            const double want[3] = {Y, 128.0 + (B - Y) / 1.772, 128.0 + (R - Y) / 1.402};
+            for (int c = 0; c < 3; ++c)
+                largest = std::max(largest, std::abs(int(uint8_t(planes[size_t(c) * n + i])) -
+                                                     int(std::lround(std::clamp(want[c], 0.0, 255.0)))));
+        }
+    }
+    EXPECT_LE(largest, 1);  // rounding at .5 in float against double
+
+    // A run that fails on the way leaves no video, finished or partial.
+    write("bad.txt", "2 view Blur.dts\n");
+    EXPECT_EQ(loom(pattern + "bad.y4m --script bad.txt").code, 2);
+    EXPECT_FALSE(fs::exists(mDir / "bad.y4m"));
+    EXPECT_FALSE(fs::exists(mDir / "bad.y4m.partial"));
+    EXPECT_EQ(loom(pattern + "nowhere/v.y4m").code, 2);
+}
+
 TEST_F(View, BadScriptsAndFieldsAreBadInput) {
     const std::string run =
         "view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json") + " --size 16x16 --frames 4 ";
