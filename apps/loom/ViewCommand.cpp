@@ -95,7 +95,7 @@ std::string paramWidget(ViewSession& session, const std::string& pass, const Par
 
 class Window {
 public:
-    explicit Window(const ViewSession& session) {
+    explicit Window(const ViewSession& session) : mOpenPasses(session.options().openPasses) {
         glfwSetErrorCallback([](int, const char* text) { spdlog::debug("GLFW: {}", text); });
         if (!glfwInit())
             throw Error({ErrorKind::Runtime,
@@ -230,6 +230,7 @@ private:
         ImGui::SetNextWindowSize(ImVec2(kPanelWidth, height));
         ImGui::Begin("Loom", nullptr,
                      ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
+        ImGui::PushItemWidth(0.5f * kPanelWidth);  // room for the parameters' names beside their widgets
         ImGui::Text("frame %llu  %ux%u  %.1f ms", (unsigned long long)session.frame(), session.width(),
                     session.height(), renderMs);
         if (ImGui::Button(paused ? "Run" : "Pause")) paused = !paused;
@@ -256,6 +257,7 @@ private:
                 std::find_if(timings.begin(), timings.end(), [&](const PassTiming& p) { return p.name == name; });
             const std::string header =
                 fmt::format("{}  {:.2f} ms###{}", name, t == timings.end() ? 0.0 : t->lastMs, name);
+            if (mOpenPasses) ImGui::SetNextItemOpen(true, ImGuiCond_Once);
             if (!ImGui::CollapsingHeader(header.c_str())) continue;
             ImGui::PushID(name.c_str());
             RenderPass* pass = session.graph().pass(name);
@@ -267,6 +269,7 @@ private:
                 for (const auto& [k, v] : s->second) ImGui::Text("%s: %g", k.c_str(), v);
             ImGui::PopID();
         }
+        ImGui::PopItemWidth();
         ImGui::End();
     }
 
@@ -289,6 +292,7 @@ private:
         mMessage = "saved " + path;
     }
 
+    bool mOpenPasses = false;
     GLFWwindow* mWindow = nullptr;
     GLuint mTexture = 0;
     std::string mMessage;
@@ -360,6 +364,7 @@ void addViewCommand(CLI::App& app) {
     cmd->add_option("--window-shot", o->windowShot, "with a window and --frames: write the whole window as PNG at the end");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
+    cmd->add_flag("--open-passes", o->openPasses, "start with every pass's section of the panel open");
     cmd->add_flag("--headless", o->headless, "no window: run --frames frames (with --script, --record, --screenshot)");
     addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runView(*o); });

@@ -32,6 +32,7 @@ struct ViewOptions {
     std::string screenshot;  ///< at the end: the displayed image as PNG
     std::string windowShot;  ///< at the end: the whole window as PNG (window only)
     bool headless = false;
+    bool openPasses = false;  ///< the panel starts with every pass's parameters shown
     SceneOptions scene;
 };
 

@@ -258,6 +258,12 @@ TEST_F(View, AnEditedGraphIsReloadedAndKeepsItsHistory) {
     EXPECT_CONTAINS(session.reloadIfChanged(), "malformed JSON");
     session.step();
     EXPECT_EQ(counted(), 5.f);
+    write("g.json", R"({"loom_graph": 1, "passes": [{"name": "Counter", "type": "FrameCountr"}],
+                       "outputs": ["Counter.dst"]})");  // parses, does not build: the running graph stays too
+    fs::last_write_time(graph, fs::file_time_type::clock::now() + std::chrono::seconds(20));
+    EXPECT_CONTAINS(session.reloadIfChanged(), "FrameCounter");
+    session.step();
+    EXPECT_EQ(counted(), 6.f);
 
     ASSERT_NO_THROW(session.view("Blur.dst"));
     save("Smooth", 5);  // the shown pass renamed: the view falls back to the first output
@@ -267,11 +273,12 @@ TEST_F(View, AnEditedGraphIsReloadedAndKeepsItsHistory) {
     EXPECT_EQ(session.viewedTexture().width(), 16u);
     ASSERT_NO_THROW(session.view("Counter.dst"));
     session.step();
-    EXPECT_EQ(counted(), 7.f);  // frames 6 and 7 after the rename: the counter pass kept its history throughout
+    EXPECT_EQ(counted(), 8.f);  // frames 7 and 8 after the rename: the counter pass kept its history throughout
 }
 
 TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
-    // The window under a virtual X server (xvfb-run, installed by scripts/setup.sh): the GL window and the
+    // The window under a virtual X server (xvfb-run, installed by scripts/setup.sh), every pass's parameter widgets
+    // drawn (--open-passes: each kind of parameter the shipped passes declare): the GL window and the
     // G-buffer rasterizer's own EGL context share the thread; the screen is the session's display, and the window's
     // own pixels, read back from GL, hold it magnified without a change of value.
     ASSERT_EQ(std::system("command -v xvfb-run >/dev/null 2>&1"), 0) << "xvfb-run is missing: run scripts/setup.sh";
@@ -282,7 +289,7 @@ TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
     ASSERT_EQ(r.code, 0) << r.output;
     const std::string cmd = "cd " + shellQuoted(mDir.string()) + " && xvfb-run -a -s '-screen 0 1024x768x24' " +
                             shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
-                            "--screenshot window.png --window-shot whole.png > window.log 2>&1";
+                            "--open-passes --screenshot window.png --window-shot whole.png > window.log 2>&1";
     const int status = std::system(cmd.c_str());
     EXPECT_EQ(status, 0) << fileBytes(mDir / "window.log");
     ASSERT_TRUE(fs::exists(mDir / "window.png")) << fileBytes(mDir / "window.log");
