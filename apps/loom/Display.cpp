@@ -8,14 +8,36 @@
 #include <cstring>
 
 #include "loom/Error.h"
+#include "loom/Parallel.h"
 
 namespace loom::cli {
 
+namespace {
+
+/// Where the exact sRGB encoding crosses each half code: code k (1..255) begins at the linear value whose encoding
+/// is (k - 1/2) / 255, computed in double once.
+struct SrgbThresholds {
+    double at[256];
+    SrgbThresholds() {
+        at[0] = -INFINITY;
+        for (int k = 1; k < 256; ++k) {
+            const double e = (k - 0.5) / 255.0;
+            const double linear = e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4);
+            at[k] = linear;
+        }
+    }
+};
+
+}  // namespace
+
 uint8_t encodeSrgb8(float linear) {
-    if (!std::isfinite(linear)) linear = linear > 0.f ? 1.f : 0.f;
-    const float v = std::clamp(linear, 0.f, 1.f);
-    const float e = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.f / 2.4f) - 0.055f;
-    return uint8_t(std::lround(std::clamp(e, 0.f, 1.f) * 255.f));
+    static const SrgbThresholds thresholds;
+    if (!std::isfinite(linear)) return linear > 0.f ? 255 : 0;
+    // The last code whose threshold lies at or below the value: eight halvings of the 256 codes.
+    int k = 0;
+    for (int step = 128; step > 0; step /= 2)
+        if (thresholds.at[k + step] <= double(linear)) k += step;
+    return uint8_t(k);
 }
 
 namespace {
@@ -81,12 +103,14 @@ std::string pixelText(const Texture& t, uint32_t x, uint32_t y) {
 
 std::vector<uint8_t> displayImage(const Texture& t, float scale) {
     std::vector<uint8_t> image(size_t(t.width()) * t.height() * 4);
-    for (uint32_t y = 0; y < t.height(); ++y)
-        for (uint32_t x = 0; x < t.width(); ++x) {
-            uint8_t* p = &image[(size_t(y) * t.width() + x) * 4];
-            displayPixel(t, x, y, scale, p);
-            p[3] = 255;  // opaque on screen whatever an 8-bit field's alpha holds
-        }
+    parallelFor2D(t.width(), t.height(), [&](const Tile& tile) {
+        for (uint32_t y = tile.y0; y < tile.y1; ++y)
+            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
+                uint8_t* p = &image[(size_t(y) * t.width() + x) * 4];
+                displayPixel(t, x, y, scale, p);
+                p[3] = 255;  // opaque on screen whatever an 8-bit field's alpha holds
+            }
+    });
     return image;
 }
 

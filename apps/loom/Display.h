@@ -10,7 +10,8 @@
 
 namespace loom::cli {
 
-/// The exact sRGB encoding of a linear value in [0, 1] (clamped; not finite: 0 or 1 by sign), to 8 bits.
+/// The exact sRGB encoding of a linear value (clamped to [0, 1]; not finite: 0 or 1 by sign), correctly rounded to 8
+/// bits.
 uint8_t encodeSrgb8(float linear);
 
 /// RGBA8 (sRGB-encoded) of pixel (x, y) as a viewer shows it: 8-bit formats as they are (alpha too); float formats

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "TestUtil.h"
+#include "loom/Display.h"
 #include "loom/ViewSession.h"
 #include "loom/ImageIO.h"
 #include "loom/Texture.h"
@@ -99,6 +100,20 @@ TEST_F(View, TheDisplayIsTheExposedValueSrgbEncoded) {
         for (uint32_t x = 0; x < 8; ++x)
             for (int c = 0; c < 4; ++c)
                 ASSERT_EQ(int(std::to_integer<uint8_t>(shot.row(y)[x * 4 + c])), expected[c]) << x << "," << y;
+}
+
+TEST(ViewDisplay, SrgbEncodingIsCorrectlyRounded) {
+    // Against the encoding in double, rounded to nearest, at 200,001 values over [0, 1] and beyond its ends.
+    int wrong = 0;
+    for (int i = 0; i <= 200000; ++i) {
+        const float v = float(i) / 200000.f;
+        wrong += int(loom::cli::encodeSrgb8(v)) != srgb8(double(v));
+    }
+    EXPECT_EQ(wrong, 0);
+    EXPECT_EQ(loom::cli::encodeSrgb8(-1.f), 0);
+    EXPECT_EQ(loom::cli::encodeSrgb8(7.f), 255);
+    EXPECT_EQ(loom::cli::encodeSrgb8(INFINITY), 255);
+    EXPECT_EQ(loom::cli::encodeSrgb8(NAN), 0);
 }
 
 TEST_F(View, RecordWritesEveryFrameAndTheLastIsTheScreenshot) {
