@@ -17,12 +17,6 @@ namespace loom::cli {
 
 namespace {
 
-/// 8-bit pixel (x, y) of an image read from disk: PNG bytes as they are, float images (EXR) clamped to [0, 1]
-/// and sRGB-encoded, so a linear HDR image shows as it would after a linear tone map.
-void pixel8(const Texture& t, uint32_t x, uint32_t y, uint8_t out[4]) {
-    displayPixel(t, x, y, 1.f, out);
-}
-
 void runMontage(const std::vector<std::string>& inputs, const std::string& output, uint32_t gap) {
     if (inputs.size() < 2) throwBadInput("loom image montage", "fewer than two input images", "two or more images");
     checkOutputFile(output, "--out");
@@ -42,7 +36,7 @@ void runMontage(const std::vector<std::string>& inputs, const std::string& outpu
     for (const Texture& image : images) {
         for (uint32_t y = 0; y < height; ++y)
             for (uint32_t x = 0; x < image.width(); ++x)
-                pixel8(image, x, y, reinterpret_cast<uint8_t*>(out.row(y)) + size_t(x0 + x) * 4);
+                displayPixel(image, x, y, 1.f, reinterpret_cast<uint8_t*>(out.row(y)) + size_t(x0 + x) * 4);
         x0 += image.width();
         for (uint32_t g = 0; g < gap && x0 < width; ++g, ++x0)
             for (uint32_t y = 0; y < height; ++y) std::memset(out.row(y) + size_t(x0) * 4, 0xFF, 4);

@@ -151,7 +151,8 @@ public:
         glfwPollEvents();
         glfwMakeContextCurrent(mWindow);  // released while the graph ran
         const Texture& shown = session.viewedTexture();
-        if (!session.display().empty()) {
+        if (!session.display().empty() && session.displayVersion() != mUploaded) {
+            mUploaded = session.displayVersion();
             glBindTexture(GL_TEXTURE_2D, mTexture);
             glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
             glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, GLsizei(shown.width()), GLsizei(shown.height()), 0, GL_RGBA,
@@ -293,6 +294,7 @@ private:
     }
 
     bool mOpenPasses = false;
+    uint64_t mUploaded = 0;  ///< the display version in the texture
     GLFWwindow* mWindow = nullptr;
     GLuint mTexture = 0;
     std::string mMessage;

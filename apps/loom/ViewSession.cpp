@@ -310,6 +310,7 @@ void ViewSession::finish() {
 void ViewSession::refreshDisplay() {
     if (mViewedTexture.empty()) return;
     mDisplay = displayImage(mViewedTexture, std::exp2(mExposure));
+    ++mDisplayVersion;
 }
 
 void ViewSession::saveField(const std::filesystem::path& path) const {

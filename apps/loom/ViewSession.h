@@ -88,6 +88,8 @@ public:
     /// The viewed field as of the last frame (empty before the first) and its display (RGBA8, 4 bytes a pixel).
     const Texture& viewedTexture() const { return mViewedTexture; }
     const std::vector<uint8_t>& display() const { return mDisplay; }
+    /// Counts the changes of display(): a window uploads it again only when this moved.
+    uint64_t displayVersion() const { return mDisplayVersion; }
     /// Writes the viewed field's values (EXR for float formats, PNG for 8-bit) or the displayed image (PNG).
     void saveField(const std::filesystem::path& path) const;
     void saveDisplay(const std::filesystem::path& path) const;
@@ -111,6 +113,7 @@ private:
     float mExposure = 0.f;
     Texture mViewedTexture;
     std::vector<uint8_t> mDisplay;
+    uint64_t mDisplayVersion = 0;
     uint64_t mFrame = 0;
     std::vector<ScriptCommand> mScript;
     size_t mScriptNext = 0;
