@@ -286,9 +286,9 @@ private:
 
     void saveNext(const ViewSession& session, bool field) {
         std::string name = session.viewed();
-        const bool isFloat = isFloatFormat(session.viewedTexture().format());
-        const std::string path =
-            fmt::format("loom-{}-{:04}.{}", name, session.frame(), field && isFloat ? "exr" : "png");
+        // The field's own values as `loom render --dump` writes them (EXR, or PNG for 8-bit fields); the screen as PNG.
+        const char* extension = field ? imageExtension(session.viewedTexture().format()) : "png";
+        const std::string path = fmt::format("loom-{}-{:04}.{}", name, session.frame(), extension);
         field ? session.saveField(path) : session.saveDisplay(path);
         mMessage = "saved " + path;
     }

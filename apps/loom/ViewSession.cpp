@@ -93,6 +93,13 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
                           "lines in frame order");
         if (c.verb == "exposure") checkExposure(numbers(c.arg, 1, where, "an exposure in EV, e.g. -1.5")[0], where);
         if (c.verb == "move") numbers(c.arg, 3, where, "move X Y Z, camera-local, in the scene's size");
+        if (c.verb == "save" || c.verb == "shot") {
+            // Before any frame renders: a path that cannot be written, and a save before the first frame.
+            checkOutputFile(c.arg, where);
+            if (c.frame == 0)
+                throwBadInput(where, "nothing is rendered before frame 0", "a frame of 1 or later",
+                              "commands run before their frame renders: 1 " + c.verb + " saves frame 0");
+        }
         if (c.verb == "turn") numbers(c.arg, 2, where, "turn YAW PITCH, in degrees");
         commands.push_back(std::move(c));
     }

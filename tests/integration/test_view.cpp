@@ -226,6 +226,9 @@ TEST_F(View, BadScriptsAndFieldsAreBadInput) {
         {"move", "1 move 0 0\n", {"move.txt:1", "3 numbers, not 2"}},
         {"turn", "1 turn 10 nan\n", {"turn.txt:1", "'nan' is not a number"}},
         {"noscene", "1 move 0 0 1\n", {"noscene.txt:1", "without a scene"}},
+        {"folder", "1 reset\n3 shot .\n", {"folder.txt:2", "is a folder"}},
+        {"nowhere", "1 save nowhere/x.exr\n", {"nowhere.txt:1", "does not exist"}},
+        {"early", "0 shot early.png\n", {"early.txt:1", "before frame 0", "1 shot saves frame 0"}},
     };
     for (const auto& [name, text, parts] : scripts) {
         write(name + ".txt", text);
