@@ -2,8 +2,10 @@
 """Renders mutated inputs through the loom CLI and checks the bad-input contract on every run.
 
 Mutations (seeded, so a run is reproducible): values, deletions and truncation of the shipped glTF scenes and
-graphs, degenerate node transforms (scales of 0, far translations), edges and outputs between the fields of their passes, out-of-range --set values, and damaged Radiance .hdr
-environment maps (written here). Each run must
+graphs, degenerate node transforms (scales of 0, far translations), edges and outputs between the fields of their
+passes, out-of-range --set values, damaged Radiance .hdr environment maps (written here), and `loom view --headless`
+scripts (fields switched, parameters set, the camera moved by 1e30 or turned by thousands of degrees, saves and a
+video recorded, now and then a malformed line). Each run must
 
   - exit with 0, or with 2 and one message that starts with "error:" (a crash, a hang past --timeout or exit code 1
     fail the run);
@@ -221,11 +223,46 @@ def mutate_graph(graph, fields, rng):
 
 # ---- runs -----------------------------------------------------------------------------------------------------
 
-def check_run(loom, args, out, timeout):
-    """Returns (exit code, a failure description or None)."""
+def view_script(fields, params, values, out, rng):
+    """Lines of a `loom view --script`: well-formed commands with extreme arguments (moves of 1e30, turns of
+    thousands of degrees, parameter values from `values`); one script in four also has a malformed line."""
+    extreme = ["0", "0.1", "-0.3", "1", "90", "-720", "1e30", "-1e30", "1e-40", "3.4e38"]
+    lines, frame = [], 1
+    for _ in range(rng.randint(1, 8)):
+        frame += rng.choice([0, 1, 1, 2])
+        verb = rng.choice(["view", "set", "exposure", "reset", "save", "shot", "move", "turn"])
+        if verb == "view":
+            arg = rng.choice(fields)
+        elif verb == "set":
+            arg = "%s=%s" % (rng.choice(params), rng.choice(values))
+        elif verb == "exposure":
+            arg = rng.choice(["0", "-3", "12", "64", "-64"])
+        elif verb in ("save", "shot"):
+            arg = os.path.join(out, rng.choice(["a.exr", "b.png", "c"]))
+        elif verb == "move":
+            arg = " ".join(rng.choice(extreme) for _ in range(3))
+        elif verb == "turn":
+            arg = " ".join(rng.choice(extreme) for _ in range(2))
+        else:
+            arg = ""
+        lines.append(("%d %s %s" % (frame, verb, arg)).rstrip())
+    if rng.random() < 0.25:
+        bad = rng.choice(["-1 reset", "x view ToneMap.dst", "99999999999999999999999 reset", "1 veiw ToneMap.dst",
+                          "1 move 1 2", "1 turn nan 0", "1 exposure inf", "1 save %s" % os.path.join(out, "no/x.png"),
+                          "0 shot %s" % os.path.join(out, "early.png"), "1 view Nope.dst", "1"])
+        lines.insert(rng.randrange(len(lines) + 1), bad)
+    return "\n".join(lines) + "\n"
+
+
+def check_run(loom, args, out, timeout, tail=None):
+    """Returns (exit code, a failure description or None). `tail`: the output arguments (render's by default)."""
     shutil.rmtree(out, ignore_errors=True)
+    if tail is None:
+        tail = ["--out", out, "--quiet"]
+    else:
+        os.makedirs(out)
     try:
-        r = subprocess.run([loom] + args + ["--out", out, "--quiet"], capture_output=True, timeout=timeout)
+        r = subprocess.run([loom] + args + tail, capture_output=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return None, "no exit within %d s" % timeout
     try:
@@ -269,8 +306,8 @@ def main():
     out = os.path.join(work, "out")
     failures, codes = [], []
 
-    def run(label, args):
-        code, why = check_run(o.loom, args, out, o.timeout)
+    def run(label, args, tail=None):
+        code, why = check_run(o.loom, args, out, o.timeout, tail)
         codes.append(code)
         if why:
             failures.append("%s: loom %s\n    %s" % (label, " ".join(args), why))
@@ -326,6 +363,25 @@ def main():
             f.write(b)
         run("env map %d (%s)" % (i, kind), ["render", "--graph", os.path.join(graphs_dir, "PathTracerRaw.json"),
                                             "--scene", dynamic, "--env", path, "--size", "32x24", "--dump", "*"])
+    shown = {"PathTracerSVGF.json": ["SVGF.variance", "SVGF.moments", "TAA.colorHistory", "GBuffer.meshId",
+                                     "GBuffer.mvec", "ToneMap.dst", "PathTracer.color", "GBuffer.vbuffer"],
+             "GBufferRaster.json": ["GBuffer.mvec", "GBuffer.linearZ", "GBuffer.meshId", "GBuffer.normW"],
+             "TestPattern.json": ["Blur.dst", "Counter.dst", "Display.dst", "Blur.tmp"]}
+    view_params = params[:3] + ["TAA.alpha", "Blur.radius", "GBuffer.cullMode"]
+    view_values = ["0", "1", "0.5", "3", "none", "1e40", "nan"]
+    view_codes = []
+    for i in range(o.runs):
+        graph = rng.choice(sorted(shown))
+        path = os.path.join(work, "script%d.txt" % i)
+        with open(path, "w") as f:
+            f.write(view_script(shown[graph], view_params, view_values, out, rng))
+        record = os.path.join(out, "v.y4m") if rng.random() < 0.5 else os.path.join(out, "frames")
+        # The still box: its camera is not animated, so the scripts' moves and turns take it.
+        run("view script %d" % i, ["view", "--headless", "--graph", os.path.join(graphs_dir, graph), "--scene",
+                                   os.path.join(scenes_dir, "cornell_box.gltf"), "--size", "40x24", "--frames", "4",
+                                   "--script", path, "--jitter", "halton"], ["--record", record])
+        view_codes.append(codes[-1])
+    print("view scripts: %d shown, %d rejected" % (view_codes.count(0), view_codes.count(2)))
     shutil.rmtree(work, ignore_errors=True)
     for f in failures:
         print("FAILED " + f)
