@@ -83,7 +83,7 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
             throwBadInput(where, "a frame number without a command", "FRAME VERB [ARGUMENT]", "verbs: " + join(kVerbs));
         if (std::find(kVerbs.begin(), kVerbs.end(), c.verb) == kVerbs.end())
             throwBadInput(where, "unknown command '" + printable(c.verb) + "'", "one of: " + join(kVerbs),
-                          didYouMean(c.verb, kVerbs, "commands"));
+                          didYouMean(c.verb, kVerbs, ""));
         std::getline(words >> std::ws, c.arg);
         while (!c.arg.empty() && std::isspace(static_cast<unsigned char>(c.arg.back()))) c.arg.pop_back();
         if (needsArgument(c.verb) && c.arg.empty())

@@ -44,7 +44,7 @@ int main(int argc, char** argv) {
             if (std::find(commands.begin(), commands.end(), argv[1]) == commands.end())
                 loom::throwBadInput(argv[1], std::string("unknown command '") + argv[1] + "'",
                                     "one of: " + loom::join(commands),
-                                    loom::didYouMean(argv[1], commands, "commands"));
+                                    loom::didYouMean(argv[1], commands, ""));
         }
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {

@@ -115,6 +115,8 @@ std::string didYouMean(std::string_view name, const std::vector<std::string>& ca
     std::string best = closestMatch(name, candidates);
     if (!best.empty()) return "did you mean '" + best + "'?";
     if (candidates.empty()) return {};
+    // The error's `expected` already lists them: say so rather than list them twice.
+    if (listLabel.empty()) return "none of these is close to '" + printable(name) + "': check its spelling";
     return std::string(listLabel) + ": " + join(candidates);
 }
 

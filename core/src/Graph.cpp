@@ -60,7 +60,7 @@ void checkKeys(const json& obj, const std::vector<std::string>& allowed, const s
     for (auto it = obj.begin(); it != obj.end(); ++it) {
         if (std::find(allowed.begin(), allowed.end(), it.key()) == allowed.end())
             throwBadInput(where + "/" + it.key(), "unknown key '" + it.key() + "'", "one of: " + join(allowed),
-                          didYouMean(it.key(), allowed, "keys"), file);
+                          didYouMean(it.key(), allowed, ""), file);
     }
 }
 

@@ -152,7 +152,7 @@ void ParamList::set(const std::string& name, const json& value, const std::strin
     const ParamDecl* d = find(name);
     if (!d) {
         throwBadInput(where, "unknown parameter '" + name + "'", "one of: " + join(declNames(mDecls)),
-                      didYouMean(name, declNames(mDecls), "parameters"));
+                      didYouMean(name, declNames(mDecls), ""));
     }
     switch (d->type) {
         case ParamType::Bool:
@@ -173,7 +173,7 @@ void ParamList::set(const std::string& name, const json& value, const std::strin
             const auto s = value.get<std::string>();
             if (std::find(d->enumValues.begin(), d->enumValues.end(), s) == d->enumValues.end())
                 throwBadInput(where, "parameter '" + name + "' has no value '" + s + "'",
-                              "one of: " + join(d->enumValues), didYouMean(s, d->enumValues, "values"));
+                              "one of: " + join(d->enumValues), didYouMean(s, d->enumValues, ""));
             break;
         }
         case ParamType::Vec3:

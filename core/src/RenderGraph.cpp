@@ -200,7 +200,7 @@ void RenderGraph::setParam(const std::string& passName, const std::string& param
     PassNode* n = mImpl->node(passName);
     if (!n)
         throwBadInput(where, "unknown pass '" + passName + "'", "one of: " + join(mImpl->passNames()),
-                      didYouMean(passName, mImpl->passNames(), "passes"));
+                      didYouMean(passName, mImpl->passNames(), ""));
     n->pass->params().set(param, value, where);
 }
 
@@ -264,7 +264,7 @@ void RenderGraph::compile(const CompileOptions& options) {
         PassNode* n = m.node(r.pass);
         if (!n)
             fail(where, "unknown pass '" + r.pass + "' in '" + r.str() + "'", "one of: " + join(m.passNames()),
-                 didYouMean(r.pass, m.passNames(), "passes"));
+                 didYouMean(r.pass, m.passNames(), ""));
         return n;
     };
     auto resolveField = [&](PassNode& n, const ChannelRef& r, FieldKind kind,
@@ -277,7 +277,7 @@ void RenderGraph::compile(const CompileOptions& options) {
                                  : fmt::format("unknown channel '{}' on pass '{}' ({})", r.channel, n.desc.name,
                                                n.desc.type);
             fail(where, what, fmt::format("an {} of {}: {}", fieldKindName(kind), n.desc.type, join(names)),
-                 didYouMean(r.channel, names, std::string(fieldKindName(kind)) + "s"));
+                 didYouMean(r.channel, names, ""));
         }
         return *f;
     };

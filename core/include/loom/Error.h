@@ -47,7 +47,8 @@ private:
 /// Closest candidate by edit distance, or empty when none is close enough.
 std::string closestMatch(std::string_view name, const std::vector<std::string>& candidates);
 
-/// "did you mean 'x'?" or a list of the candidates when none is close.
+/// "did you mean 'x'?" or, when none is close, a list of the candidates under `listLabel`; with an empty label (the
+/// error's `expected` lists them already) a note that none is close instead.
 std::string didYouMean(std::string_view name, const std::vector<std::string>& candidates,
                        std::string_view listLabel = "known");
 
