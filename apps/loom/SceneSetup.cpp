@@ -3,6 +3,8 @@
 #include <cmath>
 #include <regex>
 
+#include <spdlog/spdlog.h>
+
 #include "loom/Error.h"
 
 namespace loom::cli {
@@ -49,6 +51,9 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
         throwBadInput("--jitter-count", "jitter period out of range", "1 to 1024 samples");
 
     std::shared_ptr<Scene> scene = Scene::load(o.scene);
+    if (path.kind != CameraPathKind::Static && scene->cameraAnimated())
+        spdlog::warn("--camera-path {} is ignored: {} animates its camera, which the frames follow", o.cameraPath,
+                     o.scene);
     scene->cameraPath = path;
     scene->camera.jitterPattern = jitter;
     scene->camera.jitterSampleCount = o.jitterCount;

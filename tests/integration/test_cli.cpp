@@ -344,3 +344,19 @@ TEST_F(Cli, ImageMontageOfUnequalHeightsIsBadInput) {
     EXPECT_FALSE(fs::exists(mDir / "side.png"));
     EXPECT_EQ(loom("image montage a.png missing.png -o side.png").code, 2);
 }
+
+TEST_F(Cli, ACameraPathOnAnAnimatedCameraIsIgnoredWithAWarning) {
+    // cornell_dynamic animates its camera: the frames follow it, and --camera-path says it has no effect; on the
+    // still box the path applies silently.
+    const std::string gbuffer = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/GBufferRT.json");
+    RunResult r = loom("render --graph " + gbuffer + " --scene " +
+                       quoted(loom::test::dataScene("cornell_dynamic.gltf")) +
+                       " --size 16x16 --camera-path orbit -q --out out");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "--camera-path orbit is ignored");
+    EXPECT_CONTAINS(r.output, "animates its camera");
+    r = loom("render --graph " + gbuffer + " --scene " + quoted(loom::test::dataScene("cornell_box.gltf")) +
+             " --size 16x16 --camera-path orbit -q --out out");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(r.output.find("ignored"), std::string::npos) << r.output;
+}
