@@ -46,11 +46,11 @@ class View : public loom::test::TempDirTest {
 protected:
     loom::test::CliResult loom(const std::string& args) const { return loom::test::runLoom(mDir, args); }
     void write(const std::string& name, const std::string& text) const { std::ofstream(mDir / name) << text; }
-    /// The default graph on the dynamic scene, 64x64, orbiting and jittered: every pass has history.
+    /// The default graph on the dynamic scene (its camera and objects animated), 64x64, jittered: every pass has
+    /// history.
     std::string svgfRun(const std::string& extra) const {
         return "view --headless --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
-               shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
-               " --size 64x64 --camera-path orbit --jitter halton " + extra;
+               shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) + " --size 64x64 --jitter halton " + extra;
     }
 };
 
@@ -73,14 +73,14 @@ TEST_F(View, SwitchingTheShownFieldLeavesTheRenderUnchanged) {
     ASSERT_EQ(r.code, 0) << r.output;
     r = loom("render --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
              shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
-             " --size 64x64 --camera-path orbit --jitter halton --frames 7 --out out --dump TAA.colorOut "
+             " --size 64x64 --jitter halton --frames 7 --out out --dump TAA.colorOut "
              "--dump-frames 6 -q");
     ASSERT_EQ(r.code, 0) << r.output;
     const std::string plain = fileBytes(mDir / "plain.exr");
     ASSERT_FALSE(plain.empty());
     EXPECT_EQ(plain, fileBytes(mDir / "switching.exr"));
     EXPECT_EQ(plain, fileBytes(mDir / "out" / "TAA.colorOut.0006.exr"));
-    // And the frame is not trivially equal to something static: the orbit moved it since frame 3.
+    // And the frame is not trivially equal to something static: the animation moved it since frame 3.
     write("early.txt", "3 save early.exr\n");
     ASSERT_EQ(loom(svgfRun("--frames 4 --field TAA.colorOut --script early.txt")).code, 0);
     EXPECT_NE(plain, fileBytes(mDir / "early.exr"));
@@ -302,7 +302,7 @@ TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
     ASSERT_EQ(std::system("command -v xvfb-run >/dev/null 2>&1"), 0) << "xvfb-run is missing: run scripts/setup.sh";
     const std::string args = "--graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
                              shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
-                             " --size 64x48 --camera-path orbit --frames 4 --field SVGF.filtered --exposure 1 ";
+                             " --size 64x48 --frames 4 --field SVGF.filtered --exposure 1 ";
     auto r = loom("view --headless " + args + "--screenshot headless.png");
     ASSERT_EQ(r.code, 0) << r.output;
     const std::string cmd = "cd " + shellQuoted(mDir.string()) + " && xvfb-run -a -s '-screen 0 1024x768x24' " +
