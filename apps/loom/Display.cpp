@@ -6,38 +6,23 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <memory>
 
 #include "loom/Error.h"
 #include "loom/Parallel.h"
+#include "loom/SrgbEncode.h"
 
 namespace loom::cli {
 
-namespace {
-
-/// Where the exact sRGB encoding crosses each half code: code k (1..255) begins at the linear value whose encoding
-/// is (k - 1/2) / 255, computed in double once.
-struct SrgbThresholds {
-    double at[256];
-    SrgbThresholds() {
-        at[0] = -INFINITY;
-        for (int k = 1; k < 256; ++k) {
-            const double e = (k - 0.5) / 255.0;
-            const double linear = e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4);
-            at[k] = linear;
-        }
-    }
-};
-
-}  // namespace
-
 uint8_t encodeSrgb8(float linear) {
-    static const SrgbThresholds thresholds;
+    static const std::unique_ptr<SrgbEncodeTable> table = [] {
+        auto t = std::make_unique<SrgbEncodeTable>();
+        buildSrgbEncodeTable(*t);
+        return t;
+    }();
     if (!std::isfinite(linear)) return linear > 0.f ? 255 : 0;
-    // The last code whose threshold lies at or below the value: eight halvings of the 256 codes.
-    int k = 0;
-    for (int step = 128; step > 0; step /= 2)
-        if (thresholds.at[k + step] <= double(linear)) k += step;
-    return uint8_t(k);
+    // The table takes [0, 1] with no sign bit: -0 and negatives become +0.
+    return uint8_t(loom::encodeSrgb8(*table, linear > 0.f ? std::min(linear, 1.f) : 0.f));
 }
 
 namespace {

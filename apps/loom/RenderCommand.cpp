@@ -91,13 +91,7 @@ void runRender(const RenderOptions& o) {
     uint64_t written = 0;
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames; ++i) {
-        FrameInfo frame;
-        if (scene) {
-            frame = sceneFrame(*scene, o.startFrame + i, o.fps, width, height, i == 0);
-        } else {
-            frame.frameIndex = o.startFrame + i;
-            frame.time = double(frame.frameIndex) / o.fps;
-        }
+        const FrameInfo frame = sceneFrame(scene.get(), o.startFrame + i, o.fps, width, height, i == 0);
         graph.execute(frame);
         for (const auto& out : graph.outputs()) {
             const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);

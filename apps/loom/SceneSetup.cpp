@@ -91,4 +91,12 @@ FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, u
     return f;
 }
 
+FrameInfo sceneFrame(Scene* scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool first) {
+    if (scene) return sceneFrame(*scene, index, fps, width, height, first);
+    FrameInfo f;
+    f.frameIndex = index;
+    f.time = double(index) / fps;
+    return f;
+}
+
 }  // namespace loom::cli

@@ -29,5 +29,7 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o);
 void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t width, uint32_t height, bool firstFrame);
 /// The FrameInfo of frame `index` on a clock of `fps` frames per second, after beginSceneFrame() for it.
 FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool firstFrame);
+/// The same for a graph that may run without a scene (nullptr: the clock alone).
+FrameInfo sceneFrame(Scene* scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool firstFrame);
 
 }  // namespace loom::cli

@@ -307,7 +307,6 @@ void runView(const ViewOptions& o) {
     ViewSession session(o);
     const auto finished = [&] { return o.frames > 0 && session.frame() >= o.frames; };
     if (o.headless) {
-        if (o.frames == 0) throwBadInput("--frames", "--headless needs a frame count", "--frames N with N > 0");
         while (!finished()) session.step();
     } else {
 #ifdef LOOM_HAVE_VIEWER

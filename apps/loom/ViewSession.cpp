@@ -91,8 +91,12 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
         if (!commands.empty() && c.frame < commands.back().frame)
             throwBadInput(where, fmt::format("frame {} comes after frame {}", c.frame, commands.back().frame),
                           "lines in frame order");
-        if (c.verb == "exposure") checkExposure(numbers(c.arg, 1, where, "an exposure in EV, e.g. -1.5")[0], where);
-        if (c.verb == "move") numbers(c.arg, 3, where, "move X Y Z, camera-local, in the scene's size");
+        if (c.verb == "exposure") {
+            c.numbers = numbers(c.arg, 1, where, "an exposure in EV, e.g. -1.5");
+            checkExposure(c.numbers[0], where);
+        }
+        if (c.verb == "move") c.numbers = numbers(c.arg, 3, where, "move X Y Z, camera-local, in the scene's size");
+        if (c.verb == "turn") c.numbers = numbers(c.arg, 2, where, "turn YAW PITCH, in degrees");
         if (c.verb == "save" || c.verb == "shot") {
             // Before any frame renders: a path that cannot be written, and a save before the first frame.
             checkOutputFile(c.arg, where);
@@ -100,7 +104,6 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
                 throwBadInput(where, "nothing is rendered before frame 0", "a frame of 1 or later",
                               "commands run before their frame renders: 1 " + c.verb + " saves frame 0");
         }
-        if (c.verb == "turn") numbers(c.arg, 2, where, "turn YAW PITCH, in degrees");
         commands.push_back(std::move(c));
     }
     return commands;
@@ -117,6 +120,8 @@ ViewSession::ViewSession(const ViewOptions& options)
     else if (!options.record.empty())
         ensureWritableDir(options.record, "--record");
     if (!options.screenshot.empty()) checkOutputFile(options.screenshot, "--screenshot");
+    if (options.headless && options.frames == 0)
+        throwBadInput("--frames", "--headless needs a frame count", "--frames N with N > 0");
     if (!options.windowShot.empty()) {
         if (options.headless || options.frames == 0)
             throwBadInput("--window-shot", "a window shot needs the window and a last frame",
@@ -134,12 +139,7 @@ ViewSession::ViewSession(const ViewOptions& options)
     copts.height = mHeight;
     mGraph->compile(copts);
     listFields();
-    std::string first = options.field;
-    if (first.empty()) {
-        const auto& outs = mGraph->outputs();
-        first = outs.empty() ? mFields.front() : outs.front().pass + "." + outs.front().channel;
-    }
-    view(first);
+    view(options.field.empty() ? defaultField() : options.field);
     mGraph->setFieldObserver(
         [this](const FrameInfo&, const std::string& pass, const std::string& field, const Texture& tex) {
             if (pass + "." + field != mViewed) return;
@@ -165,6 +165,11 @@ void ViewSession::listFields() {
     std::stable_sort(mFields.begin(), mFields.end(),
                      [&](const std::string& a, const std::string& b) { return position(a) < position(b); });
     if (mFields.empty()) throwBadInput(mOptions.graph, "the graph computes no field", "a graph with outputs");
+}
+
+std::string ViewSession::defaultField() const {
+    const auto& outs = mGraph->outputs();
+    return outs.empty() ? mFields.front() : outs.front().pass + "." + outs.front().channel;
 }
 
 void ViewSession::compileViewing(const std::string& field) {
@@ -196,29 +201,16 @@ std::string ViewSession::reloadIfChanged() {
     const auto t = modificationTime(mOptions.graph);
     if (t == mGraphTime) return {};
     mGraphTime = t;
+    std::string error;
     try {
+        // Recompiles with the shown field still observed.
         mGraph->setDesc(loadGraph(mOptions.graph));
-        listFields();
-        const std::string keep = std::find(mFields.begin(), mFields.end(), mViewed) != mFields.end()
-                                     ? mViewed
-                                     : (mGraph->outputs().empty()
-                                            ? mFields.front()
-                                            : mGraph->outputs().front().pass + "." + mGraph->outputs().front().channel);
-        mViewed.clear();
-        view(keep);
-        return {};
     } catch (const Error& e) {
-        // The graph as it ran before: setDesc keeps it when the new description does not compile.
-        try {
-            listFields();
-            if (std::find(mFields.begin(), mFields.end(), mViewed) == mFields.end()) {
-                mViewed.clear();
-                view(mFields.front());
-            }
-        } catch (const Error&) {
-        }
-        return e.what();
+        error = e.what();  // setDesc leaves the graph as it ran before
     }
+    listFields();
+    if (std::find(mFields.begin(), mFields.end(), mViewed) == mFields.end()) view(defaultField());
+    return error;
 }
 
 void ViewSession::runScript() {
@@ -231,14 +223,12 @@ void ViewSession::runScript() {
             else if (c.verb == "set")
                 set(c.arg);
             else if (c.verb == "exposure")
-                setExposure(std::strtof(c.arg.c_str(), nullptr));
-            else if (c.verb == "move") {
-                const auto v = numbers(c.arg, 3, where, "");
-                moveCamera(glm::vec3(v[0], v[1], v[2]), 0.f, 0.f);
-            } else if (c.verb == "turn") {
-                const auto v = numbers(c.arg, 2, where, "");
-                moveCamera(glm::vec3(0.f), glm::radians(v[0]), glm::radians(v[1]));
-            } else if (c.verb == "reset")
+                setExposure(c.numbers[0]);
+            else if (c.verb == "move")
+                moveCamera(glm::vec3(c.numbers[0], c.numbers[1], c.numbers[2]), 0.f, 0.f);
+            else if (c.verb == "turn")
+                moveCamera(glm::vec3(0.f), glm::radians(c.numbers[0]), glm::radians(c.numbers[1]));
+            else if (c.verb == "reset")
                 resetHistory();
             else if (c.verb == "save")
                 saveField(c.arg);
@@ -289,13 +279,7 @@ void ViewSession::moveCamera(const glm::vec3& local, float yaw, float pitch) {
 
 void ViewSession::step() {
     runScript();
-    FrameInfo frame;
-    if (mScene) {
-        frame = sceneFrame(*mScene, mFrame, mOptions.fps, mWidth, mHeight, mFrame == 0);
-    } else {
-        frame.frameIndex = mFrame;
-        frame.time = double(mFrame) / mOptions.fps;
-    }
+    const FrameInfo frame = sceneFrame(mScene.get(), mFrame, mOptions.fps, mWidth, mHeight, mFrame == 0);
     mPendingPose.reset();
     mGraph->execute(frame);
     ++mFrame;

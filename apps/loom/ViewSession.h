@@ -40,6 +40,7 @@ struct ViewOptions {
 struct ScriptCommand {
     uint64_t frame = 0;
     std::string verb, arg;
+    std::vector<float> numbers;  ///< exposure, move and turn: the argument's numbers
     int line = 0;
 };
 /// Lines "FRAME VERB [ARG]"; blank lines and lines starting with # are skipped. Verbs: view FIELD, set
@@ -98,6 +99,8 @@ public:
     const ViewOptions& options() const { return mOptions; }
 
 private:
+    /// The graph's first output (its first field when it marks none).
+    std::string defaultField() const;
     void compileViewing(const std::string& field);
     void refreshDisplay();
     void runScript();

@@ -89,8 +89,8 @@ HWY_INLINE FloatVec operatorVec(FloatTag d, FloatVec v, const ToneMapParams& p) 
 
 /// encodeSrgb8 on a vector of saturated values: one gather per vector, none when every lane is black (code 0:
 /// below the first bucket) or white (255), as a sky or a blown-out light is.
-HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const tonemap::SrgbEncodeTable& t, FloatVec v) {
-    using Table = tonemap::SrgbEncodeTable;
+HWY_INLINE IntVec encodeSrgbVec(FloatTag d, const SrgbEncodeTable& t, FloatVec v) {
+    using Table = SrgbEncodeTable;
     const IntTag di;
     const IntVec bits = hn::BitCast(di, v);
     const auto black = hn::Lt(bits, hn::Set(di, int32_t(Table::kFirstBits)));
@@ -195,7 +195,7 @@ constexpr uint32_t kChunk = 128;
 /// With Measure, also sums the row's log-luminance terms into logSum / logCount from the same loads, with the same
 /// operations and order as logLuminanceRow (so the sums are the same bits).
 template <Operator Op, bool Measure>
-uint64_t mapRow(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, const glm::vec4* in, uint32_t* out,
+uint64_t mapRow(const ToneMapParams& p, const SrgbEncodeTable& table, const glm::vec4* in, uint32_t* out,
                 glm::vec4* outFloat, uint32_t x0, uint32_t x1, double& logSum, uint64_t& logCount) {
     const FloatTag d;
     const IntTag di;
@@ -249,7 +249,7 @@ uint64_t mapRow(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, c
 }
 
 /// The same row with the per-pixel reference kernel only.
-uint64_t mapRowReference(const ToneMapParams& p, const tonemap::SrgbEncodeTable& table, const glm::vec4* in,
+uint64_t mapRowReference(const ToneMapParams& p, const SrgbEncodeTable& table, const glm::vec4* in,
                          uint32_t* out, glm::vec4* outFloat, uint32_t x0, uint32_t x1) {
     uint64_t nonFinite = 0;
     for (uint32_t x = x0; x < x1; ++x) {
@@ -302,7 +302,7 @@ struct LogAverageSums {
 /// the log-luminance of the measured rows while they are in cache (one read of src for both). Returns the number of
 /// pixels with a non-finite channel (they map to finite values like any other).
 template <Operator Op>
-uint64_t mapFrame(const ToneMapParams& params, const tonemap::SrgbEncodeTable& table, const Texture& srcTexture,
+uint64_t mapFrame(const ToneMapParams& params, const SrgbEncodeTable& table, const Texture& srcTexture,
                   Texture& dstTexture, Texture* dstFloatTexture, LogAverageSums* measure, bool reference) {
     ToneMapParams p = params;
     p.op = Op;  // a constant inside the loop: the switch in toneMapChannel folds away
@@ -340,8 +340,8 @@ uint64_t mapFrame(const ToneMapParams& params, const tonemap::SrgbEncodeTable& t
 
 }  // namespace
 
-ToneMapPass::ToneMapPass() : mSrgbTable(std::make_unique<tonemap::SrgbEncodeTable>()) {
-    tonemap::buildSrgbEncodeTable(*mSrgbTable);
+ToneMapPass::ToneMapPass() : mSrgbTable(std::make_unique<SrgbEncodeTable>()) {
+    buildSrgbEncodeTable(*mSrgbTable);
 }
 
 void ToneMapPass::reflect(Reflection& r, const CompileInfo&) const {

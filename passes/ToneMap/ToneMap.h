@@ -57,7 +57,7 @@ private:
     float mWhitePoint = 4.f;
     bool mReference = false;
 
-    std::unique_ptr<tonemap::SrgbEncodeTable> mSrgbTable;
+    std::unique_ptr<SrgbEncodeTable> mSrgbTable;
 };
 
 }  // namespace loom

@@ -272,9 +272,9 @@ TEST(ToneMap, AutoExposureMeasuresEveryFourthRow) {
 // sRGB encoding
 
 TEST(ToneMap, SrgbEncodingIsExactAtKnownPoints) {
-    tonemap::SrgbEncodeTable table;
-    tonemap::buildSrgbEncodeTable(table);
-    auto code = [&](float v) { return tonemap::encodeSrgb8(table, v); };
+    SrgbEncodeTable table;
+    buildSrgbEncodeTable(table);
+    auto code = [&](float v) { return encodeSrgb8(table, v); };
     EXPECT_EQ(code(0.f), 0u);
     EXPECT_EQ(code(1.f), 255u);
     // 0.5 linear: 1.055 * 0.5^(1/2.4) - 0.055 = 0.7353569, * 255 = 187.516 -> 188.

@@ -111,6 +111,7 @@ TEST(ViewDisplay, SrgbEncodingIsCorrectlyRounded) {
     }
     EXPECT_EQ(wrong, 0);
     EXPECT_EQ(loom::cli::encodeSrgb8(-1.f), 0);
+    EXPECT_EQ(loom::cli::encodeSrgb8(-0.f), 0);
     EXPECT_EQ(loom::cli::encodeSrgb8(7.f), 255);
     EXPECT_EQ(loom::cli::encodeSrgb8(INFINITY), 255);
     EXPECT_EQ(loom::cli::encodeSrgb8(NAN), 0);
