@@ -12,7 +12,7 @@ PACKAGES=(
   libopencv-contrib-dev
   python3-matplotlib
   libegl-dev libgl-dev libegl1-mesa-dev libgl1-mesa-dri libgles-dev
-  xvfb xauth
+  xvfb xauth xdotool
 )
 
 missing=()

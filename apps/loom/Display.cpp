@@ -153,4 +153,46 @@ void Y4mWriter::finish() {
     }
 }
 
+bool ImagePlacement::pixelAt(float sx, float sy, uint32_t w, uint32_t h, uint32_t& x, uint32_t& y) const {
+    const float fx = (sx - x0) / scale, fy = (sy - y0) / scale;
+    if (!(scale > 0.f && fx >= 0.f && fy >= 0.f && fx < float(w) && fy < float(h))) return false;
+    x = std::min(uint32_t(fx), w - 1);
+    y = std::min(uint32_t(fy), h - 1);
+    return true;
+}
+
+namespace {
+
+float fitScale(float areaW, float areaH, uint32_t w, uint32_t h) {
+    return std::min(areaW / float(std::max(w, 1u)), areaH / float(std::max(h, 1u)));
+}
+
+}  // namespace
+
+ImagePlacement ImageViewport::place(float areaW, float areaH, uint32_t w, uint32_t h) const {
+    const float scale = fitScale(areaW, areaH, w, h) * mZoom;
+    return {0.5f * (areaW - float(w) * scale) + mPanX, 0.5f * (areaH - float(h) * scale) + mPanY, scale};
+}
+
+void ImageViewport::setScaleAbout(float scale, float sx, float sy, float areaW, float areaH, uint32_t w, uint32_t h) {
+    const float fit = fitScale(areaW, areaH, w, h);
+    if (!(fit > 0.f) || !std::isfinite(scale)) return;
+    scale = std::clamp(scale, std::min(0.25f * fit, 1.f), std::max(kMaxScale, fit));
+    const ImagePlacement before = place(areaW, areaH, w, h);
+    // The image point under (sx, sy) stays there: x0' = sx - (sx - x0) scale' / scale.
+    const float ratio = scale / before.scale;
+    const float x0 = sx - (sx - before.x0) * ratio, y0 = sy - (sy - before.y0) * ratio;
+    mZoom = scale / fit;
+    mPanX = x0 - 0.5f * (areaW - float(w) * scale);
+    mPanY = y0 - 0.5f * (areaH - float(h) * scale);
+}
+
+void ImageViewport::zoomAt(float factor, float sx, float sy, float areaW, float areaH, uint32_t w, uint32_t h) {
+    setScaleAbout(place(areaW, areaH, w, h).scale * factor, sx, sy, areaW, areaH, w, h);
+}
+
+void ImageViewport::actualSize(float sx, float sy, float areaW, float areaH, uint32_t w, uint32_t h) {
+    setScaleAbout(1.f, sx, sy, areaW, areaH, w, h);
+}
+
 }  // namespace loom::cli

@@ -25,6 +25,35 @@ std::string pixelText(const Texture& t, uint32_t x, uint32_t y);
 /// The whole texture through displayPixel, rows top to bottom, 4 bytes a pixel, alpha 255.
 std::vector<uint8_t> displayImage(const Texture& t, float scale);
 
+/// Where an image of w x h pixels lies on screen: its top-left corner and screen pixels per image pixel.
+struct ImagePlacement {
+    float x0 = 0.f, y0 = 0.f, scale = 1.f;
+    /// The image pixel under screen point (sx, sy); false outside the image.
+    bool pixelAt(float sx, float sy, uint32_t w, uint32_t h, uint32_t& x, uint32_t& y) const;
+};
+
+/// The viewer's zoom and pan of the shown image within its area of the window. Zoom 1 fits the image to the area,
+/// centred; zooming about a screen point keeps the image point under it in place.
+class ImageViewport {
+public:
+    static constexpr float kMaxScale = 64.f;  ///< screen pixels per image pixel at most
+    ImagePlacement place(float areaW, float areaH, uint32_t w, uint32_t h) const;
+    /// Multiplies the zoom by `factor` (clamped between a quarter of the fit, or 1:1 if that is less, and kMaxScale
+    /// screen pixels per image pixel), keeping the image point under (sx, sy) where it is.
+    void zoomAt(float factor, float sx, float sy, float areaW, float areaH, uint32_t w, uint32_t h);
+    /// One screen pixel per image pixel, keeping the image point under (sx, sy).
+    void actualSize(float sx, float sy, float areaW, float areaH, uint32_t w, uint32_t h);
+    void pan(float dx, float dy) {
+        mPanX += dx;
+        mPanY += dy;
+    }
+    void fit() { *this = ImageViewport(); }
+
+private:
+    void setScaleAbout(float scale, float sx, float sy, float areaW, float areaH, uint32_t w, uint32_t h);
+    float mZoom = 1.f, mPanX = 0.f, mPanY = 0.f;  ///< zoom relative to the fit; offset from the centred placement
+};
+
 /// A video of displayed frames as YUV4MPEG2 (.y4m): 8-bit Y'CbCr 4:4:4, full range, BT.601 coefficients on the
 /// sRGB-encoded values; players and ffmpeg read it (`ffmpeg -i in.y4m out.mp4`). Written to PATH.partial and renamed
 /// by finish(); destroyed unfinished (an error on the way), it removes the partial file.

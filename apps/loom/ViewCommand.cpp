@@ -166,12 +166,15 @@ public:
         const ImVec2 size = ImGui::GetIO().DisplaySize;
         const float areaW = std::max(1.f, size.x - kPanelWidth), areaH = std::max(1.f, size.y);
         if (!session.display().empty()) {
-            const float scale = std::min(areaW / float(shown.width()), areaH / float(shown.height()));
-            const float w = float(shown.width()) * scale, h = float(shown.height()) * scale;
-            const ImVec2 p0((areaW - w) * 0.5f, (areaH - h) * 0.5f);
-            ImGui::GetBackgroundDrawList()->AddImage(reinterpret_cast<ImTextureID>(uintptr_t(mTexture)), p0,
-                                                     ImVec2(p0.x + w, p0.y + h));
-            if (capture.empty()) inspect(shown, p0, scale);
+            navigate(shown, areaW, areaH);
+            const ImagePlacement at = mViewport.place(areaW, areaH, shown.width(), shown.height());
+            mShownScale = at.scale;
+            ImDrawList* list = ImGui::GetBackgroundDrawList();
+            list->PushClipRect(ImVec2(0.f, 0.f), ImVec2(areaW, areaH));  // a zoomed image stays left of the panel
+            list->AddImage(reinterpret_cast<ImTextureID>(uintptr_t(mTexture)), ImVec2(at.x0, at.y0),
+                           ImVec2(at.x0 + float(shown.width()) * at.scale, at.y0 + float(shown.height()) * at.scale));
+            list->PopClipRect();
+            if (capture.empty()) inspect(shown, at, areaW);
         }
         panel(session, paused, stepOnce, renderMs, areaW, areaH);
         ImGui::Render();
@@ -217,13 +220,35 @@ private:
     }
 
     /// The values of the pixel under the mouse, as a tooltip.
-    void inspect(const Texture& shown, ImVec2 p0, float scale) {
+    void inspect(const Texture& shown, const ImagePlacement& at, float areaW) {
         const ImGuiIO& io = ImGui::GetIO();
-        if (io.WantCaptureMouse || scale <= 0.f) return;
-        const float fx = (io.MousePos.x - p0.x) / scale, fy = (io.MousePos.y - p0.y) / scale;
-        if (!(fx >= 0.f && fy >= 0.f && fx < float(shown.width()) && fy < float(shown.height()))) return;
-        const uint32_t x = uint32_t(fx), y = uint32_t(fy);
+        uint32_t x, y;
+        if (io.WantCaptureMouse || io.MousePos.x >= areaW ||
+            !at.pixelAt(io.MousePos.x, io.MousePos.y, shown.width(), shown.height(), x, y))
+            return;
         ImGui::SetTooltip("(%u, %u)  %s", x, y, pixelText(shown, x, y).c_str());
+    }
+
+    /// Zoom and pan of the image while the panel does not want the mouse or keyboard: the wheel zooms about the
+    /// mouse, dragging with the left or middle button pans, F fits the image to the area again, 1 shows it at one
+    /// screen pixel per pixel, Escape closes the window.
+    void navigate(const Texture& shown, float areaW, float areaH) {
+        const ImGuiIO& io = ImGui::GetIO();
+        const uint32_t w = shown.width(), h = shown.height();
+        const bool overImage = !io.WantCaptureMouse && io.MousePos.x >= 0.f && io.MousePos.x < areaW &&
+                               io.MousePos.y >= 0.f && io.MousePos.y < areaH;
+        if (overImage && io.MouseWheel != 0.f)
+            mViewport.zoomAt(std::pow(1.25f, io.MouseWheel), io.MousePos.x, io.MousePos.y, areaW, areaH, w, h);
+        if (!io.WantCaptureMouse && (ImGui::IsMouseDragging(ImGuiMouseButton_Left, 0.f) ||
+                                     ImGui::IsMouseDragging(ImGuiMouseButton_Middle, 0.f)))
+            mViewport.pan(io.MouseDelta.x, io.MouseDelta.y);
+        if (io.WantCaptureKeyboard) return;
+        if (ImGui::IsKeyPressed(GLFW_KEY_ESCAPE, false)) glfwSetWindowShouldClose(mWindow, GLFW_TRUE);
+        if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) mViewport.fit();
+        if (ImGui::IsKeyPressed(GLFW_KEY_1, false)) {
+            const float sx = overImage ? io.MousePos.x : 0.5f * areaW, sy = overImage ? io.MousePos.y : 0.5f * areaH;
+            mViewport.actualSize(sx, sy, areaW, areaH, w, h);
+        }
     }
 
     void panel(ViewSession& session, bool& paused, bool& stepOnce, double renderMs, float x, float height) {
@@ -239,6 +264,7 @@ private:
         if (ImGui::Button("Step")) stepOnce = true;
         ImGui::SameLine();
         if (ImGui::Button("Reset history")) session.resetHistory();
+        ImGui::Text("zoom %.3g:1 (wheel; drag pans, F fits, 1 is 1:1)", mShownScale);
         // The field on display: any of the graph's, history included; switching keeps every pass's state.
         if (ImGui::BeginCombo("field", session.viewed().c_str())) {
             for (const std::string& f : session.fields())
@@ -293,6 +319,8 @@ private:
         mMessage = "saved " + path;
     }
 
+    ImageViewport mViewport;
+    float mShownScale = 1.f;  ///< screen pixels per image pixel in the last frame drawn
     bool mOpenPasses = false;
     uint64_t mUploaded = 0;  ///< the display version in the texture
     GLFWwindow* mWindow = nullptr;
@@ -333,6 +361,8 @@ void runView(const ViewOptions& o) {
             window.steer(session, std::chrono::duration<double>(end - lastLoop).count());
             lastLoop = end;
         }
+        // Closed before a last frame: the window as it was when closed.
+        if (!finished() && !o.windowShot.empty()) window.draw(session, paused, stepOnce, renderMs, o.windowShot);
 #else
         throw Error({ErrorKind::Runtime,
                      {},
@@ -362,7 +392,7 @@ void addViewCommand(CLI::App& app) {
     cmd->add_option("--record", o->record,
                     "every frame's displayed image: FILE.y4m (a video) or a folder of numbered PNGs");
     cmd->add_option("--screenshot", o->screenshot, "write the displayed image as PNG at the end");
-    cmd->add_option("--window-shot", o->windowShot, "with a window and --frames: write the whole window as PNG at the end");
+    cmd->add_option("--window-shot", o->windowShot, "write the whole window as PNG after the last frame or when it closes");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
     cmd->add_flag("--open-passes", o->openPasses, "start with every pass's section of the panel open");

@@ -123,9 +123,9 @@ ViewSession::ViewSession(const ViewOptions& options)
     if (options.headless && options.frames == 0)
         throwBadInput("--frames", "--headless needs a frame count", "--frames N with N > 0");
     if (!options.windowShot.empty()) {
-        if (options.headless || options.frames == 0)
-            throwBadInput("--window-shot", "a window shot needs the window and a last frame",
-                          "--window-shot with --frames N and without --headless");
+        if (options.headless)
+            throwBadInput("--window-shot", "a window shot needs the window",
+                          "--screenshot for the displayed image, or --window-shot without --headless");
         checkOutputFile(options.windowShot, "--window-shot");
     }
     mScene = loadScene(options.scene);

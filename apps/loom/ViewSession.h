@@ -30,7 +30,7 @@ struct ViewOptions {
     std::string script;      ///< file of timed commands (parseViewScript)
     std::string record;      ///< a .y4m video of the displayed frames, or a folder of numbered PNGs
     std::string screenshot;  ///< at the end: the displayed image as PNG
-    std::string windowShot;  ///< at the end: the whole window as PNG (window only)
+    std::string windowShot;  ///< after the last frame or when the window closes: the whole window as PNG
     bool headless = false;
     bool openPasses = false;  ///< the panel starts with every pass's parameters shown
     SceneOptions scene;

@@ -1,6 +1,7 @@
 // loom view: the session behind the window, run --headless with scripts (switching the shown field leaves the render
 // bit for bit as it was, the display is the exact sRGB encoding, every frame recorded, bad scripts are bad input),
-// and the window itself under a virtual X server showing what the headless session shows.
+// and the window itself under a virtual X server showing what the headless session shows, zooming, panning and
+// closing on real mouse and key input.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -115,6 +116,70 @@ TEST(ViewDisplay, SrgbEncodingIsCorrectlyRounded) {
     EXPECT_EQ(loom::cli::encodeSrgb8(7.f), 255);
     EXPECT_EQ(loom::cli::encodeSrgb8(INFINITY), 255);
     EXPECT_EQ(loom::cli::encodeSrgb8(NAN), 0);
+}
+
+TEST(ViewDisplay, ZoomKeepsThePixelUnderTheMouseAndPanMovesTheImage) {
+    using loom::cli::ImagePlacement;
+    using loom::cli::ImageViewport;
+    const float areaW = 800.f, areaH = 500.f;
+    const uint32_t w = 320, h = 240;
+    ImageViewport v;
+    // Fitted: the limiting side fills the area, centred.
+    ImagePlacement at = v.place(areaW, areaH, w, h);
+    EXPECT_FLOAT_EQ(at.scale, 500.f / 240.f);
+    EXPECT_NEAR(at.y0, 0.f, 1e-4f);
+    EXPECT_FLOAT_EQ(at.x0 + 0.5f * float(w) * at.scale, 0.5f * areaW);
+    uint32_t x = 0, y = 0;
+    ASSERT_TRUE(at.pixelAt(0.5f * areaW, 0.5f * areaH, w, h, x, y));
+    EXPECT_EQ(x, w / 2);
+    EXPECT_EQ(y, h / 2);
+    EXPECT_FALSE(at.pixelAt(at.x0 - 1.f, 10.f, w, h, x, y));
+    EXPECT_FALSE(at.pixelAt(at.x0 + float(w) * at.scale, 10.f, w, h, x, y));
+    // Zooming in and out about several points: the image point under the mouse stays under it.
+    const float points[][2] = {{400.f, 250.f}, {81.f, 13.f}, {799.f, 499.f}, {233.5f, 377.25f}};
+    for (const auto& p : points)
+        for (float factor : {1.25f, 3.f, 0.8f, 0.5f}) {
+            const ImagePlacement before = v.place(areaW, areaH, w, h);
+            const float u = (p[0] - before.x0) / before.scale, t = (p[1] - before.y0) / before.scale;
+            v.zoomAt(factor, p[0], p[1], areaW, areaH, w, h);
+            const ImagePlacement after = v.place(areaW, areaH, w, h);
+            EXPECT_NEAR(after.scale, before.scale * factor, 1e-4f * after.scale);
+            EXPECT_NEAR(after.x0 + u * after.scale, p[0], 1e-3f) << p[0] << " x" << factor;
+            EXPECT_NEAR(after.y0 + t * after.scale, p[1], 1e-3f) << p[1] << " x" << factor;
+        }
+    // 1:1 about a point: one screen pixel per pixel, that point kept; also where a quarter of the fit is more.
+    v.actualSize(100.f, 200.f, areaW, areaH, w, h);
+    at = v.place(areaW, areaH, w, h);
+    EXPECT_FLOAT_EQ(at.scale, 1.f);
+    ImageViewport small;
+    small.actualSize(10.f, 10.f, areaW, areaH, 16, 16);
+    EXPECT_FLOAT_EQ(small.place(areaW, areaH, 16, 16).scale, 1.f);
+    // Zoom is bounded: at most kMaxScale screen pixels per pixel, at least a quarter of the fit.
+    for (int i = 0; i < 100; ++i) v.zoomAt(2.f, 400.f, 250.f, areaW, areaH, w, h);
+    EXPECT_FLOAT_EQ(v.place(areaW, areaH, w, h).scale, ImageViewport::kMaxScale);
+    for (int i = 0; i < 100; ++i) v.zoomAt(0.5f, 400.f, 250.f, areaW, areaH, w, h);
+    EXPECT_FLOAT_EQ(v.place(areaW, areaH, w, h).scale, 0.25f * 500.f / 240.f);
+    v.zoomAt(NAN, 400.f, 250.f, areaW, areaH, w, h);  // ignored
+    EXPECT_FLOAT_EQ(v.place(areaW, areaH, w, h).scale, 0.25f * 500.f / 240.f);
+    // Panning moves the image by the mouse's motion; fit puts it back.
+    const ImagePlacement before = v.place(areaW, areaH, w, h);
+    v.pan(30.f, -12.f);
+    at = v.place(areaW, areaH, w, h);
+    EXPECT_FLOAT_EQ(at.x0, before.x0 + 30.f);
+    EXPECT_FLOAT_EQ(at.y0, before.y0 - 12.f);
+    EXPECT_FLOAT_EQ(at.scale, before.scale);
+    v.fit();
+    at = v.place(areaW, areaH, w, h);
+    EXPECT_FLOAT_EQ(at.scale, 500.f / 240.f);
+    EXPECT_NEAR(at.y0, 0.f, 1e-4f);
+    // Magnified, the pixel under a point is the one whose square holds it.
+    v.actualSize(0.f, 0.f, areaW, areaH, w, h);
+    v.zoomAt(8.f, 0.f, 0.f, areaW, areaH, w, h);
+    at = v.place(areaW, areaH, w, h);
+    ASSERT_FLOAT_EQ(at.scale, 8.f);
+    ASSERT_TRUE(at.pixelAt(at.x0 + 8.f * 5.f + 7.9f, at.y0 + 8.f * 3.f + 0.1f, w, h, x, y));
+    EXPECT_EQ(x, 5u);
+    EXPECT_EQ(y, 3u);
 }
 
 TEST_F(View, RecordWritesEveryFrameAndTheLastIsTheScreenshot) {
@@ -238,6 +303,7 @@ TEST_F(View, BadScriptsAndFieldsAreBadInput) {
     expectBad("--script missing.txt", {"missing.txt", "cannot read"});
     expectBad("--field Blur.dts", {"no field 'Blur.dts'", "did you mean 'Blur.dst'"});
     expectBad("--exposure 1e9", {"--exposure", "out of range"});
+    expectBad("--window-shot w.png", {"--window-shot", "needs the window"});
     EXPECT_EQ(loom("view --headless --graph " + shellQuoted(kGraphs + "TestPattern.json")).code, 2);  // no --frames
 }
 
@@ -330,6 +396,55 @@ TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
         }
     EXPECT_EQ(differing, 0);
     EXPECT_GT(lit, 48 * 64 / 4);  // the Cornell box, not a black frame
+}
+
+TEST_F(View, TheWindowZoomsAboutTheMousePansOnDragAndClosesOnEscape) {
+    // Real input under a virtual X server (xdotool, installed by scripts/setup.sh) on a still image (the test
+    // pattern at speed 0, 64x64). In the 680x480 window the image area is 320x480 and the image fits at scale 5
+    // from (0, 80); the mouse at (100, 150) is over image point (20, 14). Three wheel steps zoom about it, 1 sets one
+    // screen pixel per pixel about it (the image then from (80, 136)), a left drag of (30, 20) moves the image to
+    // (110, 156), and Escape closes the window, which writes the window shot. There the image must be the headless
+    // screenshot, pixel for pixel.
+    ASSERT_EQ(std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"), 0)
+        << "xvfb-run or xdotool is missing: run scripts/setup.sh";
+    const std::string args = "--graph " + shellQuoted(kGraphs + "TestPattern.json") +
+                             " --size 64x64 --set Pattern.speed=0 --field Blur.dst ";
+    auto r = loom("view --headless --frames 1 " + args + "--screenshot headless.png");
+    ASSERT_EQ(r.code, 0) << r.output;
+    write("input.sh",
+          "set -u\n" + shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
+              "--window-shot whole.png > window.log 2>&1 &\n"
+              "pid=$!\n"
+              "for i in $(seq 100); do wid=$(xdotool search --name '^Loom - ' 2>/dev/null | head -1); "
+              "[ -n \"$wid\" ] && break; sleep 0.1; done\n"
+              "[ -n \"$wid\" ] || { kill $pid; exit 3; }\n"
+              "sleep 0.5\n"
+              "xdotool mousemove --window $wid 100 150; sleep 0.3\n"
+              "for i in 1 2 3; do xdotool click 4; sleep 0.1; done; sleep 0.3\n"
+              "xdotool key 1; sleep 0.3\n"
+              "xdotool mousedown 1; sleep 0.2; xdotool mousemove_relative 10 5; sleep 0.2\n"
+              "xdotool mousemove_relative 20 15; sleep 0.2; xdotool mouseup 1; sleep 0.3\n"
+              "xdotool key Escape\n"
+              "wait $pid\n");
+    const std::string cmd = "cd " + shellQuoted(mDir.string()) +
+                            " && timeout 60 xvfb-run -a -s '-screen 0 1024x768x24' bash input.sh > input.log 2>&1";
+    const int status = std::system(cmd.c_str());
+    ASSERT_EQ(status, 0) << fileBytes(mDir / "input.log") << fileBytes(mDir / "window.log");
+    const loom::Texture whole = loom::readImage(mDir / "whole.png");
+    const loom::Texture shown = loom::readImage(mDir / "headless.png");
+    ASSERT_EQ(whole.width(), 680u);
+    ASSERT_EQ(whole.height(), 480u);
+    // Where the image's top-left pixel is found: each candidate offset near the expected one, compared in full.
+    const auto matches = [&](uint32_t ox, uint32_t oy) {
+        for (uint32_t y = 0; y < 64; ++y)
+            if (std::memcmp(whole.row(oy + y) + size_t(ox) * 4, shown.row(y), 64 * 4) != 0) return false;
+        return true;
+    };
+    std::string found;
+    for (uint32_t oy = 146; oy <= 166; ++oy)
+        for (uint32_t ox = 100; ox <= 120; ++ox)
+            if (matches(ox, oy)) found += "(" + std::to_string(ox) + ", " + std::to_string(oy) + ") ";
+    EXPECT_EQ(found, "(110, 156) ");
 }
 
 }  // namespace
