@@ -520,7 +520,7 @@ void runBench(BenchOptions o) {
         throwBadInput("--frames",
                       fmt::format("{} frame(s) leave nothing to measure after {} warm-up frame(s)", o.frames, o.warmup),
                       "more frames than --warmup", fmt::format("use --frames {} or lower --warmup", o.warmup + 16));
-    if (!(o.fps > 0.0) || o.fps > 1e6) throwBadInput("--fps", "frame rate must be positive", "e.g. 60");
+    checkFpsAndThreads(o.fps, o.threads);
     if (o.referenceSpp == 0 || o.referenceSpp > (1u << 20))
         throwBadInput("--reference-spp", "reference sample count out of range", "1 to 1048576");
     if (o.graphs.empty()) throwBadInput("--graph", "no graph to benchmark", "one or more --graph options");

@@ -1,5 +1,6 @@
 #include "CliUtil.h"
 
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -20,6 +21,15 @@ void parseSize(const std::string& text, const std::string& option, uint32_t& wid
     height = uint32_t(std::stoul(m[2]));
     if (width == 0 || height == 0 || width > 16384 || height > 16384)
         throwBadInput(option, "size '" + text + "' is out of range", "each side between 1 and 16384");
+}
+
+void checkFpsAndThreads(double fps, unsigned threads) {
+    if (!(fps >= 1e-3 && fps <= 1e6))
+        throwBadInput("--fps", fmt::format("frame rate {} is out of range", fps), "0.001 to 1000000 frames a second",
+                      "e.g. 60");
+    if (threads > kMaxThreads)
+        throwBadInput("--threads", fmt::format("{} worker threads are too many", threads),
+                      fmt::format("at most {} (0: one per core)", kMaxThreads), "leave it out to use every core");
 }
 
 std::set<uint64_t> parseFrameList(const std::string& text, const std::string& option) {

@@ -14,6 +14,10 @@ namespace loom::cli {
 
 /// "1280x720" -> width, height. Throws loom::Error naming the option.
 void parseSize(const std::string& text, const std::string& option, uint32_t& width, uint32_t& height);
+/// The options every command that runs frames shares: the animation clock's frame rate (0.001 to 10^6 frames a
+/// second) and the worker threads (at most kMaxThreads; 0: all cores). Throws loom::Error naming the option.
+inline constexpr unsigned kMaxThreads = 1024;
+void checkFpsAndThreads(double fps, unsigned threads);
 /// "3,10-12" -> {3, 10, 11, 12}. Throws loom::Error naming the option.
 std::set<uint64_t> parseFrameList(const std::string& text, const std::string& option);
 /// The registry every command uses (default folders + LOOM_PLUGIN_PATH).

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -17,13 +18,16 @@ namespace loom::cli {
 
 namespace {
 
+constexpr uint64_t kMaxMontageWidth = 65536;
+
 void runMontage(const std::vector<std::string>& inputs, const std::string& output, uint32_t gap) {
     if (inputs.size() < 2) throwBadInput("loom image montage", "fewer than two input images", "two or more images");
-    checkOutputFile(output, "--out");
+    if (gap > 1024) throwBadInput("--gap", fmt::format("a gap of {} pixels is too wide", gap), "0 to 1024 pixels");
+    checkOutputFile(output, "--out", std::vector<std::filesystem::path>(inputs.begin(), inputs.end()));
     std::vector<Texture> images;
     for (const std::string& path : inputs) images.push_back(readImage(path));
     const uint32_t height = images.front().height();
-    uint32_t width = 0;
+    uint64_t width = 0;
     for (size_t i = 0; i < images.size(); ++i) {
         if (images[i].height() != height)
             throwBadInput(inputs[i],
@@ -31,7 +35,10 @@ void runMontage(const std::vector<std::string>& inputs, const std::string& outpu
                           "images of equal height", "render them at the same --size");
         width += images[i].width() + (i ? gap : 0);
     }
-    Texture out(width, height, Format::RGBA8Srgb);
+    if (width > kMaxMontageWidth)
+        throwBadInput("loom image montage", fmt::format("the montage would be {} pixels wide", width),
+                      fmt::format("at most {} pixels side by side", kMaxMontageWidth), "montage fewer images");
+    Texture out(uint32_t(width), height, Format::RGBA8Srgb);
     uint32_t x0 = 0;
     for (const Texture& image : images) {
         for (uint32_t y = 0; y < height; ++y)

@@ -25,6 +25,8 @@ struct CheckOptions {
 void runCheck(const CheckOptions& o) {
     uint32_t width, height;
     parseSize(o.size, "--size", width, height);
+    if (!o.dot.empty() && o.dot != "-")
+        checkOutputFile(o.dot, "--dot", {o.graph});  // a folder is bad input, not a failed rename
     PluginRegistry registry = makeRegistry();
     RenderGraph graph(loadGraph(o.graph), registry);
     CompileOptions copts;
@@ -36,7 +38,6 @@ void runCheck(const CheckOptions& o) {
         if (o.dot == "-") {
             std::cout << graph.planDot();
         } else {
-            checkOutputFile(o.dot, "--dot");  // a folder is bad input, not a failed rename
             writeFileAtomic(o.dot, graph.planDot());
             std::cout << "Graphviz written to " << o.dot << "\n";
         }
@@ -130,6 +131,7 @@ void addPassesCommand(CLI::App& app) {
         if (markdown->empty()) {
             std::cout << passReference(registry, false);
         } else {
+            checkOutputFile(*markdown, "--markdown");
             writeFileAtomic(*markdown, passReference(registry, true));
             std::cout << "Pass reference written to " << *markdown << "\n";
         }

@@ -54,12 +54,26 @@ void progress(uint64_t done, uint64_t total, double msPerFrame) {
 void runRender(const RenderOptions& o) {
     uint32_t width, height;
     parseSize(o.size, "--size", width, height);
-    if (o.frames == 0) throwBadInput("--frames", "frame count is 0", "at least 1 frame");
-    if (!(o.fps > 0.0) || o.fps > 1e6) throwBadInput("--fps", "frame rate must be positive", "e.g. 60");
+    if (o.frames == 0 || o.frames > 1000000)
+        throwBadInput("--frames", fmt::format("frame count {} is out of range", o.frames), "1 to 1000000 frames");
+    if (o.startFrame > 1000000000)
+        throwBadInput("--start-frame", fmt::format("first frame {} is out of range", o.startFrame),
+                      "0 to 1000000000");
+    checkFpsAndThreads(o.fps, o.threads);
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
     ensureWritableDir(o.out, "--out");
-    if (!o.statsFile.empty()) checkOutputFile(o.statsFile, "--stats");  // before the frames, not after them
+    if (!o.statsFile.empty()) {  // before the frames, not after them
+        checkOutputFile(o.statsFile, "--stats", {o.graph, o.scene.scene, o.scene.env});
+        // Not one of the images the frames write into --out.
+        const std::filesystem::path stats(o.statsFile);
+        const std::filesystem::path folder = stats.has_parent_path() ? stats.parent_path() : ".";
+        std::error_code ec;
+        if ((stats.extension() == ".png" || stats.extension() == ".exr") &&
+            std::filesystem::equivalent(folder, o.out, ec))
+            throwBadInput("--stats", "the statistics would take the place of a rendered image in " + o.out,
+                          "a .json file", "name it stats.json", o.statsFile);
+    }
 
     ThreadLimit threadLimit(o.threads);
     PluginRegistry registry = makeRegistry();

@@ -1,7 +1,10 @@
 #include "SceneSetup.h"
 
 #include <cmath>
-#include <regex>
+#include <cstdlib>
+#include <filesystem>
+#include <sstream>
+#include <algorithm>
 
 #include <spdlog/spdlog.h>
 
@@ -58,12 +61,26 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
     scene->camera.jitterPattern = jitter;
     scene->camera.jitterSampleCount = o.jitterCount;
     if (!o.env.empty()) {
-        static const std::regex rgb(R"(\s*([0-9.eE+-]+)\s*,\s*([0-9.eE+-]+)\s*,\s*([0-9.eE+-]+)\s*)");
-        std::smatch m;
-        if (std::regex_match(o.env, m, rgb)) {
-            glm::vec3 c(std::stof(m[1]), std::stof(m[2]), std::stof(m[3]));
-            if (!std::isfinite(c.x + c.y + c.z) || glm::any(glm::lessThan(c, glm::vec3(0.f))))
-                throwBadInput("--env", "environment colour must be finite and non-negative", "R,G,B, e.g. 0.1,0.1,0.1");
+        std::error_code ec;
+        if (o.env.find(',') != std::string::npos && !std::filesystem::exists(o.env, ec)) {
+            // A colour R,G,B: three numbers, each finite, non-negative and within what a float holds comfortably.
+            glm::vec3 c(0.f);
+            std::istringstream in(o.env);
+            std::string part;
+            int n = 0;
+            bool ok = true;
+            while (std::getline(in, part, ',')) {
+                char* end = nullptr;
+                const double v = std::strtod(part.c_str(), &end);
+                ok = ok && n < 3 && end != part.c_str() && std::all_of(static_cast<const char*>(end), part.c_str() + part.size(), [](char ch) { return std::isspace(static_cast<unsigned char>(ch)) != 0; }) &&
+                     v >= 0.0 && v <= 1e9;
+                if (n < 3) c[n] = float(v);
+                ++n;
+            }
+            if (!ok || n != 3)
+                throwBadInput("--env", "'" + printable(o.env) + "' is neither a colour nor an existing file",
+                              "R,G,B (three numbers from 0 to 1e9, e.g. 0.1,0.1,0.1) or an .hdr or .exr file",
+                              "check the path, or give three numbers");
             scene->environment = Environment{};
             scene->environment.color = c;
         } else {

@@ -331,6 +331,7 @@ private:
 #endif  // LOOM_HAVE_VIEWER
 
 void runView(const ViewOptions& o) {
+    checkFpsAndThreads(o.fps, o.threads);  // before the thread limit takes effect
     ThreadLimit threadLimit(o.threads);
     ViewSession session(o);
     const auto finished = [&] { return o.frames > 0 && session.frame() >= o.frames; };

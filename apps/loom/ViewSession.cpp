@@ -11,6 +11,7 @@
 #include "CliUtil.h"
 #include "Display.h"
 #include "loom/Error.h"
+#include "loom/InputFile.h"
 #include "loom/ImageIO.h"
 
 namespace loom::cli {
@@ -57,8 +58,7 @@ void checkExposure(float ev, const std::string& where) {
 }  // namespace
 
 std::vector<ScriptCommand> parseViewScript(const std::string& path) {
-    std::ifstream in(path);
-    if (!in) throwBadInput(path, "cannot read the script", "a readable text file", "check the --script path");
+    std::istringstream in(readInputFile(path, "script", "a text file of lines 'FRAME VERB [ARG]'", uint64_t(16) << 20));
     std::vector<ScriptCommand> commands;
     std::string text;
     int line = 0;
@@ -112,7 +112,10 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
 ViewSession::ViewSession(const ViewOptions& options)
     : mOptions(options), mRegistry(makeRegistry()), mExposure(options.exposure) {
     parseSize(options.size, "--size", mWidth, mHeight);
-    if (!(options.fps > 0.0) || options.fps > 1e6) throwBadInput("--fps", "frame rate must be positive", "e.g. 60");
+    checkFpsAndThreads(options.fps, options.threads);
+    if (options.frames > 1000000)
+        throwBadInput("--frames", fmt::format("frame count {} is out of range", options.frames),
+                      "0 to 1000000 frames (0: until the window closes)");
     checkExposure(options.exposure, "--exposure");
     if (!options.script.empty()) mScript = parseViewScript(options.script);
     if (isVideo(options.record))

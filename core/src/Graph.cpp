@@ -1,6 +1,7 @@
 #include "loom/Graph.h"
 
 #include <algorithm>
+#include <cctype>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -9,6 +10,7 @@
 
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
+#include "loom/InputFile.h"
 
 namespace loom {
 
@@ -78,7 +80,10 @@ const json& require(const json& obj, const std::string& key, json::value_t type,
 
 }  // namespace
 
+constexpr size_t kMaxPassNameLength = 64;
+
 GraphDesc parseGraph(const std::string& text, const std::string& file) {
+    checkJsonText(text, file);
     json root;
     try {
         root = json::parse(text);
@@ -114,9 +119,20 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
         PassDesc d;
         d.name = require(p, "name", json::value_t::string, "a string", where, file).get<std::string>();
         d.type = require(p, "type", json::value_t::string, "a string", where, file).get<std::string>();
-        if (d.name.empty() || d.name.find_first_of(".@ ") != std::string::npos)
-            throwBadInput(where + "/name", "pass name '" + d.name + "' is not allowed",
-                          "a non-empty name without '.', '@' or spaces", {}, file);
+        // Names become parts of file names (Pass.field.0001.exr) and of "Pass.field" references.
+        const bool allowed = !d.name.empty() && d.name.size() <= kMaxPassNameLength &&
+                             std::none_of(d.name.begin(), d.name.end(), [](char c) {
+                                 return static_cast<unsigned char>(c) < 0x20 || c == 0x7F ||
+                                        std::string_view(".@ /\\:*?\"<>|").find(c) != std::string_view::npos;
+                             });
+        if (!allowed)
+            throwBadInput(where + "/name",
+                          "pass name '" + printable(d.name.substr(0, kMaxPassNameLength)) +
+                              (d.name.size() > kMaxPassNameLength ? "...'" : "'") + " is not allowed",
+                          fmt::format("1 to {} bytes without spaces, control characters or any of . @ / \\ : * ? "
+                                      "\" < > |",
+                                      kMaxPassNameLength),
+                          "e.g. \"SVGF\" or \"GBuffer_2\"", file);
         if (!names.insert(d.name).second)
             throwBadInput(where + "/name", "duplicate pass name '" + d.name + "'", "unique pass names",
                           "rename one of the passes", file);
@@ -143,7 +159,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
             const std::string where = fmt::format("/edges/{}", i);
             const json& e = edges[i];
             if (!e.is_array() || e.size() != 2 || !e[0].is_string() || !e[1].is_string())
-                throwBadInput(where, "an edge must be a pair of strings, got " + e.dump(),
+                throwBadInput(where, "an edge must be a pair of strings, got " + jsonExcerpt(e),
                               "[\"Source.output\", \"Destination.input\"]", {}, file);
             EdgeDesc ed;
             ed.src = parseChannelRef(e[0].get<std::string>(), where + "/0", file);
@@ -173,13 +189,7 @@ GraphDesc loadGraph(const std::filesystem::path& path) {
     if (!std::filesystem::exists(path, ec))
         throwBadInput({}, "graph file not found", "an existing .json graph file",
                       "check the path; the shipped graphs are in graphs/", path.string());
-    if (std::filesystem::is_directory(path, ec))
-        throwBadInput({}, "is a folder, not a graph file", "a .json graph file", {}, path.string());
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throwBadInput({}, "cannot read the graph file", "a readable file", "check its permissions", path.string());
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return parseGraph(ss.str(), path.string());
+    return parseGraph(readInputFile(path, "graph file", "a .json graph file", uint64_t(16) << 20), path.string());
 }
 
 json graphToJson(const GraphDesc& g) {

@@ -426,12 +426,17 @@ std::string readFileBytes(const fs::path& path) {
     return bytes;
 }
 
-void checkOutputFile(const fs::path& path, const std::string& where) {
+void checkOutputFile(const fs::path& path, const std::string& where, const std::vector<fs::path>& inputs) {
+    if (path.empty()) throwBadInput(where, "the output path is empty", "a file name");
     checkOutputFolder(path, where);
     std::error_code ec;
-    if (fs::is_directory(path, ec))
+    if (fs::is_directory(path, ec) || path.filename().empty())
         throwBadInput(where, "the output path is a folder", "a file name", "name a file inside the folder",
                       path.string());
+    for (const fs::path& input : inputs)
+        if (!input.empty() && fs::equivalent(path, input, ec))
+            throwBadInput(where, "the output would overwrite the input " + input.string(), "a file name of its own",
+                          "choose another output path", path.string());
 }
 
 void writeFileAtomic(const fs::path& path, const std::string& bytes) {

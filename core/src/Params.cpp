@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 
 #include "loom/Error.h"
+#include "loom/InputFile.h"
 
 namespace loom {
 
@@ -130,13 +131,13 @@ std::string rangeText(const ParamDecl& d) {
 void checkNumber(const ParamDecl& d, const json& v, const std::string& where, bool integer) {
     if (!v.is_number() || (integer && !v.is_number_integer())) {
         throwBadInput(where, "parameter '" + d.name + "' has the wrong type: got " + std::string(v.type_name()) +
-                                 " " + v.dump(),
+                                 " " + jsonExcerpt(v),
                       integer ? "an integer" : "a number");
     }
     double x = v.get<double>();
     if (!std::isfinite(x)) throwBadInput(where, "parameter '" + d.name + "' is not finite", "a finite number");
     if ((d.min && x < *d.min) || (d.max && x > *d.max)) {
-        throwBadInput(where, fmt::format("parameter '{}' is out of range: {}", d.name, v.dump()), rangeText(d),
+        throwBadInput(where, fmt::format("parameter '{}' is out of range: {}", d.name, jsonExcerpt(v)), rangeText(d),
                       "the documented range is in docs/PASSES.md (`loom passes`)");
     }
     if (integer && (x < double(INT32_MIN) || x > double(INT32_MAX)))
@@ -157,18 +158,18 @@ void ParamList::set(const std::string& name, const json& value, const std::strin
     switch (d->type) {
         case ParamType::Bool:
             if (!value.is_boolean())
-                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + value.dump(),
+                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + jsonExcerpt(value),
                               "true or false");
             break;
         case ParamType::Int: checkNumber(*d, value, where, true); break;
         case ParamType::Float: checkNumber(*d, value, where, false); break;
         case ParamType::String:
             if (!value.is_string())
-                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + value.dump(), "a string");
+                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + jsonExcerpt(value), "a string");
             break;
         case ParamType::Enum: {
             if (!value.is_string())
-                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + value.dump(),
+                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + jsonExcerpt(value),
                               "one of: " + join(d->enumValues));
             const auto s = value.get<std::string>();
             if (std::find(d->enumValues.begin(), d->enumValues.end(), s) == d->enumValues.end())
@@ -180,7 +181,7 @@ void ParamList::set(const std::string& name, const json& value, const std::strin
         case ParamType::Vec4: {
             size_t n = d->type == ParamType::Vec3 ? 3 : 4;
             if (!value.is_array() || value.size() != n)
-                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + value.dump(),
+                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + jsonExcerpt(value),
                               fmt::format("an array of {} numbers", n));
             for (const auto& c : value) checkNumber(*d, c, where, false);
             break;
@@ -211,6 +212,9 @@ json ParamList::toJson(bool onlyNonDefault) const {
 }
 
 json parseParamValue(const std::string& text) {
+    // Nesting is checked (what parses is copied and printed recursively); a number beyond a double does not parse
+    // and is taken as the string it is, which the parameter's type check then reports.
+    checkJsonText(text, "the value '" + printable(text.substr(0, 40)) + "'", false);
     json v = json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (v.is_discarded()) return json(text);
     return v;

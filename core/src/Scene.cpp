@@ -145,21 +145,48 @@ int cameraNode(const std::vector<Node>& nodes, int cam) {
 }
 
 /// A camera's pose without the node's scale: cameras are rigid by convention
-/// (view = inverse(world) must not distort). A node scaled to 0 on some axis
-/// has no orientation left: the camera then keeps the identity's axes, and a
-/// position that is not finite becomes the origin, so its rays stay valid.
+/// (view = inverse(world) must not distort). The axes are normalised; when
+/// they are then not (nearly) orthonormal (shear, axes scaled to 0 or parallel,
+/// a non-finite entry) they are rebuilt from the first two by Gram-Schmidt, and
+/// failing that are the identity's. The bottom row is always (0, 0, 0, 1) (a
+/// projective row would make the view singular), and a position that is not
+/// finite becomes the origin, so the camera's rays and its view stay valid.
 glm::mat4 rigid(const glm::mat4& m) {
-    glm::mat4 r = m;
-    for (int c = 0; c < 3; ++c) {
-        const float len = glm::length(glm::vec3(m[c]));
-        if (!(len > 0.f) || !std::isfinite(len)) {
-            r = glm::mat4(1.f);
-            r[3] = m[3];
-            break;
+    const auto finite = [](const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+    // v / |v|; where a square overflows or underflows, scaled by its largest component first; NaN for a zero or
+    // non-finite v.
+    const auto unit = [](glm::vec3 v) {
+        const float length = glm::length(v);
+        if (length > 0.f && std::isfinite(length)) return v / length;
+        const float largest = std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
+        if (!(largest > 0.f) || !std::isfinite(largest)) return glm::vec3(std::numeric_limits<float>::quiet_NaN());
+        v /= largest;
+        return v / glm::length(v);
+    };
+    glm::vec3 axis[3] = {unit(glm::vec3(m[0])), unit(glm::vec3(m[1])), unit(glm::vec3(m[2]))};
+    const float tolerance = 1e-3f;
+    bool orthonormal = finite(axis[0]) && finite(axis[1]) && finite(axis[2]);
+    for (int a = 0; a < 3 && orthonormal; ++a)
+        orthonormal = std::fabs(glm::dot(axis[a], axis[(a + 1) % 3])) < tolerance;
+    if (orthonormal)
+        orthonormal = std::fabs(std::fabs(glm::determinant(glm::mat3(axis[0], axis[1], axis[2]))) - 1.f) < tolerance;
+    if (!orthonormal) {
+        // Gram-Schmidt on the first two axes when they are far enough from parallel; else the identity's axes.
+        const glm::vec3 x = axis[0], y = axis[1];
+        const glm::vec3 rest = y - glm::dot(y, x) * x;
+        if (finite(x) && finite(y) && glm::length(rest) > tolerance) {
+            axis[1] = unit(rest);
+            axis[2] = glm::cross(x, axis[1]);
+        } else {
+            axis[0] = glm::vec3(1.f, 0.f, 0.f);
+            axis[1] = glm::vec3(0.f, 1.f, 0.f);
+            axis[2] = glm::vec3(0.f, 0.f, 1.f);
         }
-        r[c] = glm::vec4(glm::vec3(m[c]) / len, 0.f);
     }
-    if (!std::isfinite(r[3][0]) || !std::isfinite(r[3][1]) || !std::isfinite(r[3][2])) r[3] = glm::vec4(0, 0, 0, 1);
+    glm::mat4 r(1.f);
+    for (int c = 0; c < 3; ++c) r[c] = glm::vec4(axis[c], 0.f);
+    const glm::vec3 t(m[3]);
+    if (finite(t)) r[3] = glm::vec4(t, 1.f);
     return r;
 }
 

@@ -19,6 +19,7 @@
 #include <type_traits>
 
 #include "loom/Error.h"
+#include "loom/InputFile.h"
 #include "loom/ImageIO.h"
 #include "loom/Scene.h"
 
@@ -141,6 +142,34 @@ std::string cleanTinyMessage(const std::string& msg) {
 int64_t intOr(const nlohmann::json& o, const char* key, int64_t fallback) {
     if (!o.is_object() || !o.contains(key) || !o[key].is_number_integer()) return fallback;
     return o[key].get<int64_t>();
+}
+
+/// The largest scene file and the largest buffer or image file a scene may reference.
+constexpr uint64_t kMaxSceneFileBytes = uint64_t(4) << 30;
+
+/// tinygltf's test for a referenced file, without opening it (opening a pipe blocks until a writer comes).
+bool referencedFileExists(const std::string& path, void*) {
+    std::error_code ec;
+    return fs::exists(path, ec);
+}
+
+/// tinygltf's reading of the files a scene references (buffers, images): a folder, a pipe or a device is refused
+/// with a message instead of being read (a folder's size reads as huge; a pipe may never end).
+bool readReferencedFile(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+    std::error_code ec;
+    const fs::file_status status = fs::status(path, ec);
+    const auto refuse = [&](const std::string& why) {
+        if (err) *err += "File " + why + ": " + path + "\n";
+        return false;
+    };
+    if (!fs::exists(status)) return refuse("not found");
+    if (!fs::is_regular_file(status)) return refuse("is not a regular file");
+    const uintmax_t size = fs::file_size(path, ec);
+    if (ec || size > kMaxSceneFileBytes) return refuse("is too large or cannot be read");
+    std::ifstream in(path, std::ios::binary);
+    out->resize(size_t(size));
+    if (!in || !in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size))) return refuse("cannot be read");
+    return true;
 }
 
 /// tinygltf stops at the first problem with a terse message. Re-reads the
@@ -1234,14 +1263,36 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     auto scene = std::make_shared<Scene>();
     scene->file = file;
 
+    // Read once, and the JSON checked before tinygltf, which recurses into nested values (extras, extensions).
+    const std::string bytes = readInputFile(file, "scene file", "a .gltf or .glb file", kMaxSceneFileBytes);
+    if (!binary) {
+        checkJsonText(bytes, name);
+    } else if (bytes.size() >= 20) {
+        uint32_t length, type;
+        std::memcpy(&length, bytes.data() + 12, 4);
+        std::memcpy(&type, bytes.data() + 16, 4);
+        if (type == 0x4E4F534Au && length <= bytes.size() - 20)
+            checkJsonText(std::string_view(bytes).substr(20, length), name);
+    }
+
     tinygltf::Model model;
     ImageLoadContext images;
     images.model = &model;
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(&decodeImage, &images);
+    loader.SetFsCallbacks({&referencedFileExists, &tinygltf::ExpandFilePath, &readReferencedFile,
+                           &tinygltf::WriteWholeFile, nullptr});
     std::string err, warn;
-    const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, name)
-                           : loader.LoadASCIIFromFile(&model, &err, &warn, name);
+    const std::string baseDir = file.parent_path().string();
+    bool ok = false;
+    try {
+        ok = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn,
+                                                  reinterpret_cast<const unsigned char*>(bytes.data()),
+                                                  unsigned(bytes.size()), baseDir)
+                    : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), unsigned(bytes.size()), baseDir);
+    } catch (const std::exception& e) {
+        err = e.what();  // diagnosed below with the rest
+    }
     // tinygltf's warnings are about images, which are reported again per material that uses them.
     if (!warn.empty()) spdlog::debug("{}: tinygltf: {}", name, cleanTinyMessage(warn));
     if (!ok) failLoad(file, binary, err.empty() ? warn : err);

@@ -1,6 +1,7 @@
 // The loom command line: render (outputs, dumps, frame numbering, stats), check, passes, and the exit code and
 // message of each kind of bad input. Runs the real binary in a fresh folder per test.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -343,6 +344,94 @@ TEST_F(Cli, ImageMontageOfUnequalHeightsIsBadInput) {
     EXPECT_CONTAINS(r.output, "equal height");
     EXPECT_FALSE(fs::exists(mDir / "side.png"));
     EXPECT_EQ(loom("image montage a.png missing.png -o side.png").code, 2);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// hostile inputs: files that are not files, JSON nested to exhaust a stack, counts and paths out of range
+
+TEST_F(Cli, AGraphOrScriptThatIsAPipeADeviceOrTooDeepIsBadInput) {
+    // A pipe would block for ever and /dev/zero never ends: both are refused before any reading.
+    ASSERT_EQ(::mkfifo(path("pipe.json").c_str(), 0600), 0);
+    for (const std::string file : {"pipe.json", "/dev/zero"}) {
+        RunResult r = loom("check " + file);
+        EXPECT_EQ(r.code, 2) << r.output;
+        EXPECT_CONTAINS(r.output, "not a regular file");
+        r = loom("view --headless --graph " + quoted(kTestPattern) + " --size 16x16 --frames 2 --script " + file);
+        EXPECT_EQ(r.code, 2) << r.output;
+        EXPECT_CONTAINS(r.output, "not a regular file");
+    }
+    // 100,000 nested arrays as a parameter's value: copying or printing it would recurse that deep.
+    const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+    expectBadInput(render("", patchedGraph("\"frequency\": 10.0", "\"frequency\": " + deep)),
+                   {"graph.json", "line 5", "nested more than 200 deep"});
+    expectBadInput(render("--set Pattern.frequency=" + std::string(300, '[') + std::string(300, ']')),
+                   {"nested more than 200 deep"});
+    // A shallow one is reported with the value cut short, not printed whole.
+    const RunResult r = render("", patchedGraph("\"frequency\": 10.0", "\"frequency\": " + std::string(150, '[') +
+                                                                          std::string(150, ']')));
+    expectBadInput(r, {"frequency", "wrong type", "[[[..."});
+    EXPECT_LT(r.output.size(), 1000u) << r.output;
+    // A number beyond a double: where it is, not the parser's bare exception.
+    expectBadInput(render("", patchedGraph("\"frequency\": 10.0", "\"frequency\": 1e400")),
+                   {"graph.json", "line 5", "1e400 is too large"});
+}
+
+TEST_F(Cli, CountsThreadsAndRatesOutOfRangeAreBadInput) {
+    expectBadInput(render("--frames -1"), {"--frames", "out of range"});
+    expectBadInput(render("--frames 2000000"), {"--frames", "out of range"});
+    expectBadInput(render("--start-frame 99999999999"), {"--start-frame", "out of range"});
+    expectBadInput(render("--threads 4294967295"), {"--threads", "too many"});
+    expectBadInput(render("--fps 1e-45"), {"--fps", "out of range"});
+    expectBadInput(render("--fps 1e38"), {"--fps", "out of range"});
+    const RunResult r = loom("view --headless --graph " + quoted(kTestPattern) +
+                             " --size 16x16 --frames 2 --threads 100000");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "--threads");
+}
+
+TEST_F(Cli, OutputsNeverOverwriteInputs) {
+    const std::string graph = patchedGraph("\"frequency\": 10.0", "\"frequency\": 10.0");
+    const std::string graphText = readText("graph.json");
+    expectBadInput(render("--stats graph.json", graph), {"--stats", "would overwrite the input"});
+    RunResult r = loom("check graph.json --dot graph.json");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "would overwrite the input");
+    EXPECT_EQ(readText("graph.json"), graphText);
+    // Statistics named like a rendered image in the output folder would take its place.
+    fs::create_directories(path("out"));
+    expectBadInput(render("--stats out/Display.dst.0000.png"), {"--stats", "rendered image"});
+
+    writeImage(mDir / "a.png", Texture(4, 4, Format::RGBA8Unorm));
+    writeImage(mDir / "b.png", Texture(4, 4, Format::RGBA8Unorm));
+    const std::string a = readText("a.png");
+    r = loom("image montage a.png b.png -o a.png");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "would overwrite the input");
+    EXPECT_EQ(readText("a.png"), a);
+    r = loom("image montage a.png b.png -o ''");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "empty");
+    r = loom("image montage a.png b.png --gap 4294967295 -o m.png");
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "--gap");
+    EXPECT_FALSE(fs::exists(path("m.png")));
+    r = loom("passes --markdown " + quoted(mDir.string()));
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_CONTAINS(r.output, "is a folder");
+    expectNoTemporaries();
+}
+
+TEST_F(Cli, AnEnvironmentColourIsThreeNonNegativeNumbers) {
+    const std::string gbuffer = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/GBufferRT.json");
+    const std::string scene = quoted(loom::test::dataScene("cornell_box.gltf"));
+    for (const std::string env : {"1e39,0,0", "nan,0,0", "1,2", ",,", "-1,0,0", "0.5,0.5,0.5,0.5", "1,x,2"}) {
+        const RunResult r = loom("render --graph " + gbuffer + " --scene " + scene + " --size 16x16 -q --out out --env '" +
+                                 env + "'");
+        expectBadInput(r, {"--env", "neither a colour nor an existing file"});
+    }
+    EXPECT_EQ(loom("render --graph " + gbuffer + " --scene " + scene + " --size 16x16 -q --out out --env ' 0.1, 0.2 ,0.3'")
+                  .code,
+              0);
 }
 
 TEST_F(Cli, ACameraPathOnAnAnimatedCameraIsIgnoredWithAWarning) {

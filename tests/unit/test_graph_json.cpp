@@ -438,11 +438,18 @@ TEST(GraphJsonErrors, DuplicatePassName) {
 }
 
 TEST(GraphJsonErrors, PassNameNotAllowed) {
-    for (const char* bad : {"A.B", "A@B", "A B", ""}) {
+    // Names become parts of file names and of "Pass.field" references: at most 64 bytes, no control characters,
+    // spaces or characters that file names or references give a meaning (UTF-8 letters are fine: RoundTrip*).
+    for (const std::string& bad : std::vector<std::string>{"A.B", "A@B", "A B", "", "a/b", "a\\b", "a\nb", "a:b",
+                                                            std::string("a\0b", 3), std::string(65, 'x')}) {
         json g = minimalGraph();
         g["passes"][0]["name"] = bad;
         expectGraphError(g.dump(), "/passes/0/name", "is not allowed");
     }
+    json g = minimalGraph();
+    g["passes"][0]["name"] = std::string(64, 'x');
+    g["outputs"][0] = std::string(64, 'x') + ".dst";
+    EXPECT_NO_THROW(parseGraph(g.dump()));
 }
 
 TEST(GraphJsonErrors, EdgeNotAPair) {

@@ -2,6 +2,7 @@
 // animation sampling, hierarchy and motion, ray tracing, camera paths,
 // environment maps and the `loom scene info` command.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <stb/stb_image_write.h>
 #include <unistd.h>
 
@@ -821,12 +822,18 @@ TEST_F(SceneFiles, InstancesWithASingularTransformAreHiddenUntilTheyRecover) {
 // finite position, so every primary ray is finite.
 TEST_F(SceneFiles, CameraOnADegenerateNodeKeepsAUsablePose) {
     // The last: a parent scaled by 1e30 moves the camera's 1e30 translation to infinity.
+    // The matrices: all zeros, a projective bottom row, parallel axes (no orientation left), a shear.
     for (const json& extra :
-         {json{{"scale", {0, 0, 0}}}, json{{"scale", {1, 0, 1}}}, json{{"translation", {1e30, 0, 0}}}}) {
+         {json{{"scale", {0, 0, 0}}}, json{{"scale", {1, 0, 1}}}, json{{"translation", {1e30, 0, 0}}},
+          json{{"matrix", std::vector<float>(16, 0.f)}},
+          json{{"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 1, 0, 1, 3.9, 0}}},
+          json{{"matrix", {1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 0, 0, 3, 1}}},
+          json{{"matrix", {1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0, 3, 1}}}}) {
         const bool far = extra.contains("translation");
         Gltf g = triangleScene();
         g.j["cameras"] = json::array({{{"type", "perspective"}, {"perspective", {{"yfov", 0.8}, {"znear", 0.1}}}}});
-        json camera = {{"name", "Cam"}, {"camera", 0}, {"translation", {0, 0, 3}}};
+        json camera = {{"name", "Cam"}, {"camera", 0}};
+        if (!extra.contains("matrix")) camera["translation"] = {0, 0, 3};
         camera.update(extra);
         g.j["nodes"].push_back(camera);
         if (far) g.j["nodes"].push_back({{"name", "Huge"}, {"scale", {1e30, 1e30, 1e30}}, {"children", {1}}});
@@ -838,6 +845,40 @@ TEST_F(SceneFiles, CameraOnADegenerateNodeKeepsAUsablePose) {
         for (int c = 0; c < 4; ++c)
             for (int r = 0; r < 4; ++r) ASSERT_TRUE(std::isfinite(w[c][r])) << c << "," << r;
         for (int c = 0; c < 3; ++c) EXPECT_NEAR(glm::length(glm::vec3(w[c])), 1.f, 1e-5f) << c;
+        // A rotation and a translation: the view (its inverse) exists and is finite.
+        EXPECT_NEAR(std::fabs(glm::determinant(glm::mat3(w))), 1.f, 1e-4f);
+        EXPECT_EQ(glm::vec4(w[0][3], w[1][3], w[2][3], w[3][3]), glm::vec4(0.f, 0.f, 0.f, 1.f));
+        const glm::mat4 view = s->camera.view();
+        for (int c = 0; c < 4; ++c)
+            for (int r = 0; r < 4; ++r) ASSERT_TRUE(std::isfinite(view[c][r])) << c << "," << r;
+    }
+}
+
+TEST_F(SceneFiles, JsonTooDeepOrNumbersBeyondDoubleAreBadInputBeforeParsing) {
+    // tinygltf recurses into nested values (extras): 100,000 levels would exhaust the stack.
+    Gltf g = triangleScene();
+    g.j["asset"]["extras"] = "DEEP";
+    std::string text = g.text();
+    text.replace(text.find("\"DEEP\""), 6, std::string(100000, '[') + std::string(100000, ']'));
+    std::string msg = loadError(write("deep.gltf", text));
+    EXPECT_NE(msg.find("nested more than"), std::string::npos) << msg.substr(0, 300);
+    g = triangleScene();
+    g.j["asset"]["extras"] = "BIG";
+    text = g.text();
+    text.replace(text.find("\"BIG\""), 5, "1e400");
+    msg = loadError(write("big.gltf", text));
+    EXPECT_NE(msg.find("1e400 is too large"), std::string::npos) << msg;
+}
+
+TEST_F(SceneFiles, AReferencedFileThatIsAFolderOrAPipeIsBadInput) {
+    Gltf g = triangleScene();
+    json d = g.j;
+    fs::create_directories(mDir / "folder.bin");
+    ASSERT_EQ(::mkfifo((mDir / "pipe.bin").c_str(), 0600), 0);
+    for (const char* uri : {".", "folder.bin", "pipe.bin"}) {
+        d["buffers"] = json::array({{{"byteLength", g.bin.size()}, {"uri", uri}}});
+        const std::string msg = loadError(write("t.gltf", d.dump()));
+        EXPECT_NE(msg.find("buffers[0]"), std::string::npos) << uri << ": " << msg;
     }
 }
 

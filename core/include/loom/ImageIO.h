@@ -4,6 +4,7 @@
 // folder, then a rename, so a reader never sees a half-written image.
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "loom/Texture.h"
 
@@ -34,8 +35,9 @@ Texture readRadianceHdr(const std::filesystem::path& path);
 /// Checks that a file can be written at `path`: its folder exists and is writable (as writeImage and
 /// writeFileAtomic check first), and the path is not a folder. Throws loom::Error (BadInput, at `where`: the
 /// option that named the file) otherwise, so a command can check its output files before it spends time on their
-/// contents.
-void checkOutputFile(const std::filesystem::path& path, const std::string& where = {});
+/// contents. An empty path, and a path that is one of `inputs` (the command's input files), are bad input too.
+void checkOutputFile(const std::filesystem::path& path, const std::string& where = {},
+                     const std::vector<std::filesystem::path>& inputs = {});
 
 /// The whole file's bytes. Throws loom::Error (Runtime) when reading fails.
 std::string readFileBytes(const std::filesystem::path& path);
