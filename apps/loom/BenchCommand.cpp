@@ -482,22 +482,29 @@ std::vector<Variant> variants(const BenchOptions& o, const std::vector<Sweep>& s
     return out;
 }
 
-void runPlot(const BenchOptions& o, const fs::path& out) {
+std::string shellQuoted(const std::string& s) {
+    std::string q = "'";
+    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+}
+
+/// The plot script, checked with the interpreter before the benchmark runs, not after it.
+std::string checkPlotter(const BenchOptions& o) {
     const std::string script = o.plotScript.empty() ? sourcePath("tools/plot_bench.py") : o.plotScript;
     std::error_code ec;
     if (!fs::exists(script, ec))
         throwBadInput("--plot", "the plot script '" + script + "' does not exist", "tools/plot_bench.py",
                       "pass --plot-script PATH");
-    auto quoted = [](const std::string& s) {
-        std::string q = "'";
-        for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-        return q + "'";
-    };
-    const std::string check = quoted(o.python) + " -c 'import matplotlib' >/dev/null 2>&1";
+    const std::string check = shellQuoted(o.python) + " -c 'import matplotlib' >/dev/null 2>&1";
     if (std::system(check.c_str()) != 0)
         throwBadInput("--plot", "plotting needs " + o.python + " with matplotlib, which is not installed",
                       "python3 and python3-matplotlib (Debian)",
-                      "apt-get install python3-matplotlib (results.csv, results.json and summary.md are written)");
+                      "apt-get install python3-matplotlib, or leave out --plot");
+    return script;
+}
+
+void runPlot(const BenchOptions& o, const std::string& script, const fs::path& out) {
+    const auto quoted = shellQuoted;
     const std::string cmd = quoted(o.python) + " " + quoted(script) + " " + quoted((out / "results.json").string()) +
                             " " + quoted((out / "plot.png").string());
     const int status = std::system(cmd.c_str());
@@ -537,6 +544,7 @@ void runBench(BenchOptions o) {
     const std::vector<Variant> vars = variants(o, sweeps);
     ensureWritableDir(o.out, "--out");
     const fs::path outDir(o.out);
+    const std::string plotScript = o.plot ? checkPlotter(o) : std::string();
 
     ThreadLimit threadLimit(o.threads);
     PluginRegistry registry = makeRegistry();
@@ -630,7 +638,7 @@ void runBench(BenchOptions o) {
     bench::writeResults(outDir, info, results, curve);
     std::cout << readBytes(outDir / "summary.md");
     std::cout << fmt::format("Wrote results.csv, results.json and summary.md to {}\n", o.out);
-    if (o.plot) runPlot(o, outDir);
+    if (o.plot) runPlot(o, plotScript, outDir);
 }
 
 }  // namespace

@@ -14,9 +14,9 @@ namespace loom::cli {
 
 void parseSize(const std::string& text, const std::string& option, uint32_t& width, uint32_t& height) {
     std::smatch m;
-    static const std::regex re(R"((\d{1,5})[xX](\d{1,5}))");
+    static const std::regex re(R"((\d{1,9})[xX](\d{1,9}))");  // digits enough to say "out of range"
     if (!std::regex_match(text, m, re))
-        throwBadInput(option, "'" + text + "' is not a size", "WIDTHxHEIGHT, e.g. 1280x720");
+        throwBadInput(option, "'" + printable(text) + "' is not a size", "WIDTHxHEIGHT, e.g. 1280x720");
     width = uint32_t(std::stoul(m[1]));
     height = uint32_t(std::stoul(m[2]));
     if (width == 0 || height == 0 || width > 16384 || height > 16384)

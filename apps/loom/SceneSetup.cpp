@@ -26,7 +26,14 @@ void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
 }
 
 std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
-    if (o.scene.empty()) return nullptr;
+    if (o.scene.empty()) {
+        const SceneOptions defaults;
+        if (o.cameraPath != defaults.cameraPath || o.cameraSpeed != defaults.cameraSpeed ||
+            o.jitter != defaults.jitter || o.jitterCount != defaults.jitterCount || !o.env.empty())
+            spdlog::warn("--camera-path, --camera-speed, --jitter, --jitter-count and --env apply to a scene; "
+                         "without --scene they are ignored");
+        return nullptr;
+    }
     CameraPath path;
     if (o.cameraPath == "static")
         path.kind = CameraPathKind::Static;

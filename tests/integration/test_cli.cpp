@@ -383,10 +383,15 @@ TEST_F(Cli, CountsThreadsAndRatesOutOfRangeAreBadInput) {
     expectBadInput(render("--threads 4294967295"), {"--threads", "too many"});
     expectBadInput(render("--fps 1e-45"), {"--fps", "out of range"});
     expectBadInput(render("--fps 1e38"), {"--fps", "out of range"});
-    const RunResult r = loom("view --headless --graph " + quoted(kTestPattern) +
-                             " --size 16x16 --frames 2 --threads 100000");
+    RunResult r = loom("view --headless --graph " + quoted(kTestPattern) + " --size 16x16 --frames 2 --threads 100000");
     EXPECT_EQ(r.code, 2) << r.output;
     EXPECT_CONTAINS(r.output, "--threads");
+    expectBadInput(loom("render --graph " + quoted(kTestPattern) + " --size 100000x100000 --out out"),
+                   {"--size", "out of range"});
+    // Scene options without a scene have nothing to apply to: a warning, not silence.
+    r = render("--jitter halton -q");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "without --scene they are ignored");
 }
 
 TEST_F(Cli, OutputsNeverOverwriteInputs) {
