@@ -96,7 +96,11 @@ std::string sourcePath(const std::string& rel) {
     return std::string(LOOM_SOURCE_DIR) + "/" + rel;
 }
 
+/// The bytes of a regular file (what the cache keys hash); nothing for a pipe, a device or a folder, which are
+/// never read (a pipe may block for ever, a device never end); those inputs are refused where they are loaded.
 std::string readBytes(const fs::path& path) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) return {};
     std::ifstream in(path, std::ios::binary);
     std::stringstream s;
     s << in.rdbuf();
@@ -276,6 +280,7 @@ std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry,
                                 uint32_t width, uint32_t height, bench::BenchInfo& info) {
     const bool shared = !scene->hasMotion() && o.scene.jitter == "none";
     info.referenceShared = shared;
+    const GraphDesc desc = loadGraph(o.referenceGraph);  // checked before its bytes are hashed
     const std::string key = referenceKeyText(o, width, height, shared);
     const fs::path cacheRoot = o.cache.empty() ? defaultCacheDir() : fs::path(o.cache);
     const fs::path entry = cacheRoot / fmt::format("{}_{}x{}_{}spp_{:016x}", fs::path(o.scene.scene).stem().string(),
@@ -284,7 +289,6 @@ std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry,
     writeFileAtomic(entry / "key.txt", key);
     info.referenceCache = entry.string();
 
-    const GraphDesc desc = loadGraph(o.referenceGraph);
     std::string tracer, accumulate;
     uint32_t batchSpp = 1;
     for (const PassDesc& p : desc.passes) {
@@ -544,6 +548,14 @@ void runBench(BenchOptions o) {
     const std::vector<Variant> vars = variants(o, sweeps);
     ensureWritableDir(o.out, "--out");
     const fs::path outDir(o.out);
+    std::vector<std::string> inputs = {o.scene.scene, o.scene.env, o.referenceGraph, o.bruteForceGraph};
+    for (const std::string& g : o.graphs) inputs.push_back(resolveGraph(g, "--graph"));
+    checkInputsNotOverwritten(
+        o.out, inputs,
+        [](const std::string& name) {
+            return name == "results.csv" || name == "results.json" || name == "summary.md" || name == "plot.png";
+        },
+        "--out");
     const std::string plotScript = o.plot ? checkPlotter(o) : std::string();
 
     ThreadLimit threadLimit(o.threads);

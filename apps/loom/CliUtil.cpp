@@ -81,22 +81,44 @@ CameraPath parseCameraPath(const std::string& text, const std::string& option) {
     path.kind = m[1] == "orbit"   ? CameraPathKind::Orbit
                 : m[1] == "dolly" ? CameraPathKind::Dolly
                                   : CameraPathKind::Static;
-    auto number = [&](const std::string& s, const char* what) {
+    // Speeds as --camera-speed allows them; a dolly's amount is a fraction of the camera's distance.
+    auto number = [&](const std::string& s, const char* what, float limit) {
+        float v = 0.f;
         try {
             size_t used = 0;
-            const float v = std::stof(s, &used);
-            if (used == s.size() && std::isfinite(v)) return v;
+            v = std::stof(s, &used);
+            if (used != s.size()) v = NAN;
         } catch (const std::exception&) {
+            v = NAN;
         }
-        throwBadInput(option, std::string(what) + " '" + s + "' is not a number", "e.g. orbit:0.5 or dolly:1:0.25");
+        if (!std::isfinite(v))
+            throwBadInput(option, std::string(what) + " '" + s + "' is not a number", "e.g. orbit:0.5 or dolly:1:0.25");
+        if (std::fabs(v) > limit)
+            throwBadInput(option, std::string(what) + " '" + s + "' is out of range",
+                          fmt::format("a {} in [-{}, {}]", what, limit, limit));
+        return v;
     };
-    if (m[2].matched) path.speed = number(m[2], "speed");
+    if (m[2].matched) path.speed = number(m[2], "speed", 1000.f);
     if (m[3].matched) {
         if (path.kind != CameraPathKind::Dolly)
             throwBadInput(option, "only dolly takes an amount", "orbit[:SPEED] or dolly[:SPEED[:AMOUNT]]");
-        path.amount = number(m[3], "amount");
+        path.amount = number(m[3], "amount", 100.f);
     }
     return path;
+}
+
+void checkInputsNotOverwritten(const std::string& outDir, const std::vector<std::string>& inputs,
+                               const std::function<bool(const std::string& name)>& written, const std::string& option) {
+    for (const std::string& input : inputs) {
+        if (input.empty()) continue;
+        const std::filesystem::path p(input);
+        std::error_code ec;
+        if (std::filesystem::equivalent(p.has_parent_path() ? p.parent_path() : ".", outDir, ec) &&
+            written(p.filename().string()))
+            throwBadInput(option, "the run would overwrite its input " + input + " in " + outDir,
+                          "an output folder where no input has the name of an output",
+                          "choose another output folder or move the input", input);
+    }
 }
 
 void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses) {

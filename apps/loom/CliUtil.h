@@ -2,6 +2,7 @@
 // Helpers shared by the loom subcommands.
 #include <CLI/CLI.hpp>
 #include <cstdint>
+#include <functional>
 #include <set>
 #include <string>
 #include <vector>
@@ -24,6 +25,10 @@ std::set<uint64_t> parseFrameList(const std::string& text, const std::string& op
 PluginRegistry makeRegistry();
 /// Fails with a clear error when `dir` cannot be created or written.
 void ensureWritableDir(const std::string& dir, const std::string& option);
+/// Bad input (at `option`) when one of `inputs` lies in the output folder `outDir` under a name the command writes
+/// there (`written` says which names): the run would overwrite what it reads.
+void checkInputsNotOverwritten(const std::string& outDir, const std::vector<std::string>& inputs,
+                               const std::function<bool(const std::string& name)>& written, const std::string& option);
 /// Applies --set assignments "Pass.param=value" to a graph (loom::Error for a malformed one or a bad value). With
 /// onlyKnownPasses, assignments to passes the graph does not have are skipped (one --set list for several graphs).
 void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses = false);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <regex>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -63,6 +64,10 @@ void runRender(const RenderOptions& o) {
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
     ensureWritableDir(o.out, "--out");
+    static const std::regex frameFile(R"([^.]+\.[^.]+\.[0-9]{4,}\.(png|exr))");  // frameFileName's names
+    checkInputsNotOverwritten(
+        o.out, {o.graph, o.scene.scene, o.scene.env},
+        [](const std::string& name) { return std::regex_match(name, frameFile); }, "--out");
     if (!o.statsFile.empty()) {  // before the frames, not after them
         checkOutputFile(o.statsFile, "--stats", {o.graph, o.scene.scene, o.scene.env});
         // Not one of the images the frames write into --out.

@@ -6,6 +6,7 @@
 #include <sstream>
 #include <algorithm>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include "loom/Error.h"
@@ -45,7 +46,8 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
         throwBadInput("--camera-path", "unknown camera path '" + o.cameraPath + "'", "static, orbit or dolly",
                       didYouMean(o.cameraPath, {"static", "orbit", "dolly"}, "paths"));
     if (!std::isfinite(o.cameraSpeed) || std::fabs(o.cameraSpeed) > 1000.f)
-        throwBadInput("--camera-speed", "camera speed must be a finite number", "a value in [-1000, 1000]");
+        throwBadInput("--camera-speed", fmt::format("camera speed {} is out of range", o.cameraSpeed),
+                      "a value in [-1000, 1000]");
     path.speed = o.cameraSpeed;
     JitterPattern jitter;
     if (o.jitter == "none")

@@ -57,7 +57,7 @@ void checkExposure(float ev, const std::string& where) {
 
 }  // namespace
 
-std::vector<ScriptCommand> parseViewScript(const std::string& path) {
+std::vector<ScriptCommand> parseViewScript(const std::string& path, const std::vector<std::filesystem::path>& inputs) {
     std::istringstream in(readInputFile(path, "script", "a text file of lines 'FRAME VERB [ARG]'", uint64_t(16) << 20));
     std::vector<ScriptCommand> commands;
     std::string text;
@@ -99,7 +99,7 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path) {
         if (c.verb == "turn") c.numbers = numbers(c.arg, 2, where, "turn YAW PITCH, in degrees");
         if (c.verb == "save" || c.verb == "shot") {
             // Before any frame renders: a path that cannot be written, and a save before the first frame.
-            checkOutputFile(c.arg, where);
+            checkOutputFile(c.arg, where, inputs);
             if (c.frame == 0)
                 throwBadInput(where, "nothing is rendered before frame 0", "a frame of 1 or later",
                               "commands run before their frame renders: 1 " + c.verb + " saves frame 0");
@@ -117,19 +117,22 @@ ViewSession::ViewSession(const ViewOptions& options)
         throwBadInput("--frames", fmt::format("frame count {} is out of range", options.frames),
                       "0 to 1000000 frames (0: until the window closes)");
     checkExposure(options.exposure, "--exposure");
-    if (!options.script.empty()) mScript = parseViewScript(options.script);
+    // What the run reads, which none of its outputs may replace.
+    const std::vector<std::filesystem::path> inputs = {options.graph, options.scene.scene, options.scene.env,
+                                                       options.script};
+    if (!options.script.empty()) mScript = parseViewScript(options.script, inputs);
     if (isVideo(options.record))
-        checkOutputFile(options.record, "--record");
+        checkOutputFile(options.record, "--record", inputs);
     else if (!options.record.empty())
         ensureWritableDir(options.record, "--record");
-    if (!options.screenshot.empty()) checkOutputFile(options.screenshot, "--screenshot");
+    if (!options.screenshot.empty()) checkOutputFile(options.screenshot, "--screenshot", inputs);
     if (options.headless && options.frames == 0)
         throwBadInput("--frames", "--headless needs a frame count", "--frames N with N > 0");
     if (!options.windowShot.empty()) {
         if (options.headless)
             throwBadInput("--window-shot", "a window shot needs the window",
                           "--screenshot for the displayed image, or --window-shot without --headless");
-        checkOutputFile(options.windowShot, "--window-shot");
+        checkOutputFile(options.windowShot, "--window-shot", inputs);
     }
     mScene = loadScene(options.scene);
     mGraph = std::make_unique<RenderGraph>(loadGraph(options.graph), mRegistry);

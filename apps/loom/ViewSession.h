@@ -47,7 +47,8 @@ struct ScriptCommand {
 /// Pass.param=value, exposure EV, reset, save PATH (the viewed field's own values), shot PATH (the displayed image),
 /// move X Y Z (ViewSession::moveCamera, in the scene's size), turn YAW PITCH (degrees).
 /// Throws loom::Error (BadInput) naming the file and line.
-std::vector<ScriptCommand> parseViewScript(const std::string& path);
+std::vector<ScriptCommand> parseViewScript(const std::string& path,
+                                           const std::vector<std::filesystem::path>& inputs = {});
 
 class ViewSession {
 public:

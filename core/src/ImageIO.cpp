@@ -69,10 +69,20 @@ void checkOutputFolder(const fs::path& path, const std::string& where = {}) {
     }
 }
 
+/// A file that exists but is not a regular one (a device, a pipe, a socket) is never replaced by an output.
+void checkNotSpecial(const fs::path& path, const std::string& where) {
+    std::error_code ec;
+    const fs::file_status status = fs::symlink_status(path, ec);
+    if (fs::exists(status) && !fs::is_regular_file(status) && !fs::is_directory(status) && !fs::is_symlink(status))
+        throwBadInput(where, "the output path is not a regular file (a device or a pipe)", "a file name",
+                      "choose another output path", path.string());
+}
+
 /// Runs `write` on a temporary file next to `path`, then renames it over `path`. On any failure the temporary
 /// file is removed and the error is rethrown as a loom::Error.
 void writeAtomically(const fs::path& path, const std::function<void(std::ofstream&, const std::string&)>& write) {
     checkOutputFolder(path);
+    checkNotSpecial(path, {});
     static std::atomic<uint64_t> counter{0};
     // A hidden sibling ".<name>.<pid>.<n>.partial": never mistaken for an output, never a glob match.
     std::string name = ".";  // appended piece by piece: GCC 12 warns falsely (-Wrestrict) on "." + string
@@ -433,6 +443,7 @@ void checkOutputFile(const fs::path& path, const std::string& where, const std::
     if (fs::is_directory(path, ec) || path.filename().empty())
         throwBadInput(where, "the output path is a folder", "a file name", "name a file inside the folder",
                       path.string());
+    checkNotSpecial(path, where);
     for (const fs::path& input : inputs)
         if (!input.empty() && fs::equivalent(path, input, ec))
             throwBadInput(where, "the output would overwrite the input " + input.string(), "a file name of its own",

@@ -2,6 +2,7 @@
 // results (finite, the brute-force error falling with spp, a denoiser below 1 spp), the reference cache (a second
 // run hits it and gives bit-identical metrics, also with another thread count), sweeps, and bad input (exit 2).
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cmath>
@@ -299,6 +300,13 @@ TEST_F(BenchCli, BadInputExitsWithCode2AndAMessage) {
     expectBadInput({{"--frames", "0"}}, {"frame count is 0"});
     expectBadInput({{"--warmup", "8"}}, {"nothing to measure"});
     expectBadInput({{"--scene", "missing.gltf"}}, {"scene 'missing.gltf' does not exist"});
+    // A reference graph that is a pipe is refused, not read for the cache key (which would block for ever).
+    ASSERT_EQ(::mkfifo((mDir / "pipe.json").c_str(), 0600), 0);
+    expectBadInput({{"--reference-graph", "pipe.json"}}, {"not a regular file"});
+    // Outputs never replace inputs: a graph named like a result in the output folder.
+    fs::create_directories(mDir / "out");
+    fs::copy_file(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/PathTracerATrous.json", mDir / "out" / "results.json");
+    expectBadInput({{"--graph", "out/results.json"}}, {"would overwrite its input"});
 }
 
 }  // namespace

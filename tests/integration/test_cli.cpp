@@ -388,6 +388,9 @@ TEST_F(Cli, CountsThreadsAndRatesOutOfRangeAreBadInput) {
     EXPECT_CONTAINS(r.output, "--threads");
     expectBadInput(loom("render --graph " + quoted(kTestPattern) + " --size 100000x100000 --out out"),
                    {"--size", "out of range"});
+    expectBadInput(loom("scene info " + quoted(loom::test::dataScene("cornell_box.gltf")) +
+                        " --camera-path dolly:1:1e38 --time 0.25"),
+                   {"--camera-path", "amount '1e38' is out of range"});
     // Scene options without a scene have nothing to apply to: a warning, not silence.
     r = render("--jitter halton -q");
     EXPECT_EQ(r.code, 0) << r.output;
@@ -397,10 +400,14 @@ TEST_F(Cli, CountsThreadsAndRatesOutOfRangeAreBadInput) {
 TEST_F(Cli, OutputsNeverOverwriteInputs) {
     const std::string graph = patchedGraph("\"frequency\": 10.0", "\"frequency\": 10.0");
     const std::string graphText = readText("graph.json");
+    // Each run must end with exit code 2 and a message containing `part`.
+    const auto refused = [&](const std::string& args, const std::string& part) {
+        const RunResult r = loom(args);
+        EXPECT_EQ(r.code, 2) << args << "\n" << r.output;
+        EXPECT_CONTAINS(r.output, part);
+    };
     expectBadInput(render("--stats graph.json", graph), {"--stats", "would overwrite the input"});
-    RunResult r = loom("check graph.json --dot graph.json");
-    EXPECT_EQ(r.code, 2) << r.output;
-    EXPECT_CONTAINS(r.output, "would overwrite the input");
+    refused("check graph.json --dot graph.json", "would overwrite the input");
     EXPECT_EQ(readText("graph.json"), graphText);
     // Statistics named like a rendered image in the output folder would take its place.
     fs::create_directories(path("out"));
@@ -409,20 +416,26 @@ TEST_F(Cli, OutputsNeverOverwriteInputs) {
     writeImage(mDir / "a.png", Texture(4, 4, Format::RGBA8Unorm));
     writeImage(mDir / "b.png", Texture(4, 4, Format::RGBA8Unorm));
     const std::string a = readText("a.png");
-    r = loom("image montage a.png b.png -o a.png");
-    EXPECT_EQ(r.code, 2) << r.output;
-    EXPECT_CONTAINS(r.output, "would overwrite the input");
+    refused("image montage a.png b.png -o a.png", "would overwrite the input");
     EXPECT_EQ(readText("a.png"), a);
-    r = loom("image montage a.png b.png -o ''");
-    EXPECT_EQ(r.code, 2) << r.output;
-    EXPECT_CONTAINS(r.output, "empty");
-    r = loom("image montage a.png b.png --gap 4294967295 -o m.png");
-    EXPECT_EQ(r.code, 2) << r.output;
-    EXPECT_CONTAINS(r.output, "--gap");
+    refused("image montage a.png b.png -o ''", "empty");
+    refused("image montage a.png b.png --gap 4294967295 -o m.png", "--gap");
     EXPECT_FALSE(fs::exists(path("m.png")));
-    r = loom("passes --markdown " + quoted(mDir.string()));
-    EXPECT_EQ(r.code, 2) << r.output;
-    EXPECT_CONTAINS(r.output, "is a folder");
+    refused("passes --markdown " + quoted(mDir.string()), "is a folder");
+    // A pipe (or a device) is not replaced by a regular file.
+    ASSERT_EQ(::mkfifo(path("pipe").c_str(), 0600), 0);
+    refused("passes --markdown pipe", "not a regular file");
+    EXPECT_TRUE(fs::is_fifo(path("pipe")));
+    // Frames written into --out would replace a graph named like one of them.
+    fs::copy_file(path("graph.json"), path("out/Display.dst.0000.png"));
+    refused("render --graph out/Display.dst.0000.png --size 16x16 --out out -q", "would overwrite its input");
+    EXPECT_EQ(readText("out/Display.dst.0000.png"), graphText);
+    // The viewer's screenshot, and a script's save of the script itself.
+    refused("view --headless --graph graph.json --size 16x16 --frames 2 --screenshot graph.json", "would overwrite the input");
+    writeText("script.txt", "1 save script.txt\n");
+    refused("view --headless --graph graph.json --size 16x16 --frames 2 --script script.txt", "would overwrite the input");
+    EXPECT_EQ(readText("graph.json"), graphText);
+    EXPECT_EQ(readText("script.txt"), "1 save script.txt\n");
     expectNoTemporaries();
 }
 
