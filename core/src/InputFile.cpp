@@ -14,23 +14,29 @@ namespace loom {
 
 namespace fs = std::filesystem;
 
+std::string inputFileProblem(const fs::path& path, uint64_t maxBytes) {
+    std::error_code ec;
+    const fs::file_status status = fs::status(path, ec);
+    if (!fs::exists(status)) return "does not exist";
+    if (fs::is_directory(status)) return "is a folder";
+    if (!fs::is_regular_file(status)) return "is not a regular file (a pipe or a device)";
+    const uintmax_t size = fs::file_size(path, ec);
+    if (ec) return "cannot be read";
+    if (size > maxBytes) return fmt::format("is larger than {} MiB", maxBytes >> 20);
+    return {};
+}
+
 std::string readInputFile(const fs::path& path, const std::string& what, const std::string& expected,
                           uint64_t maxBytes) {
     const std::string name = path.string();
+    if (const std::string problem = inputFileProblem(path, maxBytes); !problem.empty())
+        throwBadInput({}, "the " + what + " " + problem, expected,
+                      problem == "does not exist" ? "check the path" : "give a file saved on disk", name);
     std::error_code ec;
-    const fs::file_status status = fs::status(path, ec);
-    if (!fs::exists(status)) throwBadInput({}, what + " not found", expected, "check the path", name);
-    if (fs::is_directory(status)) throwBadInput({}, "is a folder, not a " + what, expected, {}, name);
-    if (!fs::is_regular_file(status))
-        throwBadInput({}, "not a regular file (a pipe or a device)", expected, "give a file saved on disk", name);
     const uintmax_t size = fs::file_size(path, ec);
-    if (ec) throwBadInput({}, "cannot read the " + what, "a readable file", "check its permissions", name);
-    if (size > maxBytes)
-        throwBadInput({}, fmt::format("the {} is {} MiB, more than a {} can be", what, size >> 20, what),
-                      fmt::format("at most {} MiB", maxBytes >> 20), "check that this is the right file", name);
     std::ifstream in(path, std::ios::binary);
     std::string bytes(size_t(size), '\0');
-    if (!in || !in.read(bytes.data(), std::streamsize(size)))
+    if (ec || !in || !in.read(bytes.data(), std::streamsize(size)))
         throwBadInput({}, "cannot read the " + what, "a readable file", "check its permissions", name);
     return bytes;
 }

@@ -156,19 +156,18 @@ bool referencedFileExists(const std::string& path, void*) {
 /// tinygltf's reading of the files a scene references (buffers, images): a folder, a pipe or a device is refused
 /// with a message instead of being read (a folder's size reads as huge; a pipe may never end).
 bool readReferencedFile(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
-    std::error_code ec;
-    const fs::file_status status = fs::status(path, ec);
-    const auto refuse = [&](const std::string& why) {
-        if (err) *err += "File " + why + ": " + path + "\n";
+    if (const std::string problem = inputFileProblem(path, kMaxSceneFileBytes); !problem.empty()) {
+        if (err) *err += "File " + problem + ": " + path + "\n";
         return false;
-    };
-    if (!fs::exists(status)) return refuse("not found");
-    if (!fs::is_regular_file(status)) return refuse("is not a regular file");
+    }
+    std::error_code ec;
     const uintmax_t size = fs::file_size(path, ec);
-    if (ec || size > kMaxSceneFileBytes) return refuse("is too large or cannot be read");
     std::ifstream in(path, std::ios::binary);
     out->resize(size_t(size));
-    if (!in || !in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size))) return refuse("cannot be read");
+    if (ec || !in || !in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size))) {
+        if (err) *err += "File cannot be read: " + path + "\n";
+        return false;
+    }
     return true;
 }
 

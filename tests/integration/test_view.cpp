@@ -300,7 +300,7 @@ TEST_F(View, BadScriptsAndFieldsAreBadInput) {
         write(name + ".txt", text);
         expectBad("--script " + name + ".txt", parts);
     }
-    expectBad("--script missing.txt", {"missing.txt", "script not found"});
+    expectBad("--script missing.txt", {"missing.txt", "the script does not exist"});
     expectBad("--field Blur.dts", {"no field 'Blur.dts'", "did you mean 'Blur.dst'"});
     expectBad("--exposure 1e9", {"--exposure", "out of range"});
     expectBad("--window-shot w.png", {"--window-shot", "needs the window"});

@@ -13,6 +13,10 @@ namespace loom {
 /// The deepest nesting of arrays and objects Loom's JSON inputs may have (graphs and glTF need fewer than 20).
 inline constexpr int kMaxJsonDepth = 200;
 
+/// Why the file cannot be read as an input, or empty when it can: "does not exist", "is a folder", "is not a regular
+/// file (a pipe or a device)", "is larger than N MiB".
+std::string inputFileProblem(const std::filesystem::path& path, uint64_t maxBytes);
+
 /// The whole of the file as bytes. Bad input (exit 2) when it does not exist, is a folder or not a regular file, is
 /// larger than maxBytes or cannot be read; `what` names it in the message ("graph file"), `expected` says what it
 /// should be.
