@@ -6,10 +6,10 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
-#include <regex>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <regex>
 
 #include "CliUtil.h"
 #include "SceneSetup.h"
@@ -58,8 +58,7 @@ void runRender(const RenderOptions& o) {
     if (o.frames == 0 || o.frames > 1000000)
         throwBadInput("--frames", fmt::format("frame count {} is out of range", o.frames), "1 to 1000000 frames");
     if (o.startFrame > 1000000000)
-        throwBadInput("--start-frame", fmt::format("first frame {} is out of range", o.startFrame),
-                      "0 to 1000000000");
+        throwBadInput("--start-frame", fmt::format("first frame {} is out of range", o.startFrame), "0 to 1000000000");
     checkFpsAndThreads(o.fps, o.threads);
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");

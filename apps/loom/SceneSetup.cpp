@@ -1,13 +1,13 @@
 #include "SceneSetup.h"
 
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <sstream>
-#include <algorithm>
-
-#include <fmt/format.h>
-#include <spdlog/spdlog.h>
 
 #include "loom/Error.h"
 
@@ -31,8 +31,9 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
         const SceneOptions defaults;
         if (o.cameraPath != defaults.cameraPath || o.cameraSpeed != defaults.cameraSpeed ||
             o.jitter != defaults.jitter || o.jitterCount != defaults.jitterCount || !o.env.empty())
-            spdlog::warn("--camera-path, --camera-speed, --jitter, --jitter-count and --env apply to a scene; "
-                         "without --scene they are ignored");
+            spdlog::warn(
+                "--camera-path, --camera-speed, --jitter, --jitter-count and --env apply to a scene; "
+                "without --scene they are ignored");
         return nullptr;
     }
     CameraPath path;
@@ -77,11 +78,15 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
             std::istringstream in(o.env);
             std::string part;
             int n = 0;
-            bool ok = true;
+            // Plain decimal numbers only (no hexadecimal floats, no infinity), exactly two commas.
+            bool ok = std::count(o.env.begin(), o.env.end(), ',') == 2 &&
+                      o.env.find_first_not_of("0123456789.eE+- ,") == std::string::npos;
             while (std::getline(in, part, ',')) {
                 char* end = nullptr;
                 const double v = std::strtod(part.c_str(), &end);
-                ok = ok && n < 3 && end != part.c_str() && std::all_of(static_cast<const char*>(end), part.c_str() + part.size(), [](char ch) { return std::isspace(static_cast<unsigned char>(ch)) != 0; }) &&
+                ok = ok && n < 3 && end != part.c_str() &&
+                     std::all_of(static_cast<const char*>(end), part.c_str() + part.size(),
+                                 [](char ch) { return std::isspace(static_cast<unsigned char>(ch)) != 0; }) &&
                      v >= 0.0 && v <= 1e9;
                 if (n < 3) c[n] = float(v);
                 ++n;

@@ -393,7 +393,8 @@ void addViewCommand(CLI::App& app) {
     cmd->add_option("--record", o->record,
                     "every frame's displayed image: FILE.y4m (a video) or a folder of numbered PNGs");
     cmd->add_option("--screenshot", o->screenshot, "write the displayed image as PNG at the end");
-    cmd->add_option("--window-shot", o->windowShot, "write the whole window as PNG after the last frame or when it closes");
+    cmd->add_option("--window-shot", o->windowShot,
+                    "write the whole window as PNG after the last frame or when it closes");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
     cmd->add_flag("--open-passes", o->openPasses, "start with every pass's section of the panel open");

@@ -11,8 +11,8 @@
 #include "CliUtil.h"
 #include "Display.h"
 #include "loom/Error.h"
-#include "loom/InputFile.h"
 #include "loom/ImageIO.h"
+#include "loom/InputFile.h"
 
 namespace loom::cli {
 

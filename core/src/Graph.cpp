@@ -1,12 +1,12 @@
 #include "loom/Graph.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cctype>
 #include <fstream>
 #include <set>
 #include <sstream>
-
-#include <fmt/format.h>
 
 #include "loom/Error.h"
 #include "loom/ImageIO.h"

@@ -1,10 +1,10 @@
 #include "loom/Params.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
 #include <limits>
 #include <nlohmann/json.hpp>
-
-#include <fmt/format.h>
 
 #include "loom/Error.h"
 #include "loom/InputFile.h"
@@ -130,9 +130,10 @@ std::string rangeText(const ParamDecl& d) {
 
 void checkNumber(const ParamDecl& d, const json& v, const std::string& where, bool integer) {
     if (!v.is_number() || (integer && !v.is_number_integer())) {
-        throwBadInput(where, "parameter '" + d.name + "' has the wrong type: got " + std::string(v.type_name()) +
-                                 " " + jsonExcerpt(v),
-                      integer ? "an integer" : "a number");
+        throwBadInput(
+            where,
+            "parameter '" + d.name + "' has the wrong type: got " + std::string(v.type_name()) + " " + jsonExcerpt(v),
+            integer ? "an integer" : "a number");
     }
     double x = v.get<double>();
     if (!std::isfinite(x)) throwBadInput(where, "parameter '" + d.name + "' is not finite", "a finite number");
@@ -165,7 +166,8 @@ void ParamList::set(const std::string& name, const json& value, const std::strin
         case ParamType::Float: checkNumber(*d, value, where, false); break;
         case ParamType::String:
             if (!value.is_string())
-                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + jsonExcerpt(value), "a string");
+                throwBadInput(where, "parameter '" + name + "' has the wrong type: got " + jsonExcerpt(value),
+                              "a string");
             break;
         case ParamType::Enum: {
             if (!value.is_string())

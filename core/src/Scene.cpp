@@ -152,7 +152,9 @@ int cameraNode(const std::vector<Node>& nodes, int cam) {
 /// projective row would make the view singular), and a position that is not
 /// finite becomes the origin, so the camera's rays and its view stay valid.
 glm::mat4 rigid(const glm::mat4& m) {
-    const auto finite = [](const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+    const auto finite = [](const glm::vec3& v) {
+        return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+    };
     // v / |v|; where a square overflows or underflows, scaled by its largest component first; NaN for a zero or
     // non-finite v.
     const auto unit = [](glm::vec3 v) {

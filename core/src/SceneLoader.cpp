@@ -19,8 +19,8 @@
 #include <type_traits>
 
 #include "loom/Error.h"
-#include "loom/InputFile.h"
 #include "loom/ImageIO.h"
+#include "loom/InputFile.h"
 #include "loom/Scene.h"
 
 namespace loom {
@@ -1279,8 +1279,8 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     images.model = &model;
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(&decodeImage, &images);
-    loader.SetFsCallbacks({&referencedFileExists, &tinygltf::ExpandFilePath, &readReferencedFile,
-                           &tinygltf::WriteWholeFile, nullptr});
+    loader.SetFsCallbacks(
+        {&referencedFileExists, &tinygltf::ExpandFilePath, &readReferencedFile, &tinygltf::WriteWholeFile, nullptr});
     std::string err, warn;
     const std::string baseDir = file.parent_path().string();
     bool ok = false;

@@ -367,8 +367,8 @@ TEST_F(Cli, AGraphOrScriptThatIsAPipeADeviceOrTooDeepIsBadInput) {
     expectBadInput(render("--set Pattern.frequency=" + std::string(300, '[') + std::string(300, ']')),
                    {"nested more than 200 deep"});
     // A shallow one is reported with the value cut short, not printed whole.
-    const RunResult r = render("", patchedGraph("\"frequency\": 10.0", "\"frequency\": " + std::string(150, '[') +
-                                                                          std::string(150, ']')));
+    const RunResult r = render(
+        "", patchedGraph("\"frequency\": 10.0", "\"frequency\": " + std::string(150, '[') + std::string(150, ']')));
     expectBadInput(r, {"frequency", "wrong type", "[[[..."});
     EXPECT_LT(r.output.size(), 1000u) << r.output;
     // A number beyond a double: where it is, not the parser's bare exception.
@@ -431,9 +431,11 @@ TEST_F(Cli, OutputsNeverOverwriteInputs) {
     refused("render --graph out/Display.dst.0000.png --size 16x16 --out out -q", "would overwrite its input");
     EXPECT_EQ(readText("out/Display.dst.0000.png"), graphText);
     // The viewer's screenshot, and a script's save of the script itself.
-    refused("view --headless --graph graph.json --size 16x16 --frames 2 --screenshot graph.json", "would overwrite the input");
+    refused("view --headless --graph graph.json --size 16x16 --frames 2 --screenshot graph.json",
+            "would overwrite the input");
     writeText("script.txt", "1 save script.txt\n");
-    refused("view --headless --graph graph.json --size 16x16 --frames 2 --script script.txt", "would overwrite the input");
+    refused("view --headless --graph graph.json --size 16x16 --frames 2 --script script.txt",
+            "would overwrite the input");
     EXPECT_EQ(readText("graph.json"), graphText);
     EXPECT_EQ(readText("script.txt"), "1 save script.txt\n");
     expectNoTemporaries();
@@ -442,14 +444,16 @@ TEST_F(Cli, OutputsNeverOverwriteInputs) {
 TEST_F(Cli, AnEnvironmentColourIsThreeNonNegativeNumbers) {
     const std::string gbuffer = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/GBufferRT.json");
     const std::string scene = quoted(loom::test::dataScene("cornell_box.gltf"));
-    for (const std::string env : {"1e39,0,0", "nan,0,0", "1,2", ",,", "-1,0,0", "0.5,0.5,0.5,0.5", "1,x,2"}) {
-        const RunResult r = loom("render --graph " + gbuffer + " --scene " + scene + " --size 16x16 -q --out out --env '" +
-                                 env + "'");
+    for (const std::string env :
+         {"1e39,0,0", "nan,0,0", "1,2", ",,", "-1,0,0", "0.5,0.5,0.5,0.5", "1,x,2", "1,2,3,", "0x1p3,0,0"}) {
+        const RunResult r =
+            loom("render --graph " + gbuffer + " --scene " + scene + " --size 16x16 -q --out out --env '" + env + "'");
         expectBadInput(r, {"--env", "neither a colour nor an existing file"});
     }
-    EXPECT_EQ(loom("render --graph " + gbuffer + " --scene " + scene + " --size 16x16 -q --out out --env ' 0.1, 0.2 ,0.3'")
-                  .code,
-              0);
+    EXPECT_EQ(
+        loom("render --graph " + gbuffer + " --scene " + scene + " --size 16x16 -q --out out --env ' 0.1, 0.2 ,0.3'")
+            .code,
+        0);
 }
 
 TEST_F(Cli, ACameraPathOnAnAnimatedCameraIsIgnoredWithAWarning) {

@@ -412,21 +412,20 @@ TEST_F(View, TheWindowZoomsAboutTheMousePansOnDragAndClosesOnEscape) {
                              " --size 64x64 --set Pattern.speed=0 --field Blur.dst ";
     auto r = loom("view --headless --frames 1 " + args + "--screenshot headless.png");
     ASSERT_EQ(r.code, 0) << r.output;
-    write("input.sh",
-          "set -u\n" + shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
-              "--window-shot whole.png > window.log 2>&1 &\n"
-              "pid=$!\n"
-              "for i in $(seq 100); do wid=$(xdotool search --name '^Loom - ' 2>/dev/null | head -1); "
-              "[ -n \"$wid\" ] && break; sleep 0.1; done\n"
-              "[ -n \"$wid\" ] || { kill $pid; exit 3; }\n"
-              "sleep 0.5\n"
-              "xdotool mousemove --window $wid 100 150; sleep 0.3\n"
-              "for i in 1 2 3; do xdotool click 4; sleep 0.1; done; sleep 0.3\n"
-              "xdotool keydown 1; sleep 0.2; xdotool keyup 1; sleep 0.3\n"
-              "xdotool mousedown 1; sleep 0.2; xdotool mousemove_relative 10 5; sleep 0.2\n"
-              "xdotool mousemove_relative 20 15; sleep 0.2; xdotool mouseup 1; sleep 0.3\n"
-              "xdotool keydown Escape; sleep 0.2; xdotool keyup Escape\n"
-              "wait $pid\n");
+    write("input.sh", "set -u\n" + shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
+                          "--window-shot whole.png > window.log 2>&1 &\n"
+                          "pid=$!\n"
+                          "for i in $(seq 100); do wid=$(xdotool search --name '^Loom - ' 2>/dev/null | head -1); "
+                          "[ -n \"$wid\" ] && break; sleep 0.1; done\n"
+                          "[ -n \"$wid\" ] || { kill $pid; exit 3; }\n"
+                          "sleep 0.5\n"
+                          "xdotool mousemove --window $wid 100 150; sleep 0.3\n"
+                          "for i in 1 2 3; do xdotool click 4; sleep 0.1; done; sleep 0.3\n"
+                          "xdotool keydown 1; sleep 0.2; xdotool keyup 1; sleep 0.3\n"
+                          "xdotool mousedown 1; sleep 0.2; xdotool mousemove_relative 10 5; sleep 0.2\n"
+                          "xdotool mousemove_relative 20 15; sleep 0.2; xdotool mouseup 1; sleep 0.3\n"
+                          "xdotool keydown Escape; sleep 0.2; xdotool keyup Escape\n"
+                          "wait $pid\n");
     const std::string cmd = "cd " + shellQuoted(mDir.string()) +
                             " && timeout 60 xvfb-run -a -s '-screen 0 1024x768x24' bash input.sh > input.log 2>&1";
     const int status = std::system(cmd.c_str());

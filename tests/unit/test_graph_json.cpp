@@ -441,7 +441,7 @@ TEST(GraphJsonErrors, PassNameNotAllowed) {
     // Names become parts of file names and of "Pass.field" references: at most 64 bytes, no control characters,
     // spaces or characters that file names or references give a meaning (UTF-8 letters are fine: RoundTrip*).
     for (const std::string& bad : std::vector<std::string>{"A.B", "A@B", "A B", "", "a/b", "a\\b", "a\nb", "a:b",
-                                                            std::string("a\0b", 3), std::string(65, 'x')}) {
+                                                           std::string("a\0b", 3), std::string(65, 'x')}) {
         json g = minimalGraph();
         g["passes"][0]["name"] = bad;
         expectGraphError(g.dump(), "/passes/0/name", "is not allowed");

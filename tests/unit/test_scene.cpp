@@ -2,8 +2,8 @@
 // animation sampling, hierarchy and motion, ray tracing, camera paths,
 // environment maps and the `loom scene info` command.
 #include <gtest/gtest.h>
-#include <sys/stat.h>
 #include <stb/stb_image_write.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <array>
@@ -823,12 +823,11 @@ TEST_F(SceneFiles, InstancesWithASingularTransformAreHiddenUntilTheyRecover) {
 TEST_F(SceneFiles, CameraOnADegenerateNodeKeepsAUsablePose) {
     // The last: a parent scaled by 1e30 moves the camera's 1e30 translation to infinity.
     // The matrices: all zeros, a projective bottom row, parallel axes (no orientation left), a shear.
-    for (const json& extra :
-         {json{{"scale", {0, 0, 0}}}, json{{"scale", {1, 0, 1}}}, json{{"translation", {1e30, 0, 0}}},
-          json{{"matrix", std::vector<float>(16, 0.f)}},
-          json{{"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 1, 0, 1, 3.9, 0}}},
-          json{{"matrix", {1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 0, 0, 3, 1}}},
-          json{{"matrix", {1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0, 3, 1}}}}) {
+    for (const json& extra : {json{{"scale", {0, 0, 0}}}, json{{"scale", {1, 0, 1}}},
+                              json{{"translation", {1e30, 0, 0}}}, json{{"matrix", std::vector<float>(16, 0.f)}},
+                              json{{"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 1, 0, 1, 3.9, 0}}},
+                              json{{"matrix", {1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 0, 0, 3, 1}}},
+                              json{{"matrix", {1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0, 3, 1}}}}) {
         const bool far = extra.contains("translation");
         Gltf g = triangleScene();
         g.j["cameras"] = json::array({{{"type", "perspective"}, {"perspective", {{"yfov", 0.8}, {"znear", 0.1}}}}});

@@ -1,7 +1,8 @@
 #pragma once
 // Reading the files a user hands to Loom (graphs, scenes, scripts) without trusting them: what is not a regular file
 // (a FIFO or a device, which may block or never end) or is larger than it can sensibly be, and JSON that the parser
-// takes but its consumers cannot (nesting deep enough to exhaust the stack, numbers beyond double range), are bad input.
+// takes but its consumers cannot (nesting deep enough to exhaust the stack, numbers beyond double range), are bad
+// input.
 #include <cstdint>
 #include <filesystem>
 #include <nlohmann/json.hpp>
