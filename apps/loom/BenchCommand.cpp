@@ -508,9 +508,9 @@ std::string checkPlotter(const BenchOptions& o) {
 }
 
 void runPlot(const BenchOptions& o, const std::string& script, const fs::path& out) {
-    const auto quoted = shellQuoted;
-    const std::string cmd = quoted(o.python) + " " + quoted(script) + " " + quoted((out / "results.json").string()) +
-                            " " + quoted((out / "plot.png").string());
+    const std::string cmd = shellQuoted(o.python) + " " + shellQuoted(script) + " " +
+                            shellQuoted((out / "results.json").string()) + " " +
+                            shellQuoted((out / "plot.png").string());
     const int status = std::system(cmd.c_str());
     if (status != 0)
         throw Error(
@@ -548,7 +548,7 @@ void runBench(BenchOptions o) {
     const std::vector<Variant> vars = variants(o, sweeps);
     ensureWritableDir(o.out, "--out");
     const fs::path outDir(o.out);
-    std::vector<std::string> inputs = {o.scene.scene, o.scene.env, o.referenceGraph, o.bruteForceGraph};
+    std::vector<fs::path> inputs = {o.scene.scene, o.scene.env, o.referenceGraph, o.bruteForceGraph};
     for (const std::string& g : o.graphs) inputs.push_back(resolveGraph(g, "--graph"));
     checkInputsNotOverwritten(
         o.out, inputs,

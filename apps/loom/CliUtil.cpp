@@ -23,6 +23,15 @@ void parseSize(const std::string& text, const std::string& option, uint32_t& wid
         throwBadInput(option, "size '" + text + "' is out of range", "each side between 1 and 16384");
 }
 
+std::optional<float> parseFiniteFloat(const std::string& text) {
+    char* end = nullptr;
+    const float v = std::strtof(text.c_str(), &end);
+    if (end == text.c_str() || !std::isfinite(v)) return std::nullopt;
+    while (*end == ' ' || *end == '\t') ++end;
+    if (*end != '\0') return std::nullopt;
+    return v;
+}
+
 void checkFpsAndThreads(double fps, unsigned threads) {
     if (!(fps >= 1e-3 && fps <= 1e6))
         throwBadInput("--fps", fmt::format("frame rate {} is out of range", fps), "0.001 to 1000000 frames a second",
@@ -83,20 +92,13 @@ CameraPath parseCameraPath(const std::string& text, const std::string& option) {
                                   : CameraPathKind::Static;
     // Speeds as --camera-speed allows them; a dolly's amount is a fraction of the camera's distance.
     auto number = [&](const std::string& s, const char* what, float limit) {
-        float v = 0.f;
-        try {
-            size_t used = 0;
-            v = std::stof(s, &used);
-            if (used != s.size()) v = NAN;
-        } catch (const std::exception&) {
-            v = NAN;
-        }
-        if (!std::isfinite(v))
+        const std::optional<float> v = parseFiniteFloat(s);
+        if (!v)
             throwBadInput(option, std::string(what) + " '" + s + "' is not a number", "e.g. orbit:0.5 or dolly:1:0.25");
-        if (std::fabs(v) > limit)
+        if (std::fabs(*v) > limit)
             throwBadInput(option, std::string(what) + " '" + s + "' is out of range",
                           fmt::format("a {} in [-{}, {}]", what, limit, limit));
-        return v;
+        return *v;
     };
     if (m[2].matched) path.speed = number(m[2], "speed", 1000.f);
     if (m[3].matched) {
@@ -107,18 +109,20 @@ CameraPath parseCameraPath(const std::string& text, const std::string& option) {
     return path;
 }
 
-void checkInputsNotOverwritten(const std::string& outDir, const std::vector<std::string>& inputs,
+bool writtenInto(const std::filesystem::path& file, const std::string& outDir,
+                 const std::function<bool(const std::string& name)>& written) {
+    std::error_code ec;
+    return !file.empty() && written(file.filename().string()) &&
+           std::filesystem::equivalent(file.has_parent_path() ? file.parent_path() : ".", outDir, ec);
+}
+
+void checkInputsNotOverwritten(const std::string& outDir, const std::vector<std::filesystem::path>& inputs,
                                const std::function<bool(const std::string& name)>& written, const std::string& option) {
-    for (const std::string& input : inputs) {
-        if (input.empty()) continue;
-        const std::filesystem::path p(input);
-        std::error_code ec;
-        if (std::filesystem::equivalent(p.has_parent_path() ? p.parent_path() : ".", outDir, ec) &&
-            written(p.filename().string()))
-            throwBadInput(option, "the run would overwrite its input " + input + " in " + outDir,
+    for (const std::filesystem::path& input : inputs)
+        if (writtenInto(input, outDir, written))
+            throwBadInput(option, "the run would overwrite its input " + input.string() + " in " + outDir,
                           "an output folder where no input has the name of an output",
-                          "choose another output folder or move the input", input);
-    }
+                          "choose another output folder or move the input", input.string());
 }
 
 void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses) {

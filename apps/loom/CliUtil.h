@@ -2,7 +2,9 @@
 // Helpers shared by the loom subcommands.
 #include <CLI/CLI.hpp>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -19,6 +21,9 @@ void parseSize(const std::string& text, const std::string& option, uint32_t& wid
 /// second) and the worker threads (at most kMaxThreads; 0: all cores). Throws loom::Error naming the option.
 inline constexpr unsigned kMaxThreads = 1024;
 void checkFpsAndThreads(double fps, unsigned threads);
+/// The whole of `text` (spaces around it allowed) as a finite float, or nothing (not a number, trailing characters,
+/// beyond a float's range).
+std::optional<float> parseFiniteFloat(const std::string& text);
 /// "3,10-12" -> {3, 10, 11, 12}. Throws loom::Error naming the option.
 std::set<uint64_t> parseFrameList(const std::string& text, const std::string& option);
 /// The registry every command uses (default folders + LOOM_PLUGIN_PATH).
@@ -27,8 +32,11 @@ PluginRegistry makeRegistry();
 void ensureWritableDir(const std::string& dir, const std::string& option);
 /// Bad input (at `option`) when one of `inputs` lies in the output folder `outDir` under a name the command writes
 /// there (`written` says which names): the run would overwrite what it reads.
-void checkInputsNotOverwritten(const std::string& outDir, const std::vector<std::string>& inputs,
+void checkInputsNotOverwritten(const std::string& outDir, const std::vector<std::filesystem::path>& inputs,
                                const std::function<bool(const std::string& name)>& written, const std::string& option);
+/// Whether `file` lies in the folder `outDir` under a name `written` accepts.
+bool writtenInto(const std::filesystem::path& file, const std::string& outDir,
+                 const std::function<bool(const std::string& name)>& written);
 /// Applies --set assignments "Pass.param=value" to a graph (loom::Error for a malformed one or a bad value). With
 /// onlyKnownPasses, assignments to passes the graph does not have are skipped (one --set list for several graphs).
 void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses = false);

@@ -63,18 +63,14 @@ void runRender(const RenderOptions& o) {
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
     ensureWritableDir(o.out, "--out");
+    // Neither an input nor the statistics may have the name of an image the frames write into --out.
     static const std::regex frameFile(R"([^.]+\.[^.]+\.[0-9]{4,}\.(png|exr))");  // frameFileName's names
-    checkInputsNotOverwritten(
-        o.out, {o.graph, o.scene.scene, o.scene.env},
-        [](const std::string& name) { return std::regex_match(name, frameFile); }, "--out");
+    const auto isFrameFile = [](const std::string& name) { return std::regex_match(name, frameFile); };
+    const std::vector<std::filesystem::path> inputs = {o.graph, o.scene.scene, o.scene.env};
+    checkInputsNotOverwritten(o.out, inputs, isFrameFile, "--out");
     if (!o.statsFile.empty()) {  // before the frames, not after them
-        checkOutputFile(o.statsFile, "--stats", {o.graph, o.scene.scene, o.scene.env});
-        // Not one of the images the frames write into --out.
-        const std::filesystem::path stats(o.statsFile);
-        const std::filesystem::path folder = stats.has_parent_path() ? stats.parent_path() : ".";
-        std::error_code ec;
-        if ((stats.extension() == ".png" || stats.extension() == ".exr") &&
-            std::filesystem::equivalent(folder, o.out, ec))
+        checkOutputFile(o.statsFile, "--stats", inputs);
+        if (writtenInto(o.statsFile, o.out, isFrameFile))
             throwBadInput("--stats", "the statistics would take the place of a rendered image in " + o.out,
                           "a .json file", "name it stats.json", o.statsFile);
     }

@@ -5,10 +5,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <filesystem>
 #include <sstream>
 
+#include "CliUtil.h"
 #include "loom/Error.h"
 
 namespace loom::cli {
@@ -73,23 +73,18 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
     if (!o.env.empty()) {
         std::error_code ec;
         if (o.env.find(',') != std::string::npos && !std::filesystem::exists(o.env, ec)) {
-            // A colour R,G,B: three numbers, each finite, non-negative and within what a float holds comfortably.
+            // A colour R,G,B: exactly three plain decimal numbers (no hexadecimal floats, no infinity), each in
+            // [0, 1e9].
             glm::vec3 c(0.f);
+            bool ok = std::count(o.env.begin(), o.env.end(), ',') == 2 &&
+                      o.env.find_first_not_of("0123456789.eE+- ,") == std::string::npos;
             std::istringstream in(o.env);
             std::string part;
             int n = 0;
-            // Plain decimal numbers only (no hexadecimal floats, no infinity), exactly two commas.
-            bool ok = std::count(o.env.begin(), o.env.end(), ',') == 2 &&
-                      o.env.find_first_not_of("0123456789.eE+- ,") == std::string::npos;
-            while (std::getline(in, part, ',')) {
-                char* end = nullptr;
-                const double v = std::strtod(part.c_str(), &end);
-                ok = ok && n < 3 && end != part.c_str() &&
-                     std::all_of(static_cast<const char*>(end), part.c_str() + part.size(),
-                                 [](char ch) { return std::isspace(static_cast<unsigned char>(ch)) != 0; }) &&
-                     v >= 0.0 && v <= 1e9;
-                if (n < 3) c[n] = float(v);
-                ++n;
+            for (; ok && n < 3 && std::getline(in, part, ','); ++n) {
+                const std::optional<float> v = parseFiniteFloat(part);
+                ok = v && *v >= 0.f && *v <= 1e9f;
+                if (ok) c[n] = *v;
             }
             if (!ok || n != 3)
                 throwBadInput("--env", "'" + printable(o.env) + "' is neither a colour nor an existing file",

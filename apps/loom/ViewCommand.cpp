@@ -17,7 +17,6 @@
 #include "ViewSession.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
-#include "loom/Parallel.h"
 
 #ifdef LOOM_HAVE_VIEWER
 #define GLFW_INCLUDE_NONE
@@ -331,9 +330,7 @@ private:
 #endif  // LOOM_HAVE_VIEWER
 
 void runView(const ViewOptions& o) {
-    checkFpsAndThreads(o.fps, o.threads);  // before the thread limit takes effect
-    ThreadLimit threadLimit(o.threads);
-    ViewSession session(o);
+    ViewSession session(o);  // checks the options, then limits the worker threads
     const auto finished = [&] { return o.frames > 0 && session.frame() >= o.frames; };
     if (o.headless) {
         while (!finished()) session.step();

@@ -26,11 +26,9 @@ std::vector<float> numbers(const std::string& text, size_t count, const std::str
     std::vector<float> values;
     std::string word;
     while (in >> word) {
-        char* end = nullptr;
-        const float v = std::strtof(word.c_str(), &end);
-        if (end == word.c_str() || *end != '\0' || !std::isfinite(v))
-            throwBadInput(where, "'" + printable(word) + "' is not a number", form);
-        values.push_back(v);
+        const std::optional<float> v = parseFiniteFloat(word);
+        if (!v) throwBadInput(where, "'" + printable(word) + "' is not a number", form);
+        values.push_back(*v);
     }
     if (values.size() != count) throwBadInput(where, fmt::format("{} numbers, not {}", count, values.size()), form);
     return values;
@@ -113,6 +111,7 @@ ViewSession::ViewSession(const ViewOptions& options)
     : mOptions(options), mRegistry(makeRegistry()), mExposure(options.exposure) {
     parseSize(options.size, "--size", mWidth, mHeight);
     checkFpsAndThreads(options.fps, options.threads);
+    mThreadLimit.emplace(options.threads);  // before anything runs on the workers
     if (options.frames > 1000000)
         throwBadInput("--frames", fmt::format("frame count {} is out of range", options.frames),
                       "0 to 1000000 frames (0: until the window closes)");

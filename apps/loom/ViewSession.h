@@ -12,6 +12,7 @@
 
 #include "Display.h"
 #include "SceneSetup.h"
+#include "loom/Parallel.h"
 #include "loom/Plugin.h"
 #include "loom/RenderGraph.h"
 #include "loom/Texture.h"
@@ -108,6 +109,7 @@ private:
     void listFields();
 
     ViewOptions mOptions;
+    std::optional<ThreadLimit> mThreadLimit;  ///< --threads, in force once the options are checked
     uint32_t mWidth = 0, mHeight = 0;
     PluginRegistry mRegistry;
     std::shared_ptr<Scene> mScene;

@@ -22,7 +22,7 @@ const PassDesc* GraphDesc::findPass(const std::string& n) const {
     return nullptr;
 }
 
-void lineColumn(const std::string& text, size_t offset, size_t& line, size_t& column) {
+void lineColumn(std::string_view text, size_t offset, size_t& line, size_t& column) {
     line = 1;
     column = 1;
     for (size_t i = 0; i < offset && i < text.size(); ++i) {

@@ -1,14 +1,14 @@
 #include "loom/InputFile.h"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
-#include <cerrno>
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
 
 #include "loom/Error.h"
 #include "loom/Graph.h"
+#include "loom/ImageIO.h"
 
 namespace loom {
 
@@ -21,7 +21,7 @@ std::string inputFileProblem(const fs::path& path, uint64_t maxBytes) {
     if (fs::is_directory(status)) return "is a folder";
     if (!fs::is_regular_file(status)) return "is not a regular file (a pipe or a device)";
     const uintmax_t size = fs::file_size(path, ec);
-    if (ec) return "cannot be read";
+    if (ec || ::access(path.c_str(), R_OK) != 0) return "cannot be read (check its permissions)";
     if (size > maxBytes) return fmt::format("is larger than {} MiB", maxBytes >> 20);
     return {};
 }
@@ -32,19 +32,13 @@ std::string readInputFile(const fs::path& path, const std::string& what, const s
     if (const std::string problem = inputFileProblem(path, maxBytes); !problem.empty())
         throwBadInput({}, "the " + what + " " + problem, expected,
                       problem == "does not exist" ? "check the path" : "give a file saved on disk", name);
-    std::error_code ec;
-    const uintmax_t size = fs::file_size(path, ec);
-    std::ifstream in(path, std::ios::binary);
-    std::string bytes(size_t(size), '\0');
-    if (ec || !in || !in.read(bytes.data(), std::streamsize(size)))
-        throwBadInput({}, "cannot read the " + what, "a readable file", "check its permissions", name);
-    return bytes;
+    return readFileBytes(path);
 }
 
 void checkJsonText(std::string_view text, const std::string& file, bool numbers) {
     const auto at = [&](size_t offset) {
         size_t line, column;
-        lineColumn(std::string(text.substr(0, offset + 1)), offset, line, column);
+        lineColumn(text, offset, line, column);
         return fmt::format("line {}, column {}", line, column);
     };
     int depth = 0;
@@ -65,7 +59,6 @@ void checkJsonText(std::string_view text, const std::string& file, bool numbers)
                                          text[end] == 'e' || text[end] == 'E' || text[end] == '+' || text[end] == '-'))
                 ++end;
             const std::string number(text.substr(i, end - i));
-            errno = 0;
             const double v = std::strtod(number.c_str(), nullptr);
             if (std::isinf(v))
                 throwBadInput(at(i), "the number " + printable(number.substr(0, 40)) + " is too large",

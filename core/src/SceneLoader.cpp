@@ -173,9 +173,8 @@ bool readReferencedFile(std::vector<unsigned char>* out, std::string* err, const
 
 /// tinygltf stops at the first problem with a terse message. Re-reads the
 /// JSON to name the glTF object at fault, then throws.
-[[noreturn]] void failLoad(const fs::path& path, bool binary, const std::string& tinyErr) {
+[[noreturn]] void failLoad(const fs::path& path, const std::string& bytes, bool binary, const std::string& tinyErr) {
     const std::string file = path.string();
-    const std::string bytes = readFileBytes(path);
     std::string jsonText = bytes;
     std::optional<size_t> binChunk;  // size of a GLB BIN chunk, when there is one
     if (binary) {
@@ -1244,15 +1243,11 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     std::error_code ec;
     if (!fs::exists(file, ec))
         throwBadInput({}, "scene file not found", "a .gltf or .glb file", "check the path", name);
-    if (!fs::is_regular_file(file, ec)) throwBadInput({}, "not a regular file", "a .gltf or .glb file", {}, name);
-
+    // Read once: the magic, the JSON check before tinygltf (which recurses into nested values: extras,
+    // extensions), tinygltf itself and the diagnosis of a failure all use these bytes.
+    const std::string bytes = readInputFile(file, "scene file", "a .gltf or .glb file", kMaxSceneFileBytes);
     // The magic decides, whatever the extension says: "glTF" starts a binary container.
-    char magic[4] = {};
-    {
-        std::ifstream in(file, std::ios::binary);
-        in.read(magic, 4);
-    }
-    const bool binary = std::memcmp(magic, "glTF", 4) == 0;
+    const bool binary = bytes.compare(0, 4, "glTF") == 0;
     std::string ext = file.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
     if (ext == ".glb" && !binary)
@@ -1262,8 +1257,6 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     auto scene = std::make_shared<Scene>();
     scene->file = file;
 
-    // Read once, and the JSON checked before tinygltf, which recurses into nested values (extras, extensions).
-    const std::string bytes = readInputFile(file, "scene file", "a .gltf or .glb file", kMaxSceneFileBytes);
     if (!binary) {
         checkJsonText(bytes, name);
     } else if (bytes.size() >= 20) {
@@ -1294,7 +1287,7 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     }
     // tinygltf's warnings are about images, which are reported again per material that uses them.
     if (!warn.empty()) spdlog::debug("{}: tinygltf: {}", name, cleanTinyMessage(warn));
-    if (!ok) failLoad(file, binary, err.empty() ? warn : err);
+    if (!ok) failLoad(file, bytes, binary, err.empty() ? warn : err);
 
     Importer(model, images, *scene, options).run();
     return scene;

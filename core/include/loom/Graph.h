@@ -1,10 +1,10 @@
 #pragma once
 // The graph file format (docs/GRAPHS.md): passes, edges and marked outputs.
 #include <filesystem>
-#include <string>
-#include <vector>
-
 #include <nlohmann/json.hpp>
+#include <string>
+#include <string_view>
+#include <vector>
 
 namespace loom {
 
@@ -64,6 +64,6 @@ nlohmann::json graphToJson(const GraphDesc& g);
 void saveGraph(const GraphDesc& g, const std::filesystem::path& path);
 
 /// Line and column (1-based) of a byte offset in text.
-void lineColumn(const std::string& text, size_t offset, size_t& line, size_t& column);
+void lineColumn(std::string_view text, size_t offset, size_t& line, size_t& column);
 
 }  // namespace loom

@@ -15,12 +15,11 @@ namespace loom {
 inline constexpr int kMaxJsonDepth = 200;
 
 /// Why the file cannot be read as an input, or empty when it can: "does not exist", "is a folder", "is not a regular
-/// file (a pipe or a device)", "is larger than N MiB".
+/// file (a pipe or a device)", "cannot be read (check its permissions)", "is larger than N MiB".
 std::string inputFileProblem(const std::filesystem::path& path, uint64_t maxBytes);
 
-/// The whole of the file as bytes. Bad input (exit 2) when it does not exist, is a folder or not a regular file, is
-/// larger than maxBytes or cannot be read; `what` names it in the message ("graph file"), `expected` says what it
-/// should be.
+/// The whole of the file as bytes (readFileBytes) once inputFileProblem finds none: otherwise bad input (exit 2)
+/// naming the problem; `what` names the file in the message ("graph file"), `expected` says what it should be.
 std::string readInputFile(const std::filesystem::path& path, const std::string& what, const std::string& expected,
                           uint64_t maxBytes);
 
