@@ -17,19 +17,20 @@
 //   V     height-correlated Smith visibility, V = G2 / (4 |n.wi| |n.wo|), G2 = 1 / (1 + Lambda(wo) + Lambda(wi))
 //         (Heitz 2014, "Understanding the Masking-Shadowing Function in Microfacet-Based BRDFs", JCGT 3(2); the
 //         closed form is glTF Appendix B, "Specular BRDF").
-//   F(f0) Schlick 1994 with VdotH: f0 + (1 - f0) (1 - |wo.h|)^5, h = normalize(wo + wi).
-//   specular   = F(mix(0.04, baseColor, metallic)) D V      (Schlick's F is linear in f0, so the spec's
-//                                                           mix(dielectric, metal, metallic) is one evaluation)
-//   diffuse    = (1 - metallic) baseColor / pi (1 - Fd(n.wi)) (1 - Fd(n.wo)),  Fd = Schlick with f0 = 0.04
-//   f          = specular + diffuse
+//   F     Schlick 1994 on VdotH: f0 + (f90 - f0) (1 - |wo.h|)^5, h = normalize(wo + wi). The dielectric has f0 = 0.04
+//         and f90 = 1 unless KHR_materials_ior / KHR_materials_specular say otherwise; a metal has f0 = baseColor,
+//         f90 = 1. Schlick's F is linear in (f0, f90), so the spec's mix(dielectric, metal, metallic) of the specular
+//         lobes is one evaluation with mixed f0 and f90.
 //
-//   The diffuse coupling is the one the glTF spec suggests for energy conservation (Appendix B.3.6.3, "Coupling
-//   diffuse and specular reflection"; Burley 2012 / Shirley et al. 1997): light that the dielectric interface
-//   reflects at either direction does not reach the diffuse layer. The spec's reference weight 1 - F(VdotH) creates
-//   energy at grazing views (a white smooth dielectric reflected 1.85x at 89 degrees); this form is reciprocal and
-//   keeps every white albedo <= 1 (test_brdf.cpp, WhiteAlbedoIsAtMostOne, all views up to 89 degrees), at the
-//   price of a slightly darker diffuse lobe (about 0.9 of Lambert head-on).
-//   Single scattering only: rough metals lose the energy of multiple bounces between microfacets, as in the spec.
+//   Two models (BrdfInputs::multiScatter):
+//   - plain (false): the specification's model exactly,
+//       f = F D V + (1 - metallic) baseColor / pi (1 - Fdielectric(wo.h))        (fresnel_mix of Appendix B)
+//     It loses the energy of multiple scattering between microfacets (a rough white metal reflects 0.4 at
+//     grazing views) and creates energy at grazing views of smooth dielectrics (1.85 at 89 degrees).
+//   - energy-compensated (true, the default): the same single-scattering specular lobe, plus Kulla and Conty's
+//     multiple-scattering lobe, and the diffuse lobe scaled by what the whole specular layer does not reflect
+//     (makeBrdfLobes() has the formulas and the references). In a white furnace every white material reflects 1 of
+//     the light at every view, up to the resolution of the albedo tables (test_brdf.cpp).
 //
 // Sampling: a one-sample mixture (Veach 1997, thesis section 9.2.4, "the one-sample model") of cosine-weighted
 // hemisphere sampling for the diffuse lobe and GGX visible-normal sampling for the specular lobe (Heitz 2018,
@@ -42,6 +43,7 @@
 #include <cmath>
 #include <glm/glm.hpp>
 
+#include "BrdfTables.h"
 #include "loom/Kernel.h"
 #include "loom/SurfaceKernels.h"
 
@@ -229,41 +231,201 @@ LOOM_HD inline float ggxReflectionPdf(glm::vec3 wo, glm::vec3 wi, float alpha) {
 }
 
 // ---------------------------------------------------------------------------------------------------------------------
+// Directional albedo of the GGX lobe (BrdfTables.h)
+//
+// E(mu, roughness)  = integral over wi of D V (n.wi) with F = 1: the single-scattering albedo of the specular lobe;
+// Es(mu, roughness) = the same integral weighted by Schlick's (1 - wo.h)^5.
+// A lobe with Fresnel F = f0 + (f90 - f0) (1 - wo.h)^5 reflects f0 (E - Es) + f90 Es, for any f0 and f90.
+// Both are tabulated on a kBrdfTableSize^2 grid of sqrt(mu) and roughness (nodes at i / (size - 1): dense toward
+// grazing views, where E changes fastest), read bilinearly;
+// the cosine-weighted means Eavg = 2 integral E(mu) mu dmu are the exact means of that bilinear interpolant, so
+// the compensation below conserves energy exactly whatever the tables' resolution (only the single-scattering part
+// is integrated for real).
+
+/// Values of the tables (see ggxAlbedoTable()); on the device a copy in constant memory.
+#if defined(__CUDACC__)
+static __constant__ float kGgxAlbedoDevice[] = {LOOM_GGX_ALBEDO_TABLE};
+static __constant__ float kGgxAlbedoAvgDevice[] = {LOOM_GGX_ALBEDO_AVG_TABLE};
+#endif
+inline constexpr float kGgxAlbedoHost[] = {LOOM_GGX_ALBEDO_TABLE};
+inline constexpr float kGgxAlbedoAvgHost[] = {LOOM_GGX_ALBEDO_AVG_TABLE};
+static_assert(sizeof(kGgxAlbedoHost) == sizeof(float) * 2 * kBrdfTableSize * kBrdfTableSize, "table size");
+static_assert(sizeof(kGgxAlbedoAvgHost) == sizeof(float) * 2 * kBrdfTableSize, "table size");
+
+/// [roughness][mu][E, Es], row-major.
+LOOM_HD inline const float* ggxAlbedoTable() {
+#if defined(__CUDA_ARCH__)
+    return kGgxAlbedoDevice;
+#else
+    return kGgxAlbedoHost;
+#endif
+}
+/// [roughness][Eavg, Esavg].
+LOOM_HD inline const float* ggxAlbedoAvgTable() {
+#if defined(__CUDA_ARCH__)
+    return kGgxAlbedoAvgDevice;
+#else
+    return kGgxAlbedoAvgHost;
+#endif
+}
+
+/// A table coordinate: x in [0, 1] (NaN read as 0) to a cell index and the fraction within it.
+LOOM_HD inline int tableCell(float x, float& frac) {
+    const float t = (x > 0.f ? (x < 1.f ? x : 1.f) : 0.f) * float(kBrdfTableSize - 1);
+    const int i = int(t) < kBrdfTableSize - 2 ? int(t) : kBrdfTableSize - 2;
+    frac = t - float(i);
+    return i;
+}
+
+/// E and Es (see above) of one lobe.
+struct GgxAlbedo {
+    float e = 1.f;   ///< albedo with F = 1
+    float es = 0.f;  ///< albedo weighted by (1 - wo.h)^5
+};
+
+/// E and Es at (mu = n.wo, roughness), bilinear in (sqrt(mu), roughness).
+LOOM_HD inline GgxAlbedo ggxAlbedo(float mu, float roughness) {
+    float fx, fy;
+    const int x = tableCell(std::sqrt(maxOr(mu, 0.f)), fx), y = tableCell(roughness, fy);
+    const float* r0 = ggxAlbedoTable() + 2 * (y * kBrdfTableSize + x);
+    const float* r1 = r0 + 2 * kBrdfTableSize;
+    const float e0 = r0[0] + (r0[2] - r0[0]) * fx, e1 = r1[0] + (r1[2] - r1[0]) * fx;
+    const float s0 = r0[1] + (r0[3] - r0[1]) * fx, s1 = r1[1] + (r1[3] - r1[1]) * fx;
+    return {e0 + (e1 - e0) * fy, s0 + (s1 - s0) * fy};
+}
+
+/// The cosine-weighted means of E and Es over mu, at a roughness (linear in the table).
+LOOM_HD inline GgxAlbedo ggxAlbedoAverage(float roughness) {
+    float f;
+    const int y = tableCell(roughness, f);
+    const float* r = ggxAlbedoAvgTable() + 2 * y;
+    return {r[0] + (r[2] - r[0]) * f, r[1] + (r[3] - r[1]) * f};
+}
+
+/// Kulla and Conty 2017 ("Revisiting Physically Based Shading at Imageworks", SIGGRAPH course, slides 18-20): the
+/// fraction of the energy lost by single scattering that multiple scattering returns with Fresnel F:
+/// Fms = Favg^2 Eavg / (1 - Favg (1 - Eavg)), with Favg = 2 integral F(mu) mu dmu = f0 + (f90 - f0) / 21 for Schlick.
+LOOM_HD inline float multiScatterFresnel(float f0, float f90, float eAvg) {
+    const float fAvg = f0 + (f90 - f0) * (1.f / 21.f);
+    return fAvg * fAvg * eAvg / (1.f - fAvg * (1.f - eAvg));
+}
+LOOM_HD inline glm::vec3 multiScatterFresnel(glm::vec3 f0, float f90, float eAvg) {
+    return {multiScatterFresnel(f0.x, f90, eAvg), multiScatterFresnel(f0.y, f90, eAvg),
+            multiScatterFresnel(f0.z, f90, eAvg)};
+}
+
+// ---------------------------------------------------------------------------------------------------------------------
 // The material
 
-/// The glTF metallic-roughness inputs of the BRDF (linear baseColor; metallic and roughness in [0, 1]).
+/// The glTF metallic-roughness inputs of the BRDF (linear baseColor; metallic and roughness in [0, 1]), the
+/// dielectric's Fresnel (KHR_materials_ior and KHR_materials_specular; glTF's default is f0 = 0.04, f90 = 1), and the
+/// model: energy-compensated (default) or the specification's plain single-scattering model.
 struct BrdfInputs {
     glm::vec3 baseColor{1.f};
     float metallic = 0.f;
     float roughness = 1.f;
+    glm::vec3 specularF0{kDielectricF0};  ///< dielectric reflectance at normal incidence, in [0, 1]
+    float specularF90 = 1.f;              ///< dielectric reflectance at grazing incidence, in [0, 1]
+    bool multiScatter = true;             ///< false: glTF Appendix B exactly (loses and creates energy)
 };
 
 /// The BRDF inputs of an evaluated surface hit (evalSurface() has applied the textures and clamped the factors).
-LOOM_HD inline BrdfInputs brdfInputs(const SurfaceHit& hit) {
+LOOM_HD inline BrdfInputs brdfInputs(const SurfaceHit& hit, bool multiScatter = true) {
     BrdfInputs in;
     in.baseColor = hit.baseColor;
     in.metallic = hit.metallic;
     in.roughness = hit.roughness;
+    in.multiScatter = multiScatter;
     return in;
 }
 
-/// Specular reflectance at normal incidence: mix(0.04, baseColor, metallic) (glTF Appendix B, "Metal BRDF and
-/// Dielectric BRDF"; the same as specularF0(SurfaceHit)).
+/// Specular reflectance at normal incidence: mix(dielectric f0, baseColor, metallic) (glTF Appendix B, "Metal BRDF
+/// and Dielectric BRDF"; the same as specularF0(SurfaceHit) for the default dielectric).
 LOOM_HD inline glm::vec3 brdfF0(const BrdfInputs& in) {
-    return glm::mix(glm::vec3(kDielectricF0), in.baseColor, in.metallic);
+    return glm::mix(in.specularF0, in.baseColor, in.metallic);
 }
 
-/// Probability that sampleBrdf() samples the specular lobe, seen from a view with n.wo = NdotV. A heuristic that
-/// only affects variance: the luminance of the specular lobe's directional albedo (Karis' fit, specularAlbedo())
-/// against the diffuse lobe's, clamped to [0.1, 0.9] so neither lobe is starved, or 1 without a diffuse lobe. The
-/// diffuse albedo is (1 - metallic) baseColor (1 - Fd(n.wo)) times the cosine-weighted mean of 1 - Fd(n.wi), 0.91.
+/// What the BRDF needs of the material and the view direction alone (see the model in the header of this file).
+/// Every term is per unit of its lobe's shape: for a light direction with E(n.wi) = ei, Es(n.wi) = esi,
+///   f = F(wo.h) D V + msScale (1 - ei) + diffuseScale * diffuseIn,
+///   diffuseIn = 1 - (layerE ei + layerEs esi + layerC)   (compensated), or 1 - Fdielectric(wo.h)  (plain).
+struct BrdfLobes {
+    glm::vec3 f0{0.04f};          ///< Fresnel of the specular lobe, F = f0 + (f90 - f0) (1 - wo.h)^5
+    float f90 = 1.f;
+    glm::vec3 msScale{0.f};       ///< Fms (1 - E(mu_o)) / (pi (1 - Eavg)); 0 for the plain model
+    glm::vec3 diffuseScale{0.f};  ///< (1 - metallic) baseColor / pi, times (1 - Ed(mu_o)) / (1 - Ed_avg) compensated
+    float layerE = 0.f, layerEs = 0.f, layerC = 0.f;  ///< Ed(mu) = layerE E + layerEs Es + layerC
+    glm::vec3 dielectricF0{0.04f};  ///< plain model: the diffuse weight is 1 - (f0 + (f90 - f0) (1 - wo.h)^5)
+    float dielectricF90 = 1.f;
+    float roughness = 1.f;
+    float pSpec = 1.f;            ///< probability of sampling the GGX lobe (specularLobeProbability())
+    bool multiScatter = true;
+};
+
+/// The per-view terms for a view with n.wo = NdotV (0 < NdotV <= 1).
+///
+/// Multiple scattering (Kulla and Conty 2017): the specular lobe gets f_ms = Fms (1 - E(mu_o)) (1 - E(mu_i)) /
+/// (pi (1 - Eavg)), whose albedo (1 - E(mu_o)) Fms is what single scattering loses. With F = 1 the two sum to 1.
+/// The diffuse lobe under the dielectric is scaled by what the whole dielectric specular layer (its single and
+/// multiple scattering, albedo Ed) does not reflect, on both sides to stay reciprocal: (1 - Ed(mu_o)) (1 - Ed(mu_i)) /
+/// (1 - Ed_avg), the albedo-scaling layering of Kulla and Conty 2017 (slide 31) as in Dassault Systemes' Enterprise
+/// PBR shading model (2022, "Albedo scaling"). A white dielectric then reflects Ed(mu_o) + (1 - Ed(mu_o)) = 1 of the
+/// light: glTF's fresnel_mix on wo.h (Appendix B) would reflect up to 1.85 at grazing views of a smooth one. With a
+/// coloured dielectric f0 (KHR_materials_specular) the layer's albedo uses its largest channel, which never creates
+/// energy. Metals mix in by metallic as in the specification.
+LOOM_HD inline BrdfLobes makeBrdfLobes(const BrdfInputs& in, float NdotV) {
+    BrdfLobes L;
+    const float m = in.metallic;
+    L.f0 = brdfF0(in);
+    L.f90 = in.specularF90 + (1.f - in.specularF90) * m;
+    L.multiScatter = in.multiScatter;
+    L.roughness = in.roughness;
+    L.dielectricF0 = in.specularF0;
+    L.dielectricF90 = in.specularF90;
+    const GgxAlbedo eo = ggxAlbedo(NdotV, in.roughness), avg = ggxAlbedoAverage(in.roughness);
+    // The dielectric layer's scalar albedo, Ed(mu) = s0 (E - Es) + s90 Es + FmsLayer (1 - E).
+    const float s0 = glm::max(glm::max(in.specularF0.x, in.specularF0.y), in.specularF0.z), s90 = in.specularF90;
+    const float lossAvg = 1.f - avg.e;  // energy single scattering loses, averaged over views
+    // Below 1e-5 the lost energy is negligible and 1 / lossAvg would amplify rounding: no compensation there.
+    const bool compensate = in.multiScatter && lossAvg > 1e-5f;
+    const float fmsLayer = compensate ? multiScatterFresnel(s0, s90, avg.e) : 0.f;
+    L.layerE = s0 - fmsLayer;
+    L.layerEs = s90 - s0;
+    L.layerC = fmsLayer;
+    const float layerOut = L.layerE * eo.e + L.layerEs * eo.es + L.layerC;
+    const glm::vec3 diffuse = ((1.f - m) * kInvPi) * in.baseColor;
+    glm::vec3 fms(0.f);
+    if (compensate) {
+        fms = (1.f - m) * multiScatterFresnel(in.specularF0, s90, avg.e) + m * multiScatterFresnel(in.baseColor, 1.f,
+                                                                                                   avg.e);
+        L.msScale = fms * ((1.f - eo.e) * kInvPi / lossAvg);
+    }
+    if (in.multiScatter) {
+        const float layerAvg = L.layerE * avg.e + L.layerEs * avg.es + L.layerC;
+        L.diffuseScale = layerAvg < 1.f ? diffuse * (maxOr(1.f - layerOut, 0.f) / (1.f - layerAvg)) : glm::vec3(0.f);
+    } else {
+        L.diffuseScale = diffuse;
+    }
+    // Lobe selection (variance only): the albedo of the GGX lobe against the other two, which the cosine-weighted
+    // hemisphere samples. Neither is starved ([0.1, 0.9]); without the others the GGX lobe alone (1).
+    const float spec = luminance(L.f0 * (eo.e - eo.es) + glm::vec3(L.f90 * eo.es));
+    const float other = luminance(fms) * (1.f - eo.e) + (1.f - m) * luminance(in.baseColor) * maxOr(1.f - layerOut, 0.f);
+    L.pSpec = other > 0.f ? glm::clamp(spec / (spec + other), 0.1f, 0.9f) : 1.f;
+    return L;
+}
+
+/// Probability that sampleBrdf() samples the specular lobe, seen from a view with n.wo = NdotV (affects variance only).
 LOOM_HD inline float specularLobeProbability(const BrdfInputs& in, float NdotV) {
-    const float cosV = glm::clamp(NdotV, 0.f, 1.f);
-    const float spec = luminance(specularAlbedo(brdfF0(in), cosV, in.roughness));
-    const float diffuse = (1.f - in.metallic) * (1.f - schlickWeight(cosV) * (1.f - kDielectricF0) - kDielectricF0) *
-                          0.91f * luminance(in.baseColor);
-    if (!(diffuse > 0.f)) return 1.f;
-    return glm::clamp(spec / (spec + diffuse), 0.1f, 0.9f);
+    return makeBrdfLobes(in, glm::clamp(NdotV, 0.f, 1.f)).pSpec;
+}
+
+/// The lobes other than single-scattering GGX (multiple scattering and diffuse) toward a light direction with
+/// n.wi = NdotL; w = (1 - wo.h)^5 (the plain model's diffuse weight needs it).
+LOOM_HD inline glm::vec3 otherLobes(const BrdfLobes& L, float NdotL, float w) {
+    if (!L.multiScatter)
+        return L.diffuseScale * (glm::vec3(1.f) - (L.dielectricF0 + (L.dielectricF90 - L.dielectricF0) * w));
+    const GgxAlbedo ei = ggxAlbedo(NdotL, L.roughness);
+    return L.msScale * (1.f - ei.e) + L.diffuseScale * maxOr(1.f - (L.layerE * ei.e + L.layerEs * ei.es + L.layerC), 0.f);
 }
 
 /// The BRDF value and the sampling pdf for one pair of directions.
@@ -272,21 +434,15 @@ struct BrdfEval {
     float pdf = 0.f;   ///< solid-angle density of sampleBrdf() producing wi
 };
 
-/// The BRDF f(wo, wi) in the local frame (see the model at the top of this file).
+/// The BRDF f(wo, wi) in the local frame (see the model at the top of this file and makeBrdfLobes()).
 LOOM_HD inline glm::vec3 evalBrdfLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec3 wi) {
     if (wo.z <= 0.f || wi.z <= 0.f) return glm::vec3(0.f);
+    const BrdfLobes L = makeBrdfLobes(in, glm::min(wo.z, 1.f));
     const glm::vec3 h = glm::normalize(wo + wi);
-    const float VdotH = std::fabs(glm::dot(wo, h));
+    const float w = schlickWeight(std::fabs(glm::dot(wo, h)));
     const float alpha = alphaFromRoughness(in.roughness);
-    const float w = schlickWeight(VdotH);
-    // Schlick's F is linear in f0, so mix(dielectric, metal, metallic) needs one specular evaluation with mixed f0.
-    const glm::vec3 fSpec = brdfF0(in) + (glm::vec3(1.f) - brdfF0(in)) * w;
-    const glm::vec3 specular = fSpec * (ggxD(h, alpha) * ggxVisibility(wi.z, wo.z, alpha));
-    // Energy-conserving coupling (see the header): what the interface reflects never reaches the diffuse layer.
-    const float transmitIn = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wi.z));
-    const float transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wo.z));
-    const glm::vec3 diffuse = ((1.f - in.metallic) * transmitIn * transmitOut * kInvPi) * in.baseColor;
-    return specular + diffuse;
+    const glm::vec3 F = L.f0 + (glm::vec3(L.f90) - L.f0) * w;
+    return F * (ggxD(h, alpha) * ggxVisibility(wi.z, wo.z, alpha)) + otherLobes(L, glm::min(wi.z, 1.f), w);
 }
 
 /// Solid-angle pdf of sampleBrdfLocal() producing wi: the full lobe mixture. Nonzero below the surface where the
@@ -333,8 +489,9 @@ struct BrdfSample {
 };
 
 /// Draws a direction from the lobe mixture in the local frame (Veach 1997's one-sample model, section 9.2.4):
-/// uLobe < specularLobeProbability() picks the specular lobe, then u samples it. The result may point below the
-/// surface (z <= 0) when a visible normal reflects wo downward.
+/// uLobe < specularLobeProbability() picks the GGX lobe (visible normals), else the cosine-weighted hemisphere, which
+/// stands for the diffuse and multiple-scattering lobes. The result may point below the surface (z <= 0) when a
+/// visible normal reflects wo downward.
 LOOM_HD inline glm::vec3 sampleBrdfDirectionLocal(const BrdfInputs& in, glm::vec3 wo, glm::vec2 u, float uLobe) {
     if (uLobe < specularLobeProbability(in, wo.z)) {
         const glm::vec3 h = sampleGgxVndf(wo, alphaFromRoughness(in.roughness), u);
@@ -379,48 +536,40 @@ LOOM_HD inline BrdfSample sampleBrdf(const BrdfInputs& in, glm::vec3 n, glm::vec
 
 // ---------------------------------------------------------------------------------------------------------------------
 // Per-vertex evaluation: the integrator shades one vertex with the same (n, wo) several times (light sample f and pdf,
-// then a BRDF sample); BrdfVertex holds what depends only on the vertex (frame, local wo, alpha, f0, the lobe
-// probability, the wo-side Fresnel and Smith terms), computed once. The results are the same model as the functions
-// above (evalBrdf, pdfBrdf, sampleBrdf), with the half vector and D shared between f and the pdf.
+// then a BRDF sample); BrdfVertex holds what depends only on the vertex (frame, local wo, alpha, the lobes, the
+// wo-side Smith term), computed once. The results are the same model as the functions above (evalBrdf, pdfBrdf,
+// sampleBrdf), with the half vector and D shared between f and the pdf.
 
 struct BrdfVertex {
     Frame frame;
     glm::vec3 wo{0.f};        ///< local
-    glm::vec3 baseColor{1.f};
-    glm::vec3 f0{0.04f};
-    float metallic = 0.f;
+    BrdfLobes lobes;
     float alpha = 1.f, a2 = 1.f;
-    float pSpec = 1.f;        ///< specularLobeProbability(in, wo.z)
     float invA2 = 1.f;        ///< 1 / a2
     float invPiA2 = kInvPi;   ///< 1 / (pi a2): D = invPiA2 / t^2
-    float transmitOut = 0.f;  ///< 1 - Fd(wo.z)
     float smithWo = 0.f;      ///< sqrt(a2 + (1 - a2) wo.z^2)
     float specPdfScale = 0.f; ///< pSpec / (2 (wo.z + smithWo)): the specular pdf is D times this
     bool valid = false;       ///< wo.z > 0
 };
 
-/// withPdf = false leaves out what only the sampling pdf needs (the lobe probability and the specular pdf scale, left
-/// 0): for a vertex where only f is wanted, such as a path's last vertex, whose light sample needs no MIS weight.
+/// withPdf = false leaves out the specular pdf scale (left 0): for a vertex where only f is wanted, such as a path's
+/// last vertex, whose light sample needs no MIS weight.
 LOOM_HD inline BrdfVertex makeBrdfVertex(const BrdfInputs& in, glm::vec3 n, glm::vec3 wo, bool withPdf = true) {
     BrdfVertex v;
     v.frame = makeFrame(n);
     v.wo = v.frame.toLocal(wo);
     v.valid = v.wo.z > 0.f;
     if (!v.valid) return v;
-    v.baseColor = in.baseColor;
-    v.f0 = brdfF0(in);
-    v.metallic = in.metallic;
+    v.lobes = makeBrdfLobes(in, glm::min(v.wo.z, 1.f));
     v.alpha = alphaFromRoughness(in.roughness);
     v.a2 = v.alpha * v.alpha;
-    v.transmitOut = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(v.wo.z));
     v.smithWo = std::sqrt(v.a2 + (1.f - v.a2) * v.wo.z * v.wo.z);
     v.invA2 = 1.f / v.a2;
     v.invPiA2 = v.invA2 * kInvPi;
     if (withPdf) {
-        v.pSpec = specularLobeProbability(in, v.wo.z);
-        v.specPdfScale = v.pSpec / (2.f * (v.wo.z + v.smithWo));
+        v.specPdfScale = v.lobes.pSpec / (2.f * (v.wo.z + v.smithWo));
     } else {
-        v.pSpec = v.specPdfScale = 0.f;
+        v.lobes.pSpec = v.specPdfScale = 0.f;
     }
     return v;
 }
@@ -455,11 +604,11 @@ LOOM_HD inline BrdfEval evalBrdfVertexLocal(const BrdfVertex& v, glm::vec3 wi) {
     // |wo.h| = |wo.s| / |s| (Schlick's weight). For unit wo and wi, |s|^2 = 2 (1 + wo.wi) = 2 wo.s, so this is
     // sqrt(|wo.s| / 2): one square root and no division.
     const float VdotH = lenSq > 1e-12f ? std::sqrt(0.5f * std::fabs(glm::dot(wo, hSum))) : 0.f;
-    e.pdf = v.specPdfScale * D + (1.f - v.pSpec) * (wi.z * kInvPi);
+    const BrdfLobes& L = v.lobes;
+    e.pdf = v.specPdfScale * D + (1.f - L.pSpec) * (wi.z * kInvPi);
     const float w = schlickWeight(VdotH);
-    const glm::vec3 fSpec = v.f0 + (glm::vec3(1.f) - v.f0) * w;
-    const float transmitIn = 1.f - (kDielectricF0 + (1.f - kDielectricF0) * schlickWeight(wi.z));
-    e.f = fSpec * DV + ((1.f - v.metallic) * transmitIn * v.transmitOut * kInvPi) * v.baseColor;
+    const glm::vec3 F = L.f0 + (glm::vec3(L.f90) - L.f0) * w;
+    e.f = F * DV + otherLobes(L, glm::min(wi.z, 1.f), w);
     return e;
 }
 
@@ -473,7 +622,7 @@ LOOM_HD inline BrdfSample sampleBrdfVertex(const BrdfVertex& v, glm::vec2 u, flo
     BrdfSample s;
     if (!v.valid) return s;
     glm::vec3 local;
-    if (uLobe < v.pSpec) {
+    if (uLobe < v.lobes.pSpec) {
         const glm::vec3 h = sampleGgxVndf(v.wo, v.alpha, u);
         local = glm::normalize(2.f * glm::dot(v.wo, h) * h - v.wo);
     } else {

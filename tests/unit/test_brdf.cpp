@@ -308,39 +308,59 @@ TEST(Brdf, SampledAlbedoMatchesQuadrature) {
 }
 
 TEST(Brdf, SampleWeightsAreBounded) {
-    // With VNDF sampling the specular weight is F G2 / G1 <= 1 per unit lobe probability, and the diffuse weight is
-    // at most 1 as well, so the mixture's weight is at most 1 / pSpec + 1 / (1 - pSpec) (<= 20 with the clamp):
-    // no fireflies from the BRDF, including the mirror limit.
+    // With VNDF sampling the GGX lobe's weight is F G2 / G1 <= 1 per unit lobe probability. The other lobes are drawn
+    // from the cosine-weighted hemisphere, so their weight is pi f_other / (1 - pSpec), bounded by the largest value
+    // of f_other over the hemisphere (otherLobes() depends on n.wi only). The mixture's weight is at most the sum:
+    // no fireflies from the BRDF, including the mirror limit. Kulla and Conty's lobe of a nearly smooth metal seen at
+    // grazing angles is the largest of these (it returns what single scattering loses there, and loses little
+    // elsewhere): up to ~30 at roughness 0.1 and 89 degrees.
     Pcg32 rng(5);
-    for (float r : {0.f, 0.01f, 0.1f, 0.4f, 1.f}) {
-        for (float m : {0.f, 0.5f, 1.f}) {
-            const BrdfInputs in{glm::vec3(1.f), m, r};
-            const Frame frame = makeFrame(kNormal);
-            for (float view : {0.f, 45.f, 80.f, 89.f}) {
-                const glm::vec3 wo = direction(frame, view, 2.f);
-                const float p = specularLobeProbability(in, glm::dot(kNormal, wo));
-                const float bound = 1.f / p + (p < 1.f ? 1.f / (1.f - p) : 0.f);
-                for (int i = 0; i < 4000; ++i) {
-                    const BrdfSample s = sampleBrdf(in, kNormal, wo, rng.uniform2(), rng.uniform());
-                    if (!s.valid) continue;
-                    const float w = std::fmax(s.weight.r, std::fmax(s.weight.g, s.weight.b));
-                    ASSERT_TRUE(std::isfinite(w));
-                    ASSERT_LE(w, bound * 1.001f) << "roughness " << r << " metallic " << m << " view " << view;
+    float largest = 0.f;
+    for (bool multiScatter : {true, false}) {
+        for (float r : {0.f, 0.01f, 0.1f, 0.4f, 1.f}) {
+            for (float m : {0.f, 0.5f, 1.f}) {
+                BrdfInputs in{glm::vec3(1.f), m, r};
+                in.multiScatter = multiScatter;
+                const Frame frame = makeFrame(kNormal);
+                for (float view : {0.f, 45.f, 80.f, 89.f}) {
+                    const glm::vec3 wo = direction(frame, view, 2.f);
+                    const float muO = glm::dot(kNormal, wo);
+                    const BrdfLobes lobes = makeBrdfLobes(in, muO);
+                    const float p = lobes.pSpec;
+                    float otherMax = 0.f;  // the plain model's diffuse weight is largest at wo.h = 1 (w = 0)
+                    for (int i = 0; i <= 4096; ++i) {
+                        const glm::vec3 o = otherLobes(lobes, float(i) / 4096.f, 0.f);
+                        otherMax = std::fmax(otherMax, std::fmax(o.r, std::fmax(o.g, o.b)));
+                    }
+                    const float bound = 1.f / p + (p < 1.f ? kPi * otherMax / (1.f - p) : 0.f);
+                    for (int i = 0; i < 4000; ++i) {
+                        const BrdfSample s = sampleBrdf(in, kNormal, wo, rng.uniform2(), rng.uniform());
+                        if (!s.valid) continue;
+                        const float w = std::fmax(s.weight.r, std::fmax(s.weight.g, s.weight.b));
+                        ASSERT_TRUE(std::isfinite(w));
+                        ASSERT_LE(w, bound * 1.01f) << "roughness " << r << " metallic " << m << " view " << view
+                                                    << (multiScatter ? "" : " plain");
+                        largest = std::fmax(largest, w);
+                    }
                 }
             }
         }
     }
+    std::printf("[ weights ] largest sample weight %.2f\n", largest);
 }
 
 // ---------------------------------------------------------------------------------------------------------------------
 // 3. Energy.
 
-TEST(Brdf, WhiteAlbedoIsAtMostOne) {
-    // Never creates energy: a white surface's directional albedo is at most 1 for every roughness, metalness and
-    // view up to 89 degrees from the normal (the diffuse coupling of BRDF.h's header makes dielectrics conserve it
-    // at grazing views too, where glTF's reference coupling reaches 1.85).
-    double maxAlbedo = 0.0;
-    Case argMax{};
+TEST(Brdf, WhiteFurnace) {
+    // A white surface in a white furnace reflects all the light, at every roughness, metalness and view up to 89
+    // degrees from the normal: between 0.97 and 1.01 (the goal; the albedo tables' resolution is what keeps it from
+    // exactly 1, and it measures within about 0.002). The plain model (glTF Appendix B without compensation) is
+    // what the tables correct: it loses the energy of multiple scattering (a rough white metal) and creates energy
+    // at grazing views of a smooth dielectric (fresnel_mix's 1 - F(wo.h) keeps the diffuse lobe bright where the
+    // interface already reflects nearly everything).
+    double lowest = 2.0, highest = 0.0;
+    Case argLow{}, argHigh{};
     for (float r : {0.f, 0.05f, 0.1f, 0.2f, 0.3f, 0.5f, 0.7f, 1.f}) {
         for (float m : {0.f, 0.5f, 1.f}) {
             for (float view : {0.f, 20.f, 40.f, 60.f, 75.f, 85.f, 89.f}) {
@@ -348,12 +368,75 @@ TEST(Brdf, WhiteAlbedoIsAtMostOne) {
                 const Frame frame = makeFrame(kNormal);
                 const glm::vec3 wo = direction(frame, view, 0.7f);
                 const double albedo = albedoByQuadrature(in, frame, wo, 384, 192).x;
-                EXPECT_LE(albedo, 1.0 + 1e-3) << describe({r, m, view});
-                if (albedo > maxAlbedo) maxAlbedo = albedo, argMax = {r, m, view};
+                EXPECT_GE(albedo, 0.97) << describe({r, m, view});
+                EXPECT_LE(albedo, 1.01) << describe({r, m, view});
+                if (albedo < lowest) lowest = albedo, argLow = {r, m, view};
+                if (albedo > highest) highest = albedo, argHigh = {r, m, view};
             }
         }
     }
-    std::printf("[ energy ] largest white albedo %.5f (%s)\n", maxAlbedo, describe(argMax).c_str());
+    std::printf("[ furnace ] white albedo from %.5f (%s) to %.5f (%s)\n", lowest, describe(argLow).c_str(), highest,
+                describe(argHigh).c_str());
+
+    const Frame frame = makeFrame(kNormal);
+    BrdfInputs roughMetal{glm::vec3(1.f), 1.f, 1.f}, smoothDielectric{glm::vec3(1.f), 0.f, 0.05f};
+    roughMetal.multiScatter = smoothDielectric.multiScatter = false;
+    const double metal = albedoByQuadrature(roughMetal, frame, direction(frame, 80.f, 0.f)).x;
+    const double dielectric = albedoByQuadrature(smoothDielectric, frame, direction(frame, 85.f, 0.f)).x;
+    std::printf("[ furnace ] plain model: rough metal at 80 deg %.3f, smooth dielectric at 85 deg %.3f\n", metal,
+                dielectric);
+    EXPECT_LT(metal, 0.7);
+    EXPECT_GT(dielectric, 1.3);
+}
+
+TEST(Brdf, PlainModelIsTheSpecification) {
+    // multiScatter = false is glTF 2.0 Appendix B, written out here independently from its pseudo-code:
+    //   metal_brdf      = conductor_fresnel(f0 = baseColor, bsdf = specular_brdf)
+    //   dielectric_brdf = fresnel_mix(ior = 1.5, base = diffuse_brdf(baseColor), layer = specular_brdf)
+    //   material        = mix(dielectric_brdf, metal_brdf, metallic)
+    Pcg32 rng(17);
+    const Frame frame = makeFrame(kNormal);
+    for (int i = 0; i < 5000; ++i) {
+        // Roughness from 0.2: sharper lobes amplify the float rounding of the directions beyond the tolerance.
+        BrdfInputs in{glm::vec3(rng.uniform(), rng.uniform(), rng.uniform()), rng.uniform(), 0.2f + 0.8f * rng.uniform()};
+        in.multiScatter = false;
+        const glm::vec3 wo = direction(frame, 85.f * rng.uniform(), 2.f * kPi * rng.uniform());
+        const glm::vec3 wi = direction(frame, 85.f * rng.uniform(), 2.f * kPi * rng.uniform());
+        const double alpha = std::max(double(in.roughness) * in.roughness, 1e-3), a2 = alpha * alpha;
+        const glm::dvec3 n(kNormal), v(wo), l(wi), h = glm::normalize(v + l);
+        const double NdotL = glm::dot(n, l), NdotV = glm::dot(n, v), NdotH = glm::dot(n, h), VdotH = glm::dot(v, h);
+        const double Vis = 0.5 / (NdotL * std::sqrt(NdotV * NdotV * (1 - a2) + a2) +
+                                  NdotV * std::sqrt(NdotL * NdotL * (1 - a2) + a2));
+        const double dd = NdotH * NdotH * (a2 - 1) + 1;
+        const double D = a2 / (kPiD * dd * dd);
+        const double specular = Vis * D, w = std::pow(1 - std::fabs(VdotH), 5.0);
+        const glm::dvec3 base(in.baseColor);
+        const glm::dvec3 metal = specular * (base + (1.0 - base) * w);
+        const double fr = 0.04 + 0.96 * w;
+        const glm::dvec3 dielectric = (1 - fr) * base / kPiD + fr * specular;
+        const glm::dvec3 expected = glm::mix(dielectric, metal, double(in.metallic));
+        const glm::vec3 f = evalBrdf(in, kNormal, wo, wi);
+        for (int k = 0; k < 3; ++k)
+            ASSERT_NEAR(f[k], expected[k], 1e-3 * std::max(expected[k], 1e-2)) << i << " channel " << k;  // float
+    }
+}
+
+TEST(Brdf, CompensationIsTheMissingEnergy) {
+    // Kulla and Conty's lobe returns exactly what single scattering loses: for a white metal (F = 1) the albedo of
+    // the compensated BRDF minus the plain one is 1 - E(mu_o), and E(mu_o) is the plain model's own albedo.
+    const Frame frame = makeFrame(kNormal);
+    for (float r : {0.2f, 0.5f, 1.f}) {
+        for (float view : {0.f, 45.f, 75.f}) {
+            BrdfInputs in{glm::vec3(1.f), 1.f, r};
+            const glm::vec3 wo = direction(frame, view, 0.3f);
+            const double compensated = albedoByQuadrature(in, frame, wo).x;
+            in.multiScatter = false;
+            const double plain = albedoByQuadrature(in, frame, wo).x;
+            const double e = ggxAlbedo(glm::dot(kNormal, wo), r).e;
+            EXPECT_NEAR(plain, e, 3e-3) << "roughness " << r << " view " << view;
+            EXPECT_NEAR(compensated - plain, 1.0 - e, 3e-3) << "roughness " << r << " view " << view;
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------------------------------
@@ -363,8 +446,9 @@ TEST(Brdf, Reciprocity) {
     Pcg32 rng(99);
     const Frame frame = makeFrame(kNormal);
     for (int i = 0; i < 20000; ++i) {
-        const BrdfInputs in{glm::vec3(rng.uniform(), rng.uniform(), rng.uniform()), rng.uniform(),
-                            i % 10 == 0 ? 0.f : rng.uniform()};
+        BrdfInputs in{glm::vec3(rng.uniform(), rng.uniform(), rng.uniform()), rng.uniform(),
+                      i % 10 == 0 ? 0.f : rng.uniform()};
+        in.multiScatter = i % 2 == 0;  // both models
         const glm::vec3 a = direction(frame, 89.f * rng.uniform(), 2.f * kPi * rng.uniform());
         const glm::vec3 b = direction(frame, 89.f * rng.uniform(), 2.f * kPi * rng.uniform());
         const glm::vec3 fab = evalBrdf(in, kNormal, a, b), fba = evalBrdf(in, kNormal, b, a);
@@ -378,20 +462,15 @@ TEST(Brdf, Reciprocity) {
 // 5. Limits and normalisations.
 
 TEST(Brdf, RoughWhiteDielectricIsNearlyLambertian) {
-    // Roughness 1: a white Lambert lobe dimmed by what the interface reflects, (1 - Fd(n.wo)) times the mean of
-    // (1 - Fd(n.wi)) (0.91), plus a weak, flat specular lobe: close to 1 head-on, darker toward grazing views.
+    // Roughness 1, plain model: a white Lambert lobe dimmed by what the interface reflects, plus a weak, flat
+    // specular lobe: close to 1 and never above it for views up to 80 degrees.
     const Frame frame = makeFrame(kNormal);
-    const BrdfInputs in{glm::vec3(1.f), 0.f, 1.f};
-    double previous = 2.0;
+    BrdfInputs in{glm::vec3(1.f), 0.f, 1.f};
+    in.multiScatter = false;
     for (float view = 0.f; view <= 80.f; view += 10.f) {
         const double albedo = albedoByQuadrature(in, frame, direction(frame, view, 0.f)).x;
-        if (view == 0.f) {
-            EXPECT_GT(albedo, 0.85);
-        }
-        EXPECT_GT(albedo, 0.5) << view;
+        EXPECT_GT(albedo, 0.85) << view;
         EXPECT_LE(albedo, 1.0) << view;
-        EXPECT_LE(albedo, previous + 1e-3) << "albedo should not grow toward grazing views: " << view;
-        previous = albedo;
     }
 }
 
