@@ -131,6 +131,9 @@ void PathTracer::declareParams(ParamList& p) {
     p.addEnum("lightSampling", &mLightSampling, LightSamplingMode::Mis, {"mis", "nee", "bsdf"})
         .doc("direct light by MIS of light and BRDF sampling, light sampling only, or BRDF sampling only");
     p.add("lambertOnly", &mLambertOnly, false).doc("replace the glTF BRDF by baseColor/pi (validation)");
+    p.add("energyCompensation", &mEnergyCompensation, true)
+        .doc("multiple-scattering energy compensation of the glTF BRDF (a white furnace reflects 1 at every "
+             "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
     p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda"})
         .doc("where to run; without a usable CUDA device, auto and cuda run on the CPU");
     p.add("seed", &mSeed, 0).range(0, 1 << 30).doc("decorrelates runs that share frame indices");
@@ -305,6 +308,7 @@ void PathTracer::execute(PassContext& ctx) {
     set.rrStartBounce = uint32_t(mRrStartBounce);
     set.lightSampling = uint32_t(mLightSampling);
     set.lambertOnly = mLambertOnly;
+    set.multiScatter = mEnergyCompensation;
     const uint32_t spp = uint32_t(mSamplesPerPixel);
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
     const pt::LightsView lights = mLights;

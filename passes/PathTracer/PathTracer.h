@@ -34,6 +34,7 @@ private:
     int mRrStartBounce = 2;
     LightSamplingMode mLightSampling = LightSamplingMode::Mis;
     bool mLambertOnly = false;
+    bool mEnergyCompensation = true;
     Device mDevice = Device::Auto;
     int mSeed = 0;
     bool mSimdShading = true;

@@ -25,6 +25,7 @@ struct PathTracerSettings {
     uint32_t rrStartBounce = 2;  ///< Russian roulette from this bounce on
     uint32_t lightSampling = kMis;
     bool lambertOnly = false;  ///< f = baseColor / pi, for analytic tests
+    bool multiScatter = true;  ///< the BRDF's energy compensation (BrdfInputs::multiScatter)
 };
 
 struct PathResult {
@@ -206,7 +207,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
                     f = lambertEval(s, n, ls.wi);
                     bsdfPdf = cosI * kInvPi;
                 } else {
-                    bv = makeBrdfVertex(brdfInputs(s), n, wo, !lastVertex);  // no MIS weight at the last vertex
+                    bv = makeBrdfVertex(brdfInputs(s, set.multiScatter), n, wo, !lastVertex);  // no MIS weight at the last vertex
                     bvReady = true;
                     const BrdfEval e = evalBrdfVertex(bv, ls.wi);
                     f = e.f;
@@ -243,7 +244,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
         st.throughput *= s.baseColor;  // f cos / pdf = (a/pi) cos / (cos/pi)
         st.prevBsdfPdf = cosI * kInvPi;
     } else {
-        if (!bvReady) bv = makeBrdfVertex(brdfInputs(s), n, wo);
+        if (!bvReady) bv = makeBrdfVertex(brdfInputs(s, set.multiScatter), n, wo);
         const BrdfSample bs = sampleBrdfVertex(bv, glm::vec2(b0, b1), b2);
         if (!bs.valid || glm::dot(fn, bs.wi) <= 0.f) return request;
         wi = bs.wi;

@@ -114,58 +114,129 @@ HWY_INLINE FrameV makeFrame(D d, const V3& n) {
     return f;
 }
 
-/// BrdfVertex (BRDF.h) for one path per lane.
+/// tableCell() (BRDF.h): x in [0, 1] (NaN read as 0) to a cell index of the albedo tables and the fraction in it.
+HWY_INLINE hn::Vec<hn::RebindToSigned<D>> tableCell(D d, V x, V& frac) {
+    const hn::RebindToSigned<D> di;
+    const V clamped = hn::Min(hn::IfThenElseZero(hn::Gt(x, hn::Zero(d)), x), hn::Set(d, 1.f));
+    const V t = clamped * hn::Set(d, float(kBrdfTableSize - 1));
+    const V cell = hn::Min(hn::Floor(t), hn::Set(d, float(kBrdfTableSize - 2)));
+    frac = t - cell;
+    return hn::ConvertTo(di, cell);
+}
+
+/// ggxAlbedo() (BRDF.h) at n.wo = mu for lanes whose roughness row starts at `row` (2 kBrdfTableSize y) with
+/// fraction fy.
+HWY_INLINE void ggxAlbedo(D d, hn::Vec<hn::RebindToSigned<D>> row, V fy, V mu, V& e, V& es) {
+    const hn::RebindToSigned<D> di;
+    V fx;
+    const auto x = tableCell(d, hn::Sqrt(hn::Max(mu, hn::Zero(d))), fx);
+    const auto i0 = row + hn::ShiftLeft<1>(x), i1 = i0 + hn::Set(di, 2 * kBrdfTableSize);
+    const float* t = ggxAlbedoTable();
+    const V e00 = hn::GatherIndex(d, t, i0), s00 = hn::GatherIndex(d, t + 1, i0);
+    const V e01 = hn::GatherIndex(d, t + 2, i0), s01 = hn::GatherIndex(d, t + 3, i0);
+    const V e10 = hn::GatherIndex(d, t, i1), s10 = hn::GatherIndex(d, t + 1, i1);
+    const V e11 = hn::GatherIndex(d, t + 2, i1), s11 = hn::GatherIndex(d, t + 3, i1);
+    const V e0 = hn::MulAdd(e01 - e00, fx, e00), e1 = hn::MulAdd(e11 - e10, fx, e10);
+    const V s0 = hn::MulAdd(s01 - s00, fx, s00), s1 = hn::MulAdd(s11 - s10, fx, s10);
+    e = hn::MulAdd(e1 - e0, fy, e0);
+    es = hn::MulAdd(s1 - s0, fy, s0);
+}
+
+/// multiScatterFresnel() (BRDF.h).
+HWY_INLINE V multiScatterFresnel(D d, V f0, V f90, V eAvg) {
+    const V one = hn::Set(d, 1.f);
+    const V fAvg = hn::MulAdd(f90 - f0, hn::Set(d, 1.f / 21.f), f0);
+    return hn::Div(fAvg * fAvg * eAvg, hn::NegMulAdd(fAvg, one - eAvg, one));
+}
+
+/// BrdfVertex (BRDF.h, with its BrdfLobes) for one path per lane.
 struct VertexV {
     FrameV frame;
-    V3 wo, base, f0;
-    V metallic, alpha, a2, pSpec, invA2, invPiA2, transmitOut, smithWo, specPdfScale;
+    V3 wo, f0, msScale, diffuseScale, dielectricF0;
+    V f90, dielectricF90, layerE, layerEs, layerC;
+    V alpha, a2, pSpec, invA2, invPiA2, smithWo, specPdfScale;
+    hn::Vec<hn::RebindToSigned<D>> row;  ///< the roughness row of the albedo table (2 kBrdfTableSize y)
+    V rowFrac;
     M valid;
 };
 
-HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V metallic, V roughness, bool withPdf,
-                           VertexV& v) {
-    const V one = hn::Set(d, 1.f), zero = hn::Zero(d);
+/// makeBrdfVertex() and makeBrdfLobes() (BRDF.h).
+HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V metallic, V roughness,
+                           const V3& specularF0, V specularF90, bool multiScatter, bool withPdf, VertexV& v) {
+    const V one = hn::Set(d, 1.f), zero = hn::Zero(d), invPi = hn::Set(d, kInvPi);
     v.frame = makeFrame(d, n);
     v.wo = v.frame.toLocal(woW);
     v.valid = hn::Gt(v.wo.z, zero);
-    v.base = base;
-    v.metallic = metallic;
-    const V f0d = hn::Set(d, kDielectricF0);
-    v.f0 = {hn::MulAdd(base.x - f0d, metallic, f0d), hn::MulAdd(base.y - f0d, metallic, f0d),
-            hn::MulAdd(base.z - f0d, metallic, f0d)};
+    const V m = metallic, oneMinusM = one - metallic;
+    v.f0 = {hn::MulAdd(base.x - specularF0.x, m, specularF0.x), hn::MulAdd(base.y - specularF0.y, m, specularF0.y),
+            hn::MulAdd(base.z - specularF0.z, m, specularF0.z)};
+    v.f90 = hn::MulAdd(one - specularF90, m, specularF90);
+    v.dielectricF0 = specularF0;
+    v.dielectricF90 = specularF90;
+    const hn::RebindToSigned<D> di;
+    const auto rowCell = tableCell(d, roughness, v.rowFrac);
+    v.row = rowCell * hn::Set(di, 2 * kBrdfTableSize);
+    V eo, eso;
+    ggxAlbedo(d, v.row, v.rowFrac, hn::Min(v.wo.z, one), eo, eso);
+    // ggxAlbedoAverage(): the pairs of the row and of the next.
+    const auto ia = hn::ShiftLeft<1>(rowCell);
+    const float* avg = ggxAlbedoAvgTable();
+    const V ea0 = hn::GatherIndex(d, avg, ia), sa0 = hn::GatherIndex(d, avg + 1, ia);
+    const V ea1 = hn::GatherIndex(d, avg + 2, ia), sa1 = hn::GatherIndex(d, avg + 3, ia);
+    const V eAvg = hn::MulAdd(ea1 - ea0, v.rowFrac, ea0), esAvg = hn::MulAdd(sa1 - sa0, v.rowFrac, sa0);
+    // The dielectric layer's scalar albedo.
+    const V s0 = hn::Max(hn::Max(specularF0.x, specularF0.y), specularF0.z), s90 = specularF90;
+    const V lossAvg = one - eAvg;
+    const M compensate = multiScatter ? hn::Gt(lossAvg, hn::Set(d, 1e-5f)) : hn::FirstN(d, 0);
+    const V safeLoss = hn::IfThenElse(compensate, lossAvg, one);
+    const V fmsLayer = hn::IfThenElseZero(compensate, multiScatterFresnel(d, s0, s90, eAvg));
+    v.layerE = s0 - fmsLayer;
+    v.layerEs = s90 - s0;
+    v.layerC = fmsLayer;
+    const V layerOut = hn::MulAdd(v.layerE, eo, hn::MulAdd(v.layerEs, eso, v.layerC));
+    const V diffuseW = oneMinusM * invPi;
+    const V3 diffuse = scale(base, diffuseW);
+    V3 fms = {zero, zero, zero};
+    if (multiScatter) {
+        fms = {hn::MulAdd(oneMinusM, multiScatterFresnel(d, specularF0.x, s90, eAvg),
+                          m * multiScatterFresnel(d, base.x, one, eAvg)),
+               hn::MulAdd(oneMinusM, multiScatterFresnel(d, specularF0.y, s90, eAvg),
+                          m * multiScatterFresnel(d, base.y, one, eAvg)),
+               hn::MulAdd(oneMinusM, multiScatterFresnel(d, specularF0.z, s90, eAvg),
+                          m * multiScatterFresnel(d, base.z, one, eAvg))};
+        fms = {hn::IfThenElseZero(compensate, fms.x), hn::IfThenElseZero(compensate, fms.y),
+               hn::IfThenElseZero(compensate, fms.z)};
+        const V layerAvg = hn::MulAdd(v.layerE, eAvg, hn::MulAdd(v.layerEs, esAvg, v.layerC));
+        const M below1 = hn::Lt(layerAvg, one);
+        const V diffuseOut = hn::IfThenElseZero(
+            below1, hn::Div(hn::Max(one - layerOut, zero), hn::IfThenElse(below1, one - layerAvg, one)));
+        v.diffuseScale = scale(diffuse, diffuseOut);
+    } else {
+        v.diffuseScale = diffuse;
+    }
+    v.msScale = scale(fms, hn::Div((one - eo) * invPi, safeLoss));
     v.alpha = hn::Max(roughness * roughness, hn::Set(d, kMinAlpha));
     v.a2 = v.alpha * v.alpha;
-    v.transmitOut =
-        one - hn::MulAdd(hn::Set(d, 1.f - kDielectricF0), schlickWeight(d, v.wo.z), hn::Set(d, kDielectricF0));
     v.smithWo = hn::Sqrt(hn::MulAdd(one - v.a2, v.wo.z * v.wo.z, v.a2));
     v.invA2 = hn::Div(one, v.a2);
-    v.invPiA2 = v.invA2 * hn::Set(d, kInvPi);
+    v.invPiA2 = v.invA2 * invPi;
     if (!withPdf) {  // makeBrdfVertex(withPdf = false): only f is wanted
         v.pSpec = v.specPdfScale = zero;
         return;
     }
-    // specularLobeProbability(): Karis' specular albedo against the coupled diffuse albedo.
-    const V cosV = clamp01(d, v.wo.z);
-    const V rx = hn::MulAdd(roughness, hn::Set(d, -1.f), one),
-            ry = hn::MulAdd(roughness, hn::Set(d, -0.0275f), hn::Set(d, 0.0425f));
-    const V rz = hn::MulAdd(roughness, hn::Set(d, -0.572f), hn::Set(d, 1.04f)),
-            rw = hn::MulAdd(roughness, hn::Set(d, 0.022f), hn::Set(d, -0.04f));
-    const V fall = hn::Exp(d, hn::Set(d, -9.28f * kLn2) * cosV);
-    const V a004 = hn::MulAdd(hn::Min(fall, rx * rx), rx, ry);
-    const V A = hn::MulAdd(hn::Set(d, -1.04f), a004, rz), B = hn::MulAdd(hn::Set(d, 1.04f), a004, rw);
-    const V3 specAlbedo = {clamp01(d, hn::MulAdd(v.f0.x, A, B)), clamp01(d, hn::MulAdd(v.f0.y, A, B)),
-                           clamp01(d, hn::MulAdd(v.f0.z, A, B))};
+    // Lobe selection: the GGX lobe's albedo against the others'.
+    const V3 specAlbedo = {hn::MulAdd(v.f0.x, eo - eso, v.f90 * eso), hn::MulAdd(v.f0.y, eo - eso, v.f90 * eso),
+                           hn::MulAdd(v.f0.z, eo - eso, v.f90 * eso)};
     const V spec = luminance(d, specAlbedo);
-    const V diffuse = (one - metallic) *
-                      (one - schlickWeight(d, cosV) * hn::Set(d, 1.f - kDielectricF0) - hn::Set(d, kDielectricF0)) *
-                      hn::Set(d, 0.91f) * luminance(d, base);
-    const V ratio = hn::Min(hn::Max(hn::Div(spec, spec + diffuse), hn::Set(d, 0.1f)), hn::Set(d, 0.9f));
-    v.pSpec = hn::IfThenElse(hn::Gt(diffuse, zero), ratio, one);
+    const V other = hn::MulAdd(luminance(d, fms), one - eo,
+                               oneMinusM * luminance(d, base) * hn::Max(one - layerOut, zero));
+    const V ratio = hn::Min(hn::Max(hn::Div(spec, spec + other), hn::Set(d, 0.1f)), hn::Set(d, 0.9f));
+    v.pSpec = hn::IfThenElse(hn::Gt(other, zero), ratio, one);
     v.specPdfScale = hn::Div(v.pSpec, hn::Set(d, 2.f) * (v.wo.z + v.smithWo));
 }
 
 /// evalBrdfVertexLocal() (BRDF.h): f and the mixture pdf for a local wi; both 0 where the vertex is invalid.
-HWY_INLINE void evalVertex(D d, const VertexV& v, const V3& wi, V3& f, V& pdf) {
+HWY_INLINE void evalVertex(D d, const VertexV& v, const V3& wi, bool multiScatter, V3& f, V& pdf) {
     const V one = hn::Set(d, 1.f), zero = hn::Zero(d);
     const V3 hs = add(v.wo, wi);
     const V lenSq = dot(hs, hs);
@@ -182,13 +253,26 @@ HWY_INLINE void evalVertex(D d, const VertexV& v, const V3& wi, V3& f, V& pdf) {
     const V VdotH = hn::IfThenElseZero(lenOk, hn::Sqrt(hn::Set(d, 0.5f) * hn::Abs(dot(v.wo, hs))));
     const V pdfAbove = hn::MulAdd(v.specPdfScale, D_, (one - v.pSpec) * (wi.z * hn::Set(d, kInvPi)));
     const V w = schlickWeight(d, VdotH);
-    const V transmitIn =
-        one - hn::MulAdd(hn::Set(d, 1.f - kDielectricF0), schlickWeight(d, wi.z), hn::Set(d, kDielectricF0));
-    const V diffuse = (one - v.metallic) * transmitIn * v.transmitOut * hn::Set(d, kInvPi);
+    // otherLobes(): multiple scattering and diffuse.
+    V3 other;
+    if (multiScatter) {
+        V ei, esi;
+        ggxAlbedo(d, v.row, v.rowFrac, hn::Min(wi.z, one), ei, esi);
+        const V diffuseIn = hn::Max(one - hn::MulAdd(v.layerE, ei, hn::MulAdd(v.layerEs, esi, v.layerC)), zero);
+        const V msIn = one - ei;
+        other = {hn::MulAdd(v.msScale.x, msIn, v.diffuseScale.x * diffuseIn),
+                 hn::MulAdd(v.msScale.y, msIn, v.diffuseScale.y * diffuseIn),
+                 hn::MulAdd(v.msScale.z, msIn, v.diffuseScale.z * diffuseIn)};
+    } else {
+        const V f90w = v.dielectricF90 * w;
+        other = {v.diffuseScale.x * (one - hn::MulAdd(v.dielectricF0.x, one - w, f90w)),
+                 v.diffuseScale.y * (one - hn::MulAdd(v.dielectricF0.y, one - w, f90w)),
+                 v.diffuseScale.z * (one - hn::MulAdd(v.dielectricF0.z, one - w, f90w))};
+    }
     const M above = hn::And(v.valid, hn::Not(below));
-    f.x = hn::IfThenElseZero(above, hn::MulAdd(hn::MulAdd(one - v.f0.x, w, v.f0.x), DV, diffuse * v.base.x));
-    f.y = hn::IfThenElseZero(above, hn::MulAdd(hn::MulAdd(one - v.f0.y, w, v.f0.y), DV, diffuse * v.base.y));
-    f.z = hn::IfThenElseZero(above, hn::MulAdd(hn::MulAdd(one - v.f0.z, w, v.f0.z), DV, diffuse * v.base.z));
+    f.x = hn::IfThenElseZero(above, hn::MulAdd(hn::MulAdd(v.f90 - v.f0.x, w, v.f0.x), DV, other.x));
+    f.y = hn::IfThenElseZero(above, hn::MulAdd(hn::MulAdd(v.f90 - v.f0.y, w, v.f0.y), DV, other.y));
+    f.z = hn::IfThenElseZero(above, hn::MulAdd(hn::MulAdd(v.f90 - v.f0.z, w, v.f0.z), DV, other.z));
     pdf = hn::IfThenElseZero(v.valid, hn::IfThenElse(below, pdfBelow, pdfAbove));
 }
 
@@ -231,6 +315,7 @@ HWY_INLINE V3 sampleDirection(D d, const VertexV& v, V u0, V u1, V uLobe) {
 struct Batch {
     HWY_ALIGN float n[3][kMaxShadeLanes], fn[3][kMaxShadeLanes], wo[3][kMaxShadeLanes], base[3][kMaxShadeLanes];
     HWY_ALIGN float metallic[kMaxShadeLanes], roughness[kMaxShadeLanes];
+    HWY_ALIGN float specularF0[3][kMaxShadeLanes], specularF90[kMaxShadeLanes];
     HWY_ALIGN float lightDir[3][kMaxShadeLanes], lightLi[3][kMaxShadeLanes], lightPdf[kMaxShadeLanes];
     HWY_ALIGN float throughput[3][kMaxShadeLanes];
     HWY_ALIGN float u[4][kMaxShadeLanes];  // BRDF direction (2), lobe, Russian roulette
@@ -263,7 +348,7 @@ HWY_INLINE glm::vec3 get3(const float (&a)[3][kMaxShadeLanes], uint32_t lane) {
 }
 
 /// The vector part: everything after the light sample, for every lane of the batch.
-void shadeBatch(Batch& b) {
+void shadeBatch(Batch& b, bool multiScatter) {
     const D d;
     const V zero = hn::Zero(d), one = hn::Set(d, 1.f);
     const V3 n = load3(d, b.n), fn = load3(d, b.fn), wo = load3(d, b.wo), base = load3(d, b.base);
@@ -274,7 +359,8 @@ void shadeBatch(Batch& b) {
     const bool scatters = !hn::AllFalse(d, flag(d, b.scatter));
     const bool withPdf = scatters || !hn::AllFalse(d, flag(d, b.misWeighted));
     VertexV v;  // filled in place: returned by value, its 25 vectors were copied through memory
-    makeVertex(d, n, wo, base, hn::Load(d, b.metallic), hn::Load(d, b.roughness), withPdf, v);
+    makeVertex(d, n, wo, base, hn::Load(d, b.metallic), hn::Load(d, b.roughness), load3(d, b.specularF0),
+               hn::Load(d, b.specularF90), multiScatter, withPdf, v);
 
     // Next-event estimation.
     const V3 wl = load3(d, b.lightDir), Li = load3(d, b.lightLi);
@@ -284,7 +370,7 @@ void shadeBatch(Batch& b) {
         hn::And(hn::And(flag(d, b.lightOk), hn::Gt(cosI, zero)), hn::And(hn::Gt(dot(fn, wl), zero), nonZero(d, Li)));
     V3 f;
     V bsdfPdf;
-    evalVertex(d, v, v.frame.toLocal(wl), f, bsdfPdf);
+    evalVertex(d, v, v.frame.toLocal(wl), multiScatter, f, bsdfPdf);
     const M shadow = hn::And(lightOk, nonZero(d, f));
     const V safeLightPdf = hn::IfThenElse(shadow, lightPdf, one);
     const V wOverPdf = hn::IfThenElse(flag(d, b.misWeighted),
@@ -304,7 +390,7 @@ void shadeBatch(Batch& b) {
     const V3 wiL = v.frame.toLocal(wi);  // as the light-sample evaluation sees a world direction
     V3 fs;
     V pdf;
-    evalVertex(d, v, wiL, fs, pdf);
+    evalVertex(d, v, wiL, multiScatter, fs, pdf);
     const M sampled =
         hn::And(hn::And(flag(d, b.scatter), hn::Gt(wiL.z, zero)),
                 hn::And(hn::And(hn::Gt(pdf, zero), hn::Lt(pdf, hn::Set(d, std::numeric_limits<float>::infinity()))),
@@ -333,6 +419,8 @@ void fillIdle(Batch& b, uint32_t lane) {
     }
     b.metallic[lane] = 0.f;
     b.roughness[lane] = 0.5f;
+    for (int c = 0; c < 3; ++c) b.specularF0[c][lane] = kDielectricF0;
+    b.specularF90[lane] = 1.f;
     b.lightPdf[lane] = 1.f;
     for (auto& u : b.u) u[lane] = 0.5f;
     b.lightOk[lane] = b.misWeighted[lane] = b.scatter[lane] = b.roulette[lane] = 0.f;
@@ -380,8 +468,11 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         set3(b.fn, j, sf.fn);
         set3(b.wo, j, wo);
         set3(b.base, j, s.baseColor);
-        b.metallic[j] = s.metallic;
-        b.roughness[j] = s.roughness;
+        const BrdfInputs in = brdfInputs(s, set.multiScatter);
+        b.metallic[j] = in.metallic;
+        b.roughness[j] = in.roughness;
+        set3(b.specularF0, j, in.specularF0);
+        b.specularF90[j] = in.specularF90;
         set3(b.lightDir, j, ls.valid ? ls.wi : glm::vec3(0.f, 0.f, 1.f));
         set3(b.lightLi, j, Li);
         b.lightPdf[j] = ls.valid ? ls.pdf : 1.f;
@@ -397,7 +488,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         b.roulette[j] = bounce + 1 >= set.rrStartBounce ? 1.f : 0.f;
     }
 
-    shadeBatch(b);
+    shadeBatch(b, set.multiScatter);
 
     // Back into the paths, as shadeVertex() leaves them.
     for (uint32_t j = 0; j < count; ++j) {

@@ -393,10 +393,17 @@ TEST(PathTracer, DirectPlusIndirectIsColor) {
 // card, point and spot lights), with the direct/indirect split.
 TEST(PathTracer, SimdShadingAgreesWithPerPathKernel) {
     const uint32_t W = 64, H = 64;
-    for (const char* name : {"cornell_box.gltf", "cornell_dynamic.gltf", "materials.gltf"}) {
+    for (const char* name : {"cornell_box.gltf", "cornell_dynamic.gltf", "materials.gltf", "materials.gltf plain"}) {
+        // "plain": the BRDF without energy compensation.
+        const std::string file = std::string(name).substr(0, std::string(name).find(' '));
+        const bool compensated = file == name;
         auto render = [&](bool simd) {
-            auto scene = Scene::load(scenePath(name));
-            auto g = ptGraph({{"maxBounces", 4}, {"samplesPerPixel", 4}, {"rrStartBounce", 2}, {"simdShading", simd}},
+            auto scene = Scene::load(scenePath(file));
+            auto g = ptGraph({{"maxBounces", 4},
+                              {"samplesPerPixel", 4},
+                              {"rrStartBounce", 2},
+                              {"simdShading", simd},
+                              {"energyCompensation", compensated}},
                              W, H, scene, true);
             frame(*g, *scene, 3, W, H);
             std::vector<glm::vec4> out;
