@@ -131,6 +131,10 @@ void PathTracer::declareParams(ParamList& p) {
     p.addEnum("lightSampling", &mLightSampling, LightSamplingMode::Mis, {"mis", "nee", "bsdf"})
         .doc("direct light by MIS of light and BRDF sampling, light sampling only, or BRDF sampling only");
     p.add("lambertOnly", &mLambertOnly, false).doc("replace the glTF BRDF by baseColor/pi (validation)");
+    p.add("indirectClamp", &mIndirectClamp, 0.f)
+        .range(0.f, 1e6f)
+        .doc("firefly guard: the largest channel of any contribution after the first bounce is clamped to this "
+             "(biased, darker); 0 = off, as references need");
     p.add("energyCompensation", &mEnergyCompensation, true)
         .doc("multiple-scattering energy compensation of the glTF BRDF (a white furnace reflects 1 at every "
              "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
@@ -309,6 +313,7 @@ void PathTracer::execute(PassContext& ctx) {
     set.lightSampling = uint32_t(mLightSampling);
     set.lambertOnly = mLambertOnly;
     set.multiScatter = mEnergyCompensation;
+    set.indirectClamp = mIndirectClamp;
     const uint32_t spp = uint32_t(mSamplesPerPixel);
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
     const pt::LightsView lights = mLights;

@@ -35,6 +35,7 @@ private:
     LightSamplingMode mLightSampling = LightSamplingMode::Mis;
     bool mLambertOnly = false;
     bool mEnergyCompensation = true;
+    float mIndirectClamp = 0.f;
     Device mDevice = Device::Auto;
     int mSeed = 0;
     bool mSimdShading = true;

@@ -26,7 +26,18 @@ struct PathTracerSettings {
     uint32_t lightSampling = kMis;
     bool lambertOnly = false;  ///< f = baseColor / pi, for analytic tests
     bool multiScatter = true;  ///< the BRDF's energy compensation (BrdfInputs::multiScatter)
+    float indirectClamp = 0.f; ///< firefly guard: largest channel of one indirect contribution; 0 = off
 };
+
+/// The firefly guard of the real-time graphs: a contribution that reaches the pixel after the first bounce (what
+/// PathResult files under "indirect") is scaled down so that its largest channel is at most `limit` (0: off). It
+/// keeps the hue and biases the image darker where rare paths carry much energy (caustics through glossy
+/// reflections, small bright lights seen in glossy surfaces); direct light is never clamped.
+LOOM_HD inline glm::vec3 clampIndirect(glm::vec3 c, float limit) {
+    if (!(limit > 0.f)) return c;
+    const float m = glm::max(glm::max(c.x, c.y), c.z);
+    return m > limit ? c * (limit / m) : c;
+}
 
 struct PathResult {
     glm::vec3 color{0.f};
@@ -104,7 +115,7 @@ LOOM_HD inline bool shadeEmission(PathState& st, const RayHit& hit, const SceneV
             else if (set.lightSampling == kMis)
                 w = powerHeuristic(st.prevBsdfPdf, lights.pEnv * envPdf(lights.env, rayDir));
         }
-        const glm::vec3 c = st.throughput * Le * w;
+        const glm::vec3 c = directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
         r.color += c;
         (directSlot ? r.direct : r.indirect) += c;
         return false;
@@ -125,15 +136,39 @@ LOOM_HD inline bool shadeEmission(PathState& st, const RayHit& hit, const SceneV
                 w = powerHeuristic(st.prevBsdfPdf, triLightPdf(lights, t, glm::dot(d, d), cosLight));
             }
         }
-        const glm::vec3 c = st.throughput * Le * w;
+        const glm::vec3 c = directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
         r.color += c;
         (directSlot ? r.direct : r.indirect) += c;
     }
     return st.bounce < set.maxBounces;
 }
 
+/// Smallest cosine between the geometric normal and the mirror direction about a bent shading normal
+/// (bendShadingNormal()).
+inline constexpr float kMinReflectionCosine = 0.02f;
+
+/// A shading normal n bent, where needed, so that the mirror direction of wo about it stays above the geometric
+/// surface (ng, on wo's side): the treatment of shading normals in Keller et al. 2017 ("The Iray Light Transport
+/// Simulation and Rendering System", appendix A.3). A normal map can tilt n so far that the reflection of wo falls
+/// below the surface; such a path would end there, and a normal-mapped mirror shows black rings. Here the mirror
+/// direction r is lifted to the geometric horizon plus kMinReflectionCosine, keeping its azimuth, and n becomes the
+/// half vector of wo and the lifted r (so reflecting wo about it gives exactly the lifted r). Where r is already
+/// above the surface n is returned unchanged, so the map is continuous.
+LOOM_HD inline glm::vec3 bendShadingNormal(glm::vec3 n, glm::vec3 ng, glm::vec3 wo) {
+    const glm::vec3 r = 2.f * glm::dot(wo, n) * n - wo;
+    const float c = glm::dot(r, ng);
+    if (c >= kMinReflectionCosine) return n;
+    const glm::vec3 tangential = r - c * ng;
+    const float len = glm::length(tangential);
+    if (!(len > 1e-6f)) return ng;
+    const float lift = kMinReflectionCosine;
+    const glm::vec3 lifted = tangential * (std::sqrt(1.f - lift * lift) / len) + lift * ng;
+    return glm::normalize(wo + lifted);
+}
+
 /// Normals of a scattering vertex turned to the side the ray arrived from (wo = -rayDir), and the offset origin of
-/// the rays that leave it.
+/// the rays that leave it. The shading normal is bent where its mirror direction would leave through the geometric
+/// surface (bendShadingNormal()).
 struct ScatterFrame {
     glm::vec3 n, fn, p;
 };
@@ -144,6 +179,7 @@ LOOM_HD inline ScatterFrame scatterFrame(const SurfaceHit& s, glm::vec3 wo) {
         f.n = -f.n;
     }
     if (glm::dot(f.n, wo) <= 0.f) f.n = f.fn;  // shading normal beyond the silhouette: fall back to geometry
+    f.n = bendShadingNormal(f.n, f.fn, wo);
     f.p = offsetOrigin(s.posW, f.fn);
     return f;
 }
@@ -223,6 +259,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
                                                ? ls.pdf / (ls.pdf * ls.pdf + bsdfPdf * bsdfPdf)
                                                : 1.f / ls.pdf;
                     st.shadowContrib = st.throughput * f * cosI * Li * wOverPdf;
+                    if (!nearSurface) st.shadowContrib = clampIndirect(st.shadowContrib, set.indirectClamp);
                     st.shadowNearSurface = nearSurface;
                     request = kShadowRay;
                 }

@@ -499,7 +499,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
             ++st.r.rays;
             st.shadowDir = get3(b.lightDir, j);
             st.shadowTMax = shadowRayTMax(b.lightDistance[j]);
-            st.shadowContrib = get3(b.contrib, j);
+            st.shadowContrib = st.bounce == 0 ? get3(b.contrib, j) : clampIndirect(get3(b.contrib, j), set.indirectClamp);
             st.shadowNearSurface = st.bounce == 0;
             requests[j] |= kShadowRay;
         }
