@@ -199,11 +199,18 @@ LOOM_HD inline float shadowRayTMax(float distance) {
     return distance >= 1e29f ? 1e30f : distance * (1.f - 1e-4f);
 }
 
+/// Roughness below which a path's last vertex still samples the BRDF (see isLastVertex()).
+inline constexpr float kGlossyRoughness = 0.4f;
+
 /// Whether the vertex at `bounce` is a path's last scattering vertex: no BRDF-sampled ray follows it, so light
 /// sampling alone estimates direct light there (weight 1): unbiased, and it saves a closest-hit ray per path.
-/// BRDF-only mode still traces it.
-LOOM_HD inline bool isLastVertex(uint32_t bounce, const PathTracerSettings& set) {
-    return bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly;
+/// BRDF-only mode still traces it, and so does a glossy vertex (roughness below kGlossyRoughness): light sampling
+/// alone meets the peak of a narrow lobe (D up to 1 / (pi alpha^2), 5e4 at roughness 0.05) with a small light pdf,
+/// the fireflies of a glossy reflection of a light. There the BRDF sample is traced too, for the emission it finds
+/// (the path ends at that hit, bounce = maxBounces), and both samples are MIS-weighted.
+LOOM_HD inline bool isLastVertex(uint32_t bounce, const PathTracerSettings& set, float roughness) {
+    return bounce + 1 == set.maxBounces && set.lightSampling != kBsdfOnly &&
+           (set.lambertOnly || !(roughness < kGlossyRoughness));
 }
 
 /// Shades the hit (or miss) of st.rayOrigin + t st.rayDir: emission reached there, a light sample (the shadow ray
@@ -227,7 +234,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
     BrdfVertex bv;
     bool bvReady = false;
     const bool nearSurface = bounce == 0;
-    const bool lastVertex = isLastVertex(bounce, set);
+    const bool lastVertex = isLastVertex(bounce, set, s.roughness);
 
     // Next-event estimation: the shadow ray is left to the caller, with the contribution it carries when clear.
     const glm::vec2 l01 = rng.next2(), l23 = rng.next2();

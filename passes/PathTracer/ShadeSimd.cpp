@@ -458,7 +458,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         const glm::vec3 wo = -st.rayDir;
         const ScatterFrame sf = scatterFrame(s, wo);
         st.rayOrigin = sf.p;
-        const bool last = isLastVertex(bounce, set);
+        const bool last = isLastVertex(bounce, set, s.roughness);
         // The same numbers in the same dimensions as shadeVertex() draws them.
         const glm::vec2 l01 = rng.next2(), l23 = rng.next2(), b01 = rng.next2();
         const float uLobe = rng.next(), uRoulette = rng.next();
