@@ -18,13 +18,47 @@ struct RayScene::Impl {
     RTCScene top = nullptr;
     std::vector<RTCScene> meshScenes;          // one per Scene::meshes
     std::vector<RTCGeometry> instanceGeoms;    // one per Scene::instances
+    const SceneView* view = nullptr;           // the owning Scene's view (Scene is neither copied nor moved)
+    bool alphaTested = false;                  // some geometry carries alphaFilter
 };
 
 namespace {
 void embreeError(void*, RTCError code, const char* str) {
     spdlog::error("Embree error {}: {}", int(code), str ? str : "");
 }
+
+/// The any-hit filter of geometry whose material is MASK or BLEND, for intersection and occlusion queries alike:
+/// rejects a hit where the surface is not there (surfaceCovers, drawing from the ray's coverage key in its id).
+/// Streams and packets call it with N > 1; lanes with valid[i] == 0 are left alone.
+void alphaFilter(const RTCFilterFunctionNArguments* args) {
+    const auto* ctx = reinterpret_cast<const HitFilterContext*>(args->context);
+    if (!(ctx->rules & kRayAlphaTest)) return;
+    const unsigned n = args->N;
+    for (unsigned i = 0; i < n; ++i) {
+        if (args->valid[i] == 0) continue;
+        const uint32_t instance = RTCHitN_instID(args->hit, n, i, 0);
+        const uint32_t prim = RTCHitN_primID(args->hit, n, i);
+        if (!surfaceCovers(*ctx->scene, instance, prim, RTCHitN_u(args->hit, n, i), RTCHitN_v(args->hit, n, i),
+                           RTCRayN_id(args->ray, n, i)))
+            args->valid[i] = 0;
+    }
+}
 }  // namespace
+
+void cullBackFacesFilter(const RTCFilterFunctionNArguments* args) {
+    const auto* ctx = reinterpret_cast<const HitFilterContext*>(args->context);
+    const SceneView& view = *ctx->scene;
+    const unsigned n = args->N;
+    for (unsigned i = 0; i < n; ++i) {
+        if (args->valid[i] == 0) continue;
+        const uint32_t instance = RTCHitN_instID(args->hit, n, i, 0);
+        if (view.materials[view.meshes[view.instances[instance].mesh].material].doubleSided) continue;
+        // Inside an instance Embree hands filters the ray in the instance's object space.
+        const glm::vec3 dirObj(RTCRayN_dir_x(args->ray, n, i), RTCRayN_dir_y(args->ray, n, i),
+                               RTCRayN_dir_z(args->ray, n, i));
+        if (!facesRayObject(view, instance, RTCHitN_primID(args->hit, n, i), dirObj)) args->valid[i] = 0;
+    }
+}
 
 RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
     Impl& m = *mImpl;
@@ -33,8 +67,13 @@ RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
         throw Error(Error::Info{ErrorKind::Runtime, {}, {}, "cannot create the Embree device", {},
                                 "check that the CPU supports SSE4.2 or better"});
     rtcSetDeviceErrorFunction(m.device, embreeError, nullptr);
+    m.view = &scene.view();
+    // Camera rays cull back faces through a context filter (cullBackFacesFilter), which Embree calls only in
+    // scenes that enable it, instanced ones included. Other queries leave the context's filter null.
+    const RTCSceneFlags flags = RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION;
     for (const Mesh& mesh : scene.meshes) {
         RTCScene s = rtcNewScene(m.device);
+        rtcSetSceneFlags(s, flags);
         rtcSetSceneBuildQuality(s, RTC_BUILD_QUALITY_HIGH);
         if (!mesh.indices.empty()) {
             RTCGeometry g = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
@@ -50,6 +89,14 @@ RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
             auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                                                        3 * sizeof(uint32_t), mesh.triangleCount()));
             std::copy(mesh.indices.begin(), mesh.indices.end(), idx);
+            // Only alpha-tested geometry gets a filter: opaque geometry is traversed at full speed.
+            const bool alphaTested =
+                mesh.material < scene.materials.size() && scene.materials[mesh.material].alphaMode != AlphaMode::Opaque;
+            if (alphaTested) {
+                rtcSetGeometryIntersectFilterFunction(g, alphaFilter);
+                rtcSetGeometryOccludedFilterFunction(g, alphaFilter);
+                m.alphaTested = true;
+            }
             rtcCommitGeometry(g);
             rtcAttachGeometryByID(s, g, 0);
             rtcReleaseGeometry(g);
@@ -58,7 +105,7 @@ RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
         m.meshScenes.push_back(s);
     }
     m.top = rtcNewScene(m.device);
-    rtcSetSceneFlags(m.top, RTC_SCENE_FLAG_DYNAMIC);
+    rtcSetSceneFlags(m.top, RTCSceneFlags(RTC_SCENE_FLAG_DYNAMIC | flags));
     rtcSetSceneBuildQuality(m.top, RTC_BUILD_QUALITY_LOW);
     for (size_t i = 0; i < scene.instances.size(); ++i) {
         RTCGeometry g = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_INSTANCE);
@@ -97,19 +144,26 @@ void RayScene::updateInstances(const Scene& scene) {
 
 void* RayScene::embreeScene() const { return mImpl->top; }
 
-RayHit RayScene::intersect(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
-    return embreeIntersect(mImpl->top, o, d, tMin, tMax);
+bool RayScene::hasAlphaTestedGeometry() const {
+    return mImpl->alphaTested;
 }
 
-bool RayScene::occluded(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
-    return embreeOccluded(mImpl->top, o, d, tMin, tMax);
+RayHit RayScene::intersect(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax, uint32_t rules) const {
+    HitFilterContext ctx;
+    initHitFilterContext(ctx, *mImpl->view, rules);
+    return embreeIntersect(mImpl->top, ctx, o, d, tMin, tMax);
 }
 
-void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax,
-                           RayHit* hits) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+bool RayScene::occluded(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax, uint32_t rules) const {
+    HitFilterContext ctx;
+    initHitFilterContext(ctx, *mImpl->view, rules);
+    return embreeOccluded(mImpl->top, ctx, o, d, tMin, tMax);
+}
+
+void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax, RayHit* hits,
+                           uint32_t rules, const uint32_t* keys) const {
+    HitFilterContext ctx;
+    initHitFilterContext(ctx, *mImpl->view, rules, RTC_INTERSECT_CONTEXT_FLAG_COHERENT);
     alignas(64) RTCRayHit16 rh;
     alignas(64) int mask[16];
     for (int i = 0; i < 16; ++i) {
@@ -125,12 +179,12 @@ void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, cons
         rh.ray.tfar[i] = tMax;
         rh.ray.time[i] = 0.f;
         rh.ray.mask[i] = 0xFFFFFFFFu;
-        rh.ray.id[i] = unsigned(i);
+        rh.ray.id[i] = keys ? keys[i] : active ? rayCoverageKey(origins[i], dirs[i]) : 0u;
         rh.ray.flags[i] = 0;
         rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
     }
-    rtcIntersect16(mask, mImpl->top, &ctx, &rh);
+    rtcIntersect16(mask, mImpl->top, &ctx.embree, &rh);
     for (int i = 0; i < 16; ++i) {
         RayHit h;
         if (mask[i] && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) {

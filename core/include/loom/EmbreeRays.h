@@ -8,14 +8,38 @@
 #include <glm/glm.hpp>
 
 #include "loom/RayScene.h"
+#include "loom/SceneView.h"
+#include "loom/SurfaceKernels.h"
 
 namespace loom {
 
+/// Embree's intersection context extended with what Loom's filters read (Embree's documented pattern: the
+/// RTCIntersectContext comes first, and a filter casts the context it is given back to this). Every query against
+/// a RayScene's Embree scene passes one, made by initHitFilterContext. A ray's coverage key (cameraCoverageKey or
+/// rayCoverageKey) travels in its `id`, which Embree hands to filters for single rays, packets and streams alike.
+struct HitFilterContext {
+    RTCIntersectContext embree;
+    const SceneView* scene = nullptr;
+    uint32_t rules = 0;  ///< RayRules
+};
+
+/// The context filter of queries with kRayCullBackFaces: rejects back faces of single-sided materials
+/// (RayScene.cpp). It runs after the geometries' own (alpha) filters.
+void cullBackFacesFilter(const RTCFilterFunctionNArguments* args);
+
+/// A context for queries under `rules` (RayRules) over `scene`, the view of the Scene the RayScene was built from.
+inline void initHitFilterContext(HitFilterContext& c, const SceneView& scene, uint32_t rules,
+                                 RTCIntersectContextFlags flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT) {
+    rtcInitIntersectContext(&c.embree);
+    c.embree.flags = flags;
+    if (rules & kRayCullBackFaces) c.embree.filter = cullBackFacesFilter;
+    c.scene = &scene;
+    c.rules = rules;
+}
+
 /// Closest hit of o + t d, t in (tMin, tMax); none for a ray that is not traceable().
-inline RayHit embreeIntersect(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+inline RayHit embreeIntersect(RTCScene scene, HitFilterContext& ctx, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
     if (!traceable(o, d)) return {};
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
     rh.ray.org_x = o.x;
     rh.ray.org_y = o.y;
@@ -27,11 +51,11 @@ inline RayHit embreeIntersect(RTCScene scene, glm::vec3 o, glm::vec3 d, float tM
     rh.ray.time = 0.f;
     rh.ray.tfar = tMax;
     rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
+    rh.ray.id = rayCoverageKey(o, d);
     rh.ray.flags = 0;
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene, &ctx, &rh);
+    rtcIntersect1(scene, &ctx.embree, &rh);
     RayHit h;
     if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
         h.instance = rh.hit.instID[0];
@@ -44,10 +68,8 @@ inline RayHit embreeIntersect(RTCScene scene, glm::vec3 o, glm::vec3 d, float tM
 }
 
 /// Any hit of o + t d, t in (tMin, tMax); none for a ray that is not traceable().
-inline bool embreeOccluded(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+inline bool embreeOccluded(RTCScene scene, HitFilterContext& ctx, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
     if (!traceable(o, d)) return false;
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
     RTCRay r;
     r.org_x = o.x;
     r.org_y = o.y;
@@ -59,15 +81,16 @@ inline bool embreeOccluded(RTCScene scene, glm::vec3 o, glm::vec3 d, float tMin,
     r.time = 0.f;
     r.tfar = tMax;
     r.mask = 0xFFFFFFFFu;
-    r.id = 0;
+    r.id = rayCoverageKey(o, d);
     r.flags = 0;
-    rtcOccluded1(scene, &ctx, &r);
+    rtcOccluded1(scene, &ctx.embree, &r);
     return r.tfar < 0.f;  // Embree sets tfar to -inf on a hit
 }
 
 /// Sets up ray r of a stream (rtcIntersect1M, rtcOccluded1M): o + t d for t in (0, tMax), or, for a ray that is
-/// not traceable(), an inactive one (tnear > tfar), which Embree leaves as it is: no hit, no occluder.
-inline void setStreamRay(RTCRay& r, glm::vec3 o, glm::vec3 d, float tMax, unsigned id) {
+/// not traceable(), an inactive one (tnear > tfar), which Embree leaves as it is: no hit, no occluder. `key` is
+/// the ray's coverage key (rayCoverageKey(o, d) where the scene has alpha-tested geometry; anything otherwise).
+inline void setStreamRay(RTCRay& r, glm::vec3 o, glm::vec3 d, float tMax, uint32_t key) {
     const bool active = traceable(o, d);
     r.org_x = active ? o.x : 0.f;
     r.org_y = active ? o.y : 0.f;
@@ -79,7 +102,7 @@ inline void setStreamRay(RTCRay& r, glm::vec3 o, glm::vec3 d, float tMax, unsign
     r.time = 0.f;
     r.tfar = active ? tMax : 0.f;
     r.mask = 0xFFFFFFFFu;
-    r.id = id;
+    r.id = key;
     r.flags = 0;
 }
 
