@@ -1,13 +1,12 @@
 #include "loom/RayScene.h"
 
-#include "loom/EmbreeRays.h"
-
 #include <embree3/rtcore.h>
-
-#include <vector>
-
 #include <spdlog/spdlog.h>
 
+#include <cmath>
+#include <vector>
+
+#include "loom/EmbreeRays.h"
 #include "loom/Error.h"
 #include "loom/Scene.h"
 
@@ -20,6 +19,9 @@ struct RayScene::Impl {
     std::vector<RTCGeometry> instanceGeoms;    // one per Scene::instances
     const SceneView* view = nullptr;           // the owning Scene's view (Scene is neither copied nor moved)
     bool alphaTested = false;                  // some geometry carries alphaFilter
+
+    RayHit continuePastBackFaces(HitFilterContext& ctx, glm::vec3 o, glm::vec3 d, RayHit culled, float tMax,
+                                 uint32_t key) const;
 };
 
 namespace {
@@ -45,21 +47,6 @@ void alphaFilter(const RTCFilterFunctionNArguments* args) {
 }
 }  // namespace
 
-void cullBackFacesFilter(const RTCFilterFunctionNArguments* args) {
-    const auto* ctx = reinterpret_cast<const HitFilterContext*>(args->context);
-    const SceneView& view = *ctx->scene;
-    const unsigned n = args->N;
-    for (unsigned i = 0; i < n; ++i) {
-        if (args->valid[i] == 0) continue;
-        const uint32_t instance = RTCHitN_instID(args->hit, n, i, 0);
-        if (view.materials[view.meshes[view.instances[instance].mesh].material].doubleSided) continue;
-        // Inside an instance Embree hands filters the ray in the instance's object space.
-        const glm::vec3 dirObj(RTCRayN_dir_x(args->ray, n, i), RTCRayN_dir_y(args->ray, n, i),
-                               RTCRayN_dir_z(args->ray, n, i));
-        if (!facesRayObject(view, instance, RTCHitN_primID(args->hit, n, i), dirObj)) args->valid[i] = 0;
-    }
-}
-
 RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
     Impl& m = *mImpl;
     m.device = rtcNewDevice(nullptr);
@@ -68,12 +55,8 @@ RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
                                 "check that the CPU supports SSE4.2 or better"});
     rtcSetDeviceErrorFunction(m.device, embreeError, nullptr);
     m.view = &scene.view();
-    // Camera rays cull back faces through a context filter (cullBackFacesFilter), which Embree calls only in
-    // scenes that enable it, instanced ones included. Other queries leave the context's filter null.
-    const RTCSceneFlags flags = RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION;
     for (const Mesh& mesh : scene.meshes) {
         RTCScene s = rtcNewScene(m.device);
-        rtcSetSceneFlags(s, flags);
         rtcSetSceneBuildQuality(s, RTC_BUILD_QUALITY_HIGH);
         if (!mesh.indices.empty()) {
             RTCGeometry g = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
@@ -105,7 +88,7 @@ RayScene::RayScene(const Scene& scene) : mImpl(std::make_unique<Impl>()) {
         m.meshScenes.push_back(s);
     }
     m.top = rtcNewScene(m.device);
-    rtcSetSceneFlags(m.top, RTCSceneFlags(RTC_SCENE_FLAG_DYNAMIC | flags));
+    rtcSetSceneFlags(m.top, RTC_SCENE_FLAG_DYNAMIC);
     rtcSetSceneBuildQuality(m.top, RTC_BUILD_QUALITY_LOW);
     for (size_t i = 0; i < scene.instances.size(); ++i) {
         RTCGeometry g = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_INSTANCE);
@@ -148,10 +131,38 @@ bool RayScene::hasAlphaTestedGeometry() const {
     return mImpl->alphaTested;
 }
 
+namespace {
+/// Is hit h of a ray along d a back face to cull (kRayCullBackFaces): a single-sided material whose front (counter-
+/// clockwise) face looks away from the ray? ngObj is Embree's geometric normal in the instance's object space; the
+/// normal matrix carries it to world space, as facesRay does with the normal it rebuilds from the vertices.
+bool culled(const SceneView& view, const RayHit& h, glm::vec3 ngObj, glm::vec3 d) {
+    const InstanceView& inst = view.instances[h.instance];
+    return !view.materials[view.meshes[inst.mesh].material].doubleSided &&
+           !(glm::dot(inst.normalMatrix * ngObj, d) < 0.f);
+}
+}  // namespace
+
+/// Continues a ray from just beyond a culled back face, and each further one, as GBufferRaster's culling drops
+/// them (a miss after 16 such faces). Culling outside Embree: only camera rays cull, and most of their hits are
+/// front faces, while a filter on every single-sided geometry would cost every ray.
+RayHit RayScene::Impl::continuePastBackFaces(HitFilterContext& ctx, glm::vec3 o, glm::vec3 d, RayHit hit, float tMax,
+                                             uint32_t key) const {
+    for (int layer = 1; layer < 16; ++layer) {
+        glm::vec3 ng;
+        hit = embreeIntersect(top, ctx, o, d, std::nextafter(hit.t, 1e30f), tMax, key, &ng);
+        if (!hit.hit() || !culled(*view, hit, ng, d)) return hit;
+    }
+    return {};
+}
+
 RayHit RayScene::intersect(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax, uint32_t rules) const {
     HitFilterContext ctx;
     initHitFilterContext(ctx, *mImpl->view, rules);
-    return embreeIntersect(mImpl->top, ctx, o, d, tMin, tMax);
+    const uint32_t key = mImpl->alphaTested ? rayCoverageKey(o, d) : 0u;  // keys matter to alpha filters only
+    glm::vec3 ng;
+    const RayHit h = embreeIntersect(mImpl->top, ctx, o, d, tMin, tMax, key, &ng);
+    const bool cull = (rules & kRayCullBackFaces) && h.hit() && culled(*mImpl->view, h, ng, d);
+    return cull ? mImpl->continuePastBackFaces(ctx, o, d, h, tMax, key) : h;
 }
 
 bool RayScene::occluded(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax, uint32_t rules) const {
@@ -179,12 +190,16 @@ void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, cons
         rh.ray.tfar[i] = tMax;
         rh.ray.time[i] = 0.f;
         rh.ray.mask[i] = 0xFFFFFFFFu;
-        rh.ray.id[i] = keys ? keys[i] : active ? rayCoverageKey(origins[i], dirs[i]) : 0u;
+        rh.ray.id[i] = keys ? keys[i] : 0u;
         rh.ray.flags[i] = 0;
         rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
     }
+    // Keys matter to alpha filters only; hashed in a loop of their own, which keeps the one above simple.
+    if (!keys && mImpl->alphaTested)
+        for (int i = 0; i < 16; ++i) rh.ray.id[i] = rayCoverageKey(origins[i], dirs[i]);
     rtcIntersect16(mask, mImpl->top, &ctx.embree, &rh);
+    const bool cull = rules & kRayCullBackFaces;
     for (int i = 0; i < 16; ++i) {
         RayHit h;
         if (mask[i] && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) {
@@ -193,6 +208,8 @@ void RayScene::intersect16(const glm::vec3* origins, const glm::vec3* dirs, cons
             h.u = rh.hit.u[i];
             h.v = rh.hit.v[i];
             h.t = rh.ray.tfar[i];
+            if (cull && culled(*mImpl->view, h, glm::vec3(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]), dirs[i]))
+                h = mImpl->continuePastBackFaces(ctx, origins[i], dirs[i], h, tMax, rh.ray.id[i]);
         }
         hits[i] = h;
     }

@@ -72,8 +72,8 @@ void GBufferRT::execute(PassContext& ctx) {
     const CameraData cam = makeCameraData(camera, w, h);
     const SceneView& view = scene->view();
     const RayScene& rays = scene->rayScene();
-    // Culling and alpha testing happen inside Embree (RayRules), for the coherent 4x4 packets too; the path
-    // tracer's camera rays use the same rules and coverage keys, so they agree with this vbuffer bit for bit.
+    // Culling and alpha testing are RayScene's (RayRules), for the coherent 4x4 packets too; the path tracer's
+    // camera rays use the same rules and coverage keys, so they agree with this vbuffer bit for bit.
     const uint32_t rules = (mCullMode == CullMode::Back ? kRayCullBackFaces : 0u) | (mAlphaTest ? kRayAlphaTest : 0u);
     const uint32_t frame = uint32_t(ctx.frameIndex());
     parallelFor2D(w, h, [&](const Tile& t) {

@@ -25,6 +25,7 @@
 #include "TestUtil.h"
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
+#include "loom/RayScene.h"
 #include "loom/RenderGraph.h"
 #include "loom/Scene.h"
 
@@ -299,6 +300,18 @@ std::vector<std::pair<std::string, QuadLook>> maskLooks(bool below) {
 }
 
 }  // namespace
+
+// Only MASK and BLEND geometry carries an Embree filter: a scene without it traces at full speed.
+TEST(AlphaMode, OnlyAlphaTestedGeometryIsFiltered) {
+    TempDirs dirs;
+    EXPECT_FALSE(Scene::load(test::dataScene("cornell_box.gltf"))->rayScene().hasAlphaTestedGeometry());
+    const QuadLook opaque;
+    EXPECT_FALSE(seeThroughScene(dirs, "opaque", &opaque)->rayScene().hasAlphaTestedGeometry());
+    for (const auto& [name, look] : maskLooks(true))
+        EXPECT_TRUE(seeThroughScene(dirs, name, &look)->rayScene().hasAlphaTestedGeometry()) << name;
+    const QuadLook blend = blendLook();
+    EXPECT_TRUE(seeThroughScene(dirs, "blend", &blend)->rayScene().hasAlphaTestedGeometry());
+}
 
 // Below the cutoff the quad is not there for any ray: every image is bit-identical to the scene without it (the
 // same hits on the other surfaces, and the same random numbers).

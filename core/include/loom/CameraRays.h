@@ -18,6 +18,7 @@ namespace loom {
 template <class Fn>
 void traceCameraRays(const RayScene& rays, const CameraData& cam, const Tile& tile, uint32_t rules, uint32_t frame,
                      Fn&& fn) {
+    const bool keyed = (rules & kRayAlphaTest) && rays.hasAlphaTestedGeometry();  // keys matter to alpha filters only
     for (uint32_t by = tile.y0; by < tile.y1; by += 4) {
         for (uint32_t bx = tile.x0; bx < tile.x1; bx += 4) {
             glm::vec3 origins[16], dirs[16];
@@ -29,9 +30,9 @@ void traceCameraRays(const RayScene& rays, const CameraData& cam, const Tile& ti
                 valid[i] = x < tile.x1 && y < tile.y1;
                 origins[i] = cam.origin;
                 dirs[i] = valid[i] ? pixelRayDir(cam, x, y) : glm::vec3(0.f, 0.f, 1.f);
-                keys[i] = cameraCoverageKey(x, y, frame);
+                if (keyed) keys[i] = cameraCoverageKey(x, y, frame);
             }
-            rays.intersect16(origins, dirs, valid, 1e30f, hits, rules, keys);
+            rays.intersect16(origins, dirs, valid, 1e30f, hits, rules, keyed ? keys : nullptr);
             for (uint32_t i = 0; i < 16; ++i)
                 if (valid[i]) fn(bx + (i & 3u), by + (i >> 2), dirs[i], hits[i]);
         }

@@ -17,28 +17,28 @@ namespace loom {
 /// RTCIntersectContext comes first, and a filter casts the context it is given back to this). Every query against
 /// a RayScene's Embree scene passes one, made by initHitFilterContext. A ray's coverage key (cameraCoverageKey or
 /// rayCoverageKey) travels in its `id`, which Embree hands to filters for single rays, packets and streams alike.
+/// Back faces are culled outside Embree (RayScene::intersect16 and intersect continue past them): a filter on
+/// every single-sided geometry would slow down every ray, for the camera rays' sake.
 struct HitFilterContext {
     RTCIntersectContext embree;
     const SceneView* scene = nullptr;
     uint32_t rules = 0;  ///< RayRules
 };
 
-/// The context filter of queries with kRayCullBackFaces: rejects back faces of single-sided materials
-/// (RayScene.cpp). It runs after the geometries' own (alpha) filters.
-void cullBackFacesFilter(const RTCFilterFunctionNArguments* args);
-
 /// A context for queries under `rules` (RayRules) over `scene`, the view of the Scene the RayScene was built from.
 inline void initHitFilterContext(HitFilterContext& c, const SceneView& scene, uint32_t rules,
                                  RTCIntersectContextFlags flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT) {
     rtcInitIntersectContext(&c.embree);
     c.embree.flags = flags;
-    if (rules & kRayCullBackFaces) c.embree.filter = cullBackFacesFilter;
     c.scene = &scene;
     c.rules = rules;
 }
 
-/// Closest hit of o + t d, t in (tMin, tMax); none for a ray that is not traceable().
-inline RayHit embreeIntersect(RTCScene scene, HitFilterContext& ctx, glm::vec3 o, glm::vec3 d, float tMin, float tMax) {
+/// Closest hit of o + t d, t in (tMin, tMax), for a ray of coverage key `key`; none for a ray that is not
+/// traceable(). Back faces are not culled here (RayScene::intersect does that). With ngObj, a hit's geometric
+/// normal as Embree gives it, (p1 - p0) x (p2 - p0) in the instance's object space, goes there.
+inline RayHit embreeIntersect(RTCScene scene, HitFilterContext& ctx, glm::vec3 o, glm::vec3 d, float tMin, float tMax,
+                              uint32_t key, glm::vec3* ngObj = nullptr) {
     if (!traceable(o, d)) return {};
     RTCRayHit rh;
     rh.ray.org_x = o.x;
@@ -51,7 +51,7 @@ inline RayHit embreeIntersect(RTCScene scene, HitFilterContext& ctx, glm::vec3 o
     rh.ray.time = 0.f;
     rh.ray.tfar = tMax;
     rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = rayCoverageKey(o, d);
+    rh.ray.id = key;
     rh.ray.flags = 0;
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -63,6 +63,7 @@ inline RayHit embreeIntersect(RTCScene scene, HitFilterContext& ctx, glm::vec3 o
         h.u = rh.hit.u;
         h.v = rh.hit.v;
         h.t = rh.ray.tfar;
+        if (ngObj) *ngObj = glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
     }
     return h;
 }

@@ -128,16 +128,6 @@ LOOM_HD inline bool surfaceCovers(const SceneView& scene, uint32_t instance, uin
     return true;
 }
 
-/// Does the front face of triangle `prim` of an instance face a ray whose direction is `dirObj` in the instance's
-/// object space? The same sign as facesRay with the world direction (the normal matrix is the inverse transpose),
-/// as Embree's filters see rays inside an instance.
-LOOM_HD inline bool facesRayObject(const SceneView& scene, uint32_t instance, uint32_t prim, glm::vec3 dirObj) {
-    const MeshView& mesh = scene.meshes[scene.instances[instance].mesh];
-    const uint32_t* idx = mesh.indices + 3 * prim;
-    const glm::vec3 p0 = mesh.positions[idx[0]];
-    return glm::dot(glm::cross(mesh.positions[idx[1]] - p0, mesh.positions[idx[2]] - p0), dirObj) < 0.f;
-}
-
 /// A primary or secondary hit, evaluated.
 struct SurfaceHit {
     glm::vec3 posW{0.f};
