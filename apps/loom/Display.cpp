@@ -11,6 +11,7 @@
 #include "loom/Error.h"
 #include "loom/Parallel.h"
 #include "loom/SrgbEncode.h"
+#include "loom/SurfaceKernels.h"
 
 namespace loom::cli {
 
@@ -25,20 +26,6 @@ uint8_t encodeSrgb8(float linear) {
     return uint8_t(loom::encodeSrgb8(*table, linear > 0.f ? std::min(linear, 1.f) : 0.f));
 }
 
-namespace {
-
-/// A well-mixed 32-bit hash (for id colours).
-uint32_t mix(uint32_t v) {
-    v ^= v >> 16;
-    v *= 0x7feb352du;
-    v ^= v >> 15;
-    v *= 0x846ca68bu;
-    v ^= v >> 16;
-    return v;
-}
-
-}  // namespace
-
 void displayPixel(const Texture& t, uint32_t x, uint32_t y, float scale, uint8_t out[4]) {
     const FormatInfo& info = formatInfo(t.format());
     out[3] = 255;
@@ -49,7 +36,7 @@ void displayPixel(const Texture& t, uint32_t x, uint32_t y, float scale, uint8_t
     if (info.component == ComponentType::Uint32) {
         uint32_t id;
         std::memcpy(&id, t.row(y) + size_t(x) * info.bytesPerPixel, sizeof(id));
-        const uint32_t h = id == ~0u ? 0u : mix(id) | 0x404040u;  // ids never black: black is the miss
+        const uint32_t h = id == ~0u ? 0u : loom::hash32(id) | 0x404040u;  // ids never black: black is the miss
         out[0] = uint8_t(h), out[1] = uint8_t(h >> 8), out[2] = uint8_t(h >> 16);
         return;
     }

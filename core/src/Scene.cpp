@@ -521,6 +521,7 @@ void Scene::rebuildView() {
         d.emissiveTexture = m.emissiveTexture;
         d.doubleSided = m.doubleSided ? 1u : 0u;
         d.alphaMask = m.alphaMode == AlphaMode::Mask ? 1u : 0u;
+        d.alphaBlend = m.alphaMode == AlphaMode::Blend ? 1u : 0u;
     }
     mImageViews.resize(images.size());
     for (size_t i = 0; i < images.size(); ++i)

@@ -17,7 +17,10 @@ void GBufferRT::reflect(Reflection& r, const CompileInfo&) const { reflectChanne
 void GBufferRT::declareParams(ParamList& p) {
     p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
         .doc("skip back faces of single-sided materials (double-sided ones are always hit)");
-    p.add("alphaTest", &mAlphaTest, true).doc("alpha-masked materials let rays pass below their cutoff");
+    p.add("alphaTest", &mAlphaTest, true)
+        .doc(
+            "alphaMode MASK: rays pass where alpha < alphaCutoff; BLEND: stochastic transparency (the surface is "
+            "there with probability alpha); false: every material opaque");
 }
 
 namespace {
@@ -69,30 +72,15 @@ void GBufferRT::execute(PassContext& ctx) {
     const CameraData cam = makeCameraData(camera, w, h);
     const SceneView& view = scene->view();
     const RayScene& rays = scene->rayScene();
-    const bool cullBack = mCullMode == CullMode::Back;
-    const bool alphaTest = mAlphaTest;
-
-    // The first hit of each camera ray comes from a coherent 4x4 packet (rtcIntersect16); a ray whose first hit
-    // must be passed (culled back face, alpha-masked texel) continues with single rays. Packet and single-ray hits
-    // are bit-identical, which PathTracer relies on when it reads this vbuffer.
-    auto resolve = [&](uint32_t x, uint32_t y, glm::vec3 dir, RayHit hit) {
-        for (int layer = 0; layer < 16 && hit.hit(); ++layer) {
-            const InstanceView& inst = view.instances[hit.instance];
-            const MaterialData& mat = view.materials[view.meshes[inst.mesh].material];
-            bool skip = false;
-            if (cullBack && !mat.doubleSided) skip = !facesRay(view, hit.instance, hit.primitive, dir);
-            if (!skip && alphaTest && mat.alphaMask) {
-                const SurfaceHit s = evalSurface(view, hit.instance, hit.primitive, hit.u, hit.v, dir);
-                skip = s.alpha < mat.alphaCutoff;
-            }
-            if (!skip) return hitSample(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v);
-            hit = rays.intersect(cam.origin, dir, std::nextafter(hit.t, 1e30f));
-        }
-        return missSample(cam, dir);
-    };
+    // Culling and alpha testing are RayScene's (RayRules), for the coherent 4x4 packets too; the path tracer's
+    // camera rays use the same rules and coverage keys, so they agree with this vbuffer bit for bit.
+    const uint32_t rules = (mCullMode == CullMode::Back ? kRayCullBackFaces : 0u) | (mAlphaTest ? kRayAlphaTest : 0u);
+    const uint32_t frame = uint32_t(ctx.frameIndex());
     parallelFor2D(w, h, [&](const Tile& t) {
-        traceCameraRays(rays, cam, t, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
-            store(o, x, y, resolve(x, y, dir, hit));
+        traceCameraRays(rays, cam, t, rules, frame, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
+            store(o, x, y,
+                  hit.hit() ? hitSample(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
+                            : missSample(cam, dir));
         });
     });
 }

@@ -63,6 +63,7 @@ layout(std140, binding = 0) uniform FrameBlock {
     vec4 lens;          // x: tan(fovY / 2), y: aspect, z: nearZ
     vec4 viewport;      // x: width, y: height (pixels)
     vec4 jitter;        // xy: NDC offset (Camera::jitterNdcOffset), zw: jitter in pixels
+    uvec4 counters;     // x: frame index (low 32 bits), for stochastic transparency
 } uFrame;
 
 // Per draw: x = instance id, y = material index; the instance's transforms.
@@ -146,7 +147,7 @@ layout(location = 4) uniform vec4 uBaseColorFactor;
 layout(location = 5) uniform vec4 uEmissive;      // xyz: emissiveFactor, w: normalScale
 layout(location = 6) uniform vec4 uMaterialParams; // x: metallic, y: roughness, z: alphaCutoff
 layout(location = 7) uniform ivec4 uTextures;      // baseColor, metallicRoughness, normal, emissive (-1 = none)
-layout(location = 8) uniform uvec4 uFlags;         // x: doubleSided, y: alpha mask
+layout(location = 8) uniform uvec4 uFlags;         // x: doubleSided, y: alpha mask, z: alpha blend
 
 // The drawn mesh's vertex arrays and triangles, as buffer textures (views of
 // its buffers). Buffer textures rather than storage buffers: llvmpipe
@@ -180,6 +181,23 @@ vec3 fetchPosition(uint i) { return texelFetch(uPositions, int(i)).xyz; }
 vec3 fetchNormal(uint i) { return texelFetch(uNormals, int(i)).xyz; }
 vec4 fetchTangent(uint i) { return texelFetch(uTangents, int(i)); }
 vec2 fetchUv(uint i) { return texelFetch(uUvs, int(i)).xy; }
+
+// SurfaceKernels.h hash32, cameraCoverageKey and coverageRandom, bit for bit:
+// stochastic transparency decides as GBufferRT and PathTracer's camera rays do.
+uint hash32(uint x) {
+    x ^= x >> 16;
+    x *= 0x7FEB352Du;
+    x ^= x >> 15;
+    x *= 0x846CA68Bu;
+    x ^= x >> 16;
+    return x;
+}
+uint cameraCoverageKey(uint x, uint y, uint frame) {
+    return hash32(x + hash32(y + hash32(frame + 0x9E3779B9u)));
+}
+float coverageRandom(uint key, uint instance, uint prim) {
+    return float(hash32(key + hash32(instance + hash32(prim))) >> 8) * (1.0 / 16777216.0);
+}
 
 // CameraKernels.h clipToUv: frame uv, origin top-left; false behind the camera.
 bool clipToUv(vec4 clip, out vec2 uv) {
@@ -314,7 +332,13 @@ void main() {
     const vec3 dndx = dFdxFine(nI), dndy = dFdyFine(nI);
 
 #ifdef ALPHA_TEST
+    // SurfaceKernels.h surfaceCovers. The pixel is gl_FragCoord's (row 0 at
+    // the top, see the clip control), not the jittered sample position.
     if (uFlags.y != 0u && base.a < uMaterialParams.z) discard;
+    if (uFlags.z != 0u) {
+        const uint key = cameraCoverageKey(uint(gl_FragCoord.x), uint(gl_FragCoord.y), uFrame.counters.x);
+        if (!(coverageRandom(key, instance, prim) < base.a)) discard;
+    }
 #endif
 
 #ifdef OUT_POSW
@@ -437,8 +461,9 @@ void main() {
 struct FrameGpu {
     glm::mat4 viewProj, prevViewProj, view, prevView, proj;
     glm::vec4 camOrigin, camRight, camUp, camForward, lens, viewport, jitter;
+    glm::uvec4 counters;
 };
-static_assert(sizeof(FrameGpu) == 5 * 64 + 7 * 16);
+static_assert(sizeof(FrameGpu) == 5 * 64 + 8 * 16);
 
 /// A material as the per-draw uniforms uBaseColorFactor ... uFlags carry it.
 struct MaterialGpu {
@@ -896,7 +921,10 @@ void GBufferRaster::reflect(Reflection& r, const CompileInfo&) const { reflectCh
 void GBufferRaster::declareParams(ParamList& p) {
     p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
         .doc("cull back faces of single-sided materials (double-sided ones are always drawn)");
-    p.add("alphaTest", &mAlphaTest, true).doc("alpha-masked materials discard fragments below their cutoff");
+    p.add("alphaTest", &mAlphaTest, true)
+        .doc(
+            "alphaMode MASK discards fragments where alpha < alphaCutoff; BLEND is stochastic transparency (kept "
+            "with probability alpha, decided as in GBufferRT); false: every material opaque");
 }
 
 GBufferRaster::Gpu& GBufferRaster::gpu() {
@@ -972,6 +1000,7 @@ void GBufferRaster::execute(PassContext& ctx) {
     frame.lens = glm::vec4(std::tan(0.5f * camera.fovY), camera.aspect, camera.nearZ, 0.f);
     frame.viewport = glm::vec4(float(width), float(height), 0.f, 0.f);
     frame.jitter = glm::vec4(camera.jitterNdcOffset(width, height), camera.jitter);
+    frame.counters = glm::uvec4(uint32_t(ctx.frameIndex()), 0u, 0u, 0u);
     glNamedBufferSubData(g.frameUbo, 0, sizeof frame, &frame);
 
     // The last entry is a default material for meshes whose index is out of range.
@@ -987,7 +1016,8 @@ void GBufferRaster::execute(PassContext& ctx) {
         materials[i].params = glm::vec4(m.metallicFactor, m.roughnessFactor, m.alphaCutoff, 0.f);
         materials[i].textures = glm::ivec4(tex(m.baseColorTexture), tex(m.metallicRoughnessTexture),
                                            tex(m.normalTexture), tex(m.emissiveTexture));
-        materials[i].flags = glm::uvec4(m.doubleSided ? 1u : 0u, m.alphaMode == AlphaMode::Mask ? 1u : 0u, 0u, 0u);
+        materials[i].flags = glm::uvec4(m.doubleSided ? 1u : 0u, m.alphaMode == AlphaMode::Mask ? 1u : 0u,
+                                        m.alphaMode == AlphaMode::Blend ? 1u : 0u, 0u);
     }
 
     glBindBufferBase(GL_UNIFORM_BUFFER, kBindFrame, g.frameUbo);
@@ -1038,9 +1068,9 @@ void GBufferRaster::execute(PassContext& ctx) {
                                                          uint32_t(scene->materials.size()));
             const MaterialGpu& mat = materials[matIndex];
             const bool doubleSided = mat.flags.x != 0;
-            const bool alphaMask = mAlphaTest && mat.flags.y != 0;
+            const bool alphaTested = mAlphaTest && (mat.flags.y != 0 || mat.flags.z != 0);
 
-            const GLuint program = g.program(groupMask | (alphaMask ? kVariantAlphaTest : 0u));
+            const GLuint program = g.program(groupMask | (alphaTested ? kVariantAlphaTest : 0u));
             if (program != boundProgram) {
                 glUseProgram(program);
                 boundProgram = program;

@@ -17,6 +17,10 @@
 //   pixel's direction at infinity under the previous camera's rotation
 //   (CameraKernels.h missMotion), as GBufferRT.
 // - Geometry closer than the camera's nearZ is clipped; there is no far plane.
+// - alphaMode MASK and BLEND (stochastic transparency) decide as GBufferRT's
+//   rays do (SurfaceKernels.h surfaceCovers, the same hash of pixel, frame,
+//   instance and triangle); textured alpha comes from GL's filtering, so it
+//   agrees to 8-bit filter weights, factors exactly.
 // The context is current only inside execute/setScene (and restored after).
 #include <memory>
 

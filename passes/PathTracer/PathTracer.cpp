@@ -68,37 +68,48 @@ TileScratch& tileScratch() {
     return scratch;
 }
 
+/// How bounce and shadow rays are traced: alpha-tested like every ray (when the pass's alphaTest is on), never
+/// culled. Back-face culling is for camera rays only, as in rasterization; a single-sided wall still blocks
+/// light and reflects from behind, so closed scenes stay closed. Coverage keys (rayCoverageKey) are computed only
+/// where some geometry is alpha-tested: opaque scenes pay nothing for them.
+struct SecondaryRays {
+    RTCScene scene;
+    const SceneView* view;
+    uint32_t rules;  // RayRules
+    bool keyed;      // coverage keys needed
+    uint32_t key(glm::vec3 o, glm::vec3 d) const { return keyed ? rayCoverageKey(o, d) : 0u; }
+    void initContext(HitFilterContext& ctx) const { initHitFilterContext(ctx, *view, rules); }
+};
+
 /// Traces the pending shadow rays of paths ts.shadow[0, n) as one Embree stream of incoherent rays and resolves
 /// them into their paths (the same rays and tests as RayScene::occluded).
-void traceShadowRays(RTCScene scene, TileScratch& ts, uint32_t n) {
+void traceShadowRays(const SecondaryRays& sr, TileScratch& ts, uint32_t n) {
     if (n == 0) return;
     for (uint32_t j = 0; j < n; ++j) {
         const pt::PathState& st = ts.paths[ts.shadow[j]];
-        setStreamRay(ts.shadowRays[j], st.rayOrigin, st.shadowDir, st.shadowTMax, j);
+        setStreamRay(ts.shadowRays[j], st.rayOrigin, st.shadowDir, st.shadowTMax, sr.key(st.rayOrigin, st.shadowDir));
     }
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-    rtcOccluded1M(scene, &ctx, ts.shadowRays.data(), n, sizeof(RTCRay));
+    HitFilterContext ctx;
+    sr.initContext(ctx);
+    rtcOccluded1M(sr.scene, &ctx.embree, ts.shadowRays.data(), n, sizeof(RTCRay));
     for (uint32_t j = 0; j < n; ++j)
         pt::resolveShadowRay(ts.paths[ts.shadow[j]], ts.shadowRays[j].tfar < 0.f);  // tfar = -inf: blocked
 }
 
 /// Traces the continuation rays of paths ts.live[0, n) as one incoherent Embree stream; hits go to ts.hits (the
 /// same rays and hits as RayScene::intersect).
-void traceNextRays(RTCScene scene, TileScratch& ts, uint32_t n) {
+void traceNextRays(const SecondaryRays& sr, TileScratch& ts, uint32_t n) {
     if (n == 0) return;
     for (uint32_t j = 0; j < n; ++j) {
         const pt::PathState& st = ts.paths[ts.live[j]];
         RTCRayHit& rh = ts.nextRays[j];
-        setStreamRay(rh.ray, st.rayOrigin, st.rayDir, 1e30f, j);
+        setStreamRay(rh.ray, st.rayOrigin, st.rayDir, 1e30f, sr.key(st.rayOrigin, st.rayDir));
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     }
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-    rtcIntersect1M(scene, &ctx, ts.nextRays.data(), n, sizeof(RTCRayHit));
+    HitFilterContext ctx;
+    sr.initContext(ctx);
+    rtcIntersect1M(sr.scene, &ctx.embree, ts.nextRays.data(), n, sizeof(RTCRayHit));
     for (uint32_t j = 0; j < n; ++j) {
         const RTCRayHit& rh = ts.nextRays[j];
         RayHit h;
@@ -144,6 +155,14 @@ void PathTracer::declareParams(ParamList& p) {
     p.add("simdShading", &mSimdShading, true)
         .doc("CPU: shade several paths at once in SIMD lanes (MIS with the glTF BRDF; other modes always run per "
              "path); false runs the per-path kernel, for comparison");
+    p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
+        .doc(
+            "camera rays skip back faces of single-sided materials, as the G-buffers' cullMode (bounce and shadow "
+            "rays never cull)");
+    p.add("alphaTest", &mAlphaTest, true)
+        .doc(
+            "every ray: alphaMode MASK passes where alpha < alphaCutoff, BLEND is stochastic transparency (there "
+            "with probability alpha, as in the G-buffers); false: every material opaque");
 }
 
 void PathTracer::compile(const CompileInfo&) {
@@ -306,7 +325,10 @@ void PathTracer::execute(PassContext& ctx) {
     const CameraData cam = makeCameraData(camera, w, h);
     const SceneView& view = scene->view();
     const RayScene& rayScene = scene->rayScene();
-    const auto embree = static_cast<RTCScene>(rayScene.embreeScene());
+    const uint32_t alphaRules = mAlphaTest ? kRayAlphaTest : 0u;
+    const uint32_t cameraRules = alphaRules | (mCullMode == CullMode::Back ? kRayCullBackFaces : 0u);
+    const SecondaryRays secondary{static_cast<RTCScene>(rayScene.embreeScene()), &view, alphaRules,
+                                  mAlphaTest && rayScene.hasAlphaTestedGeometry()};
     pt::PathTracerSettings set;
     set.maxBounces = uint32_t(mMaxBounces);
     set.rrStartBounce = uint32_t(mRrStartBounce);
@@ -362,13 +384,14 @@ void PathTracer::execute(PassContext& ctx) {
                 }
             }
         } else {
-            // Camera rays in coherent 4x4 packets. The same (unnormalised) primary ray as GBufferRT, so hits
-            // from its vbuffer and from camera rays are bit-identical.
-            traceCameraRays(rayScene, cam, tile, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
-                const uint32_t i = (y - tile.y0) * tw + (x - tile.x0);
-                ts.primary[i] = hit;
-                ts.dir[i] = glm::normalize(dir);
-            });
+            // Camera rays in coherent 4x4 packets. The same (unnormalised) primary ray, rules and coverage keys as
+            // GBufferRT, so hits from its vbuffer and from camera rays are bit-identical.
+            traceCameraRays(rayScene, cam, tile, cameraRules, uint32_t(ctx.frameIndex()),
+                            [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
+                                const uint32_t i = (y - tile.y0) * tw + (x - tile.x0);
+                                ts.primary[i] = hit;
+                                ts.dir[i] = glm::normalize(dir);
+                            });
             rays += tilePixels;
         }
 
@@ -423,8 +446,8 @@ void PathTracer::execute(PassContext& ctx) {
                     ts.live[next] = k;
                     next += (request & pt::kNextRay) ? 1u : 0u;
                 }
-                traceShadowRays(embree, ts, shadows);
-                traceNextRays(embree, ts, next);
+                traceShadowRays(secondary, ts, shadows);
+                traceNextRays(secondary, ts, next);
                 live = next;
             }
             for (uint32_t k = 0; k < count; ++k) {

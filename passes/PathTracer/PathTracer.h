@@ -23,6 +23,7 @@ public:
 
     enum class Device { Auto, Cpu, Cuda };
     enum class LightSamplingMode { Mis, Nee, Bsdf };
+    enum class CullMode { None, Back };
 
 private:
     void buildLights(const Scene& scene);
@@ -39,6 +40,8 @@ private:
     Device mDevice = Device::Auto;
     int mSeed = 0;
     bool mSimdShading = true;
+    CullMode mCullMode = CullMode::Back;
+    bool mAlphaTest = true;
 
     // Light data, rebuilt per frame (triangles) or per scene (environment).
     std::vector<pt::EmissiveTri> mTris;

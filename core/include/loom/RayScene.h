@@ -15,6 +15,20 @@ class Scene;
 
 inline constexpr uint32_t kInvalidId = 0xFFFFFFFFu;
 
+/// What a ray query honours (a bit set). Every pass traces by the same rules, so G-buffers and the path tracer see
+/// one scene:
+/// - kRayAlphaTest: glTF alphaMode MASK (no surface where alpha < alphaCutoff) and BLEND (stochastic
+///   transparency, surfaceCovers in SurfaceKernels.h). Only geometry of MASK or BLEND materials carries an Embree
+///   filter, so opaque geometry costs nothing extra.
+/// - kRayCullBackFaces: back faces of single-sided materials are not hit. For camera rays, as rasterization culls
+///   them; bounce and shadow rays see both faces (the common convention: a single-sided wall still blocks light
+///   and reflects from behind, so closed scenes stay closed).
+enum RayRules : uint32_t {
+    kRayOpaque = 0,
+    kRayAlphaTest = 1u << 0,
+    kRayCullBackFaces = 1u << 1,
+};
+
 /// The world Loom traces in: ray origins and directions with a component beyond this (or not finite) are not
 /// traced (no hit, no occluder), and an instance whose translation exceeds it is hidden (Instance::visible).
 /// Embree rejects rays beyond about 1.8e18, also after it carries them into an instance: with origins, directions
@@ -46,17 +60,25 @@ public:
     /// top-level scene (no geometry rebuild).
     void updateInstances(const Scene& scene);
 
-    /// Closest hit in (tMin, tMax). Thread-safe.
-    RayHit intersect(const glm::vec3& origin, const glm::vec3& dir, float tMin = 0.f, float tMax = 1e30f) const;
-    /// Any hit in (tMin, tMax). Thread-safe.
-    bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tMin, float tMax) const;
+    /// Closest hit in (tMin, tMax) under `rules` (RayRules); stochastic transparency draws from the ray's
+    /// rayCoverageKey. Thread-safe.
+    RayHit intersect(const glm::vec3& origin, const glm::vec3& dir, float tMin = 0.f, float tMax = 1e30f,
+                     uint32_t rules = kRayAlphaTest) const;
+    /// Any hit in (tMin, tMax) under `rules`, as intersect. Thread-safe.
+    bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tMin, float tMax,
+                  uint32_t rules = kRayAlphaTest) const;
 
-    /// 16 rays at once (for coherent primary rays); valid[i] = false skips lane i.
-    void intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax,
-                     RayHit* hits) const;
+    /// 16 rays at once (for coherent primary rays); valid[i] = false skips lane i. keys[i] is lane i's coverage
+    /// key (cameraCoverageKey for camera rays); without keys each ray's rayCoverageKey.
+    void intersect16(const glm::vec3* origins, const glm::vec3* dirs, const bool* valid, float tMax, RayHit* hits,
+                     uint32_t rules = kRayAlphaTest, const uint32_t* keys = nullptr) const;
+
+    /// Whether any geometry is alpha-tested (a MASK or BLEND material): only then do coverage keys matter.
+    bool hasAlphaTestedGeometry() const;
 
     /// The top-level Embree scene (an RTCScene), for passes that call Embree
-    /// directly in their innermost loop; valid while this RayScene lives.
+    /// directly in their innermost loop; valid while this RayScene lives. Such calls pass a HitFilterContext
+    /// (EmbreeRays.h), which the filters of alpha-tested geometry read.
     void* embreeScene() const;
 
 private:

@@ -38,7 +38,8 @@ struct MaterialData {
     int32_t normalTexture = -1;
     int32_t emissiveTexture = -1;
     uint32_t doubleSided = 0;
-    uint32_t alphaMask = 0;  ///< 1 for AlphaMode::Mask
+    uint32_t alphaMask = 0;   ///< 1 for AlphaMode::Mask
+    uint32_t alphaBlend = 0;  ///< 1 for AlphaMode::Blend (stochastic transparency, see surfaceCovers)
 };
 
 struct InstanceView {

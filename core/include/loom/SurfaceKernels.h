@@ -67,6 +67,67 @@ LOOM_HD inline bool facesRay(const SceneView& scene, uint32_t instance, uint32_t
     return glm::dot(n, rayDir) < 0.f;
 }
 
+/// A 32-bit integer hash with full avalanche (Wellons' "lowbias32" from hash-prospector). Only 32-bit integer
+/// arithmetic, so GBufferRaster's GLSL computes the same bits.
+LOOM_HD inline uint32_t hash32(uint32_t x) {
+    x ^= x >> 16;
+    x *= 0x7FEB352Du;
+    x ^= x >> 15;
+    x *= 0x846CA68Bu;
+    x ^= x >> 16;
+    return x;
+}
+
+/// The coverage key of a camera ray: pixel (x, y), row 0 at the top, and the frame index's low 32 bits. Every
+/// pass computes it alike (GBufferRT, GBufferRaster from gl_FragCoord, PathTracer's own camera rays), so they
+/// make the same stochastic-transparency decisions and a vbuffer agrees with camera rays.
+LOOM_HD inline uint32_t cameraCoverageKey(uint32_t x, uint32_t y, uint32_t frame) {
+    return hash32(x + hash32(y + hash32(frame + 0x9E3779B9u)));
+}
+
+/// The coverage key of any other ray: a hash of its origin and direction bits. A pure function of the ray, so
+/// the decision never depends on which thread or which batch traced it.
+LOOM_HD inline uint32_t rayCoverageKey(glm::vec3 o, glm::vec3 d) {
+    uint32_t h = 0x85EBCA6Bu;
+    h = hash32(h + floatBits(o.x));
+    h = hash32(h + floatBits(o.y));
+    h = hash32(h + floatBits(o.z));
+    h = hash32(h + floatBits(d.x));
+    h = hash32(h + floatBits(d.y));
+    return hash32(h + floatBits(d.z));
+}
+
+/// Uniform in [0, 1) with 24 random bits for a ray of coverage `key` meeting triangle `prim` of `instance`.
+LOOM_HD inline float coverageRandom(uint32_t key, uint32_t instance, uint32_t prim) {
+    return float(hash32(key + hash32(instance + hash32(prim))) >> 8) * (1.f / 16777216.f);
+}
+
+/// Coverage alpha at barycentrics (u, v) of a triangle: baseColorFactor.a times the base colour texture's alpha,
+/// sampled as evalSurface samples it (so the two agree on every hit).
+LOOM_HD inline float coverageAlpha(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v) {
+    const MeshView& mesh = scene.meshes[scene.instances[instance].mesh];
+    const MaterialData& mat = scene.materials[mesh.material];
+    float alpha = mat.baseColorFactor.a;
+    if (mat.baseColorTexture >= 0) {
+        const uint32_t i0 = mesh.indices[3 * prim], i1 = mesh.indices[3 * prim + 1], i2 = mesh.indices[3 * prim + 2];
+        const float w = 1.f - u - v;
+        const glm::vec2 uv = w * mesh.uvs[i0] + u * mesh.uvs[i1] + v * mesh.uvs[i2];
+        alpha *= sampleImage(scene.images[mat.baseColorTexture], uv, true).a;
+    }
+    return alpha;
+}
+
+/// Does a ray of coverage `key` stop at this hit? By the material's glTF alphaMode: OPAQUE always; MASK where the
+/// coverage alpha reaches alphaCutoff; BLEND with probability alpha (stochastic transparency: the surface is there
+/// when coverageRandom < alpha, so on average a fraction 1 - alpha of what lies behind shows through).
+LOOM_HD inline bool surfaceCovers(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v,
+                                  uint32_t key) {
+    const MaterialData& mat = scene.materials[scene.meshes[scene.instances[instance].mesh].material];
+    if (mat.alphaMask) return coverageAlpha(scene, instance, prim, u, v) >= mat.alphaCutoff;
+    if (mat.alphaBlend) return coverageRandom(key, instance, prim) < coverageAlpha(scene, instance, prim, u, v);
+    return true;
+}
+
 /// A primary or secondary hit, evaluated.
 struct SurfaceHit {
     glm::vec3 posW{0.f};
