@@ -168,9 +168,11 @@ layout(binding = 0) uniform usampler2D uBaseColorTex;  // sRGB
 layout(binding = 1) uniform usampler2D uMetalRoughTex; // linear
 layout(binding = 2) uniform usampler2D uNormalTex;     // linear
 layout(binding = 3) uniform usampler2D uEmissiveTex;   // sRGB
-// Byte to float, as the CPU computes it: [0, 256) byte / 255, [256, 512)
-// srgbToLinear(byte / 255).
-layout(binding = 9) uniform samplerBuffer uByteToFloat;
+// SurfaceKernels.h srgbToLinear(byte / 255) for each byte, computed by it
+// (Gpu::program). A uniform array: on llvmpipe a lookup in it costs less than
+// a buffer-texture fetch (with a buffer texture, the pass took 1.7 times as
+// long on data/scenes/materials).
+layout(location = 16) uniform float uSrgbToLinear[256];
 
 // Interpolated attributes: for derivatives and grazing rays only.
 in vec3 vObjPos;
@@ -192,14 +194,23 @@ layout(location = 15) uniform uvec4 uSampling;
 vec3 fetchPosition(uint i) { return texelFetch(uPositions, int(i)).xyz; }
 vec3 fetchNormal(uint i) { return texelFetch(uNormals, int(i)).xyz; }
 
-// SurfaceKernels.h wrapTexel (GL 4.5, table 8.20). GLSL leaves % undefined for
-// negative operands, so i (|i| <= 2^24 + 1) is first shifted by a multiple of
-// the period.
-int wrapTexel(int i, int n, uint mode) {
-    if (mode == 1u) return clamp(i, 0, n - 1);
+// i mod n in [0, n), for |i| <= 2^24 + 1. Without an integer division (GLSL
+// leaves % undefined for negative operands, and llvmpipe divides integers one
+// lane at a time): the float quotient is off by at most one, which is
+// corrected; the clamp only guards the texel fetch.
+int floorMod(int i, int n) {
+    int m = i - n * int(floor(float(i) / float(n)));
+    m += m < 0 ? n : (m >= n ? -n : 0);
+    return clamp(m, 0, n - 1);
+}
+
+// SurfaceKernels.h wrapTexel (GL 4.5, table 8.20) of texels i and i + 1.
+ivec2 wrapTexels(int i, int n, uint mode) {
+    if (mode == 1u) return clamp(ivec2(i, i + 1), 0, n - 1);
     const int period = mode == 2u ? 2 * n : n;
-    const int m = (i + period * (16777218 / period + 1)) % period;
-    return m < n ? m : period - 1 - m;
+    const int m0 = floorMod(i, period);
+    const ivec2 m = ivec2(m0, m0 + 1 == period ? 0 : m0 + 1);
+    return mode == 2u ? mix(m, period - 1 - m, greaterThanEqual(m, ivec2(n))) : m;
 }
 
 // SurfaceKernels.h sampleTexture's texelCoord.
@@ -208,11 +219,12 @@ float texelCoord(float c) {
     return !(c >= -limit) ? -limit : (c > limit ? limit : c);
 }
 
+// A texel as SurfaceKernels.h sampleTexture's fetch decodes it: byte / 255,
+// and sRGB colour through srgbToLinear's values.
 vec4 fetchTexel(usampler2D tex, int x, int y, bool srgb) {
     const uvec4 t = texelFetch(tex, ivec2(x, y), 0);
-    const int o = srgb ? 256 : 0;
-    return vec4(texelFetch(uByteToFloat, int(t.r) + o).r, texelFetch(uByteToFloat, int(t.g) + o).r,
-                texelFetch(uByteToFloat, int(t.b) + o).r, texelFetch(uByteToFloat, int(t.a)).r);
+    if (!srgb) return vec4(t) / 255.0;
+    return vec4(uSrgbToLinear[t.r], uSrgbToLinear[t.g], uSrgbToLinear[t.b], float(t.a) / 255.0);
 }
 
 // glm::mix's formula, x * (1 - a) + y * a, written out.
@@ -228,16 +240,15 @@ vec4 sampleTexture(usampler2D tex, int slot, vec2 uv, bool srgb) {
     if ((sampling & 16u) != 0u) {
         const int x = int(floor(texelCoord(uv.x * float(size.x))));
         const int y = int(floor(texelCoord(uv.y * float(size.y))));
-        return fetchTexel(tex, wrapTexel(x, size.x, wrapS), wrapTexel(y, size.y, wrapT), srgb);
+        return fetchTexel(tex, wrapTexels(x, size.x, wrapS).x, wrapTexels(y, size.y, wrapT).x, srgb);
     }
     const float fx = texelCoord(uv.x * float(size.x) - 0.5);
     const float fy = texelCoord(uv.y * float(size.y) - 0.5);
     const float x0f = floor(fx), y0f = floor(fy);
     const float tx = fx - x0f, ty = fy - y0f;
-    const int x0 = wrapTexel(int(x0f), size.x, wrapS), x1 = wrapTexel(int(x0f) + 1, size.x, wrapS);
-    const int y0 = wrapTexel(int(y0f), size.y, wrapT), y1 = wrapTexel(int(y0f) + 1, size.y, wrapT);
-    return lerp(lerp(fetchTexel(tex, x0, y0, srgb), fetchTexel(tex, x1, y0, srgb), tx),
-                lerp(fetchTexel(tex, x0, y1, srgb), fetchTexel(tex, x1, y1, srgb), tx), ty);
+    const ivec2 xs = wrapTexels(int(x0f), size.x, wrapS), ys = wrapTexels(int(y0f), size.y, wrapT);
+    return lerp(lerp(fetchTexel(tex, xs.x, ys.x, srgb), fetchTexel(tex, xs.y, ys.x, srgb), tx),
+                lerp(fetchTexel(tex, xs.x, ys.y, srgb), fetchTexel(tex, xs.y, ys.y, srgb), tx), ty);
 }
 vec4 fetchTangent(uint i) { return texelFetch(uTangents, int(i)); }
 vec2 fetchUv(uint i) { return texelFetch(uUvs, int(i)).xy; }
@@ -325,6 +336,10 @@ void main() {
         fn = -fn;
         n = -n;
     }
+    // Each textured slot is compiled in only where the drawn material has
+    // it (TEXTURE_SLOT_<k>, a program variant): llvmpipe runs both sides of
+    // a branch, masked, so an untextured draw would still pay for sampling.
+#ifdef TEXTURE_SLOT_2
     if (uTextures.z >= 0) {
         const vec4 t4 = w * fetchTangent(i0) + u * fetchTangent(i1) + v * fetchTangent(i2);
         vec3 t = (world * vec4(t4.xyz, 0.0)).xyz;
@@ -339,18 +354,25 @@ void main() {
             if (dot(mapped, mapped) > 1e-12) n = normalize(mapped);
         }
     }
+#endif
     vec4 base = uBaseColorFactor;
+#ifdef TEXTURE_SLOT_0
     if (uTextures.x >= 0) base *= sampleTexture(uBaseColorTex, 0, uv, true);
+#endif
     float metallic = uMaterialParams.x, roughness = uMaterialParams.y;
+#ifdef TEXTURE_SLOT_1
     if (uTextures.y >= 0) {
         const vec4 mr = sampleTexture(uMetalRoughTex, 1, uv, false);
         roughness *= mr.g;
         metallic *= mr.b;
     }
+#endif
     metallic = clamp(metallic, 0.0, 1.0);
     roughness = clamp(roughness, 0.0, 1.0);
     vec3 emission = uEmissive.xyz;
+#ifdef TEXTURE_SLOT_3
     if (uTextures.w >= 0) emission *= sampleTexture(uEmissiveTex, 3, uv, true).rgb;
+#endif
 
     // View depth along the camera axis, as the RT pass measures it.
     const float depth = dot(posW - uFrame.camOrigin.xyz, uFrame.camForward.xyz);
@@ -531,8 +553,7 @@ enum : GLuint {
     kUnitNormals = 5,
     kUnitTangents = 6,
     kUnitUvs = 7,
-    kUnitTriangles = 8,
-    kUnitByteToFloat = 9
+    kUnitTriangles = 8
 };
 enum : GLint {
     kLocDraw = 0,
@@ -547,7 +568,8 @@ enum : GLint {
     kLocObjRayOrigin = 9,
     kLocObjRayBasis = 10,
     kLocUvTransform = 11,  // four locations, one per texture slot
-    kLocSampling = 15
+    kLocSampling = 15,
+    kLocSrgbToLinear = 16  // 256 locations
 };
 constexpr GLuint kBindFrame = 0;
 
@@ -563,6 +585,7 @@ constexpr uint32_t kVBufferBit = channelBit(kVBuffer), kMeshIdBit = channelBit(k
 // order), plus these flags.
 constexpr uint32_t kVariantAlphaTest = 1u << 16;
 constexpr uint32_t kVariantMiss = 1u << 17;
+constexpr uint32_t kVariantTextureSlot0 = 1u << 18;  // bits 18..21: texture slots 0..3 (order of uTextures)
 
 [[noreturn]] void runtimeError(const std::string& what, const std::string& suggestion = {}) {
     throw Error(Error::Info{ErrorKind::Runtime, {}, "GBufferRaster", what, {}, suggestion});
@@ -702,7 +725,6 @@ struct GBufferRaster::Gpu {
     std::vector<MeshGpu> meshes;
     std::vector<ImageGpu> images;
 
-    GLuint byteToFloat = 0, byteToFloatBuffer = 0;  // uByteToFloat
     GLuint emptyVao = 0;
     GLuint frameUbo = 0;
 
@@ -718,7 +740,7 @@ struct GBufferRaster::Gpu {
     std::array<GLuint, kChannelCount> colour{};  // renderbuffer per consumed channel
     std::vector<Group> groups;
 
-    // Programs by variant (channel bits | kVariantAlphaTest | kVariantMiss).
+    // Programs by variant (channel bits | kVariantAlphaTest | kVariantMiss | texture slot bits).
     std::map<uint32_t, GLuint> programs;
 
     Gpu() {
@@ -729,16 +751,6 @@ struct GBufferRaster::Gpu {
         glGetIntegerv(GL_MAX_DRAW_BUFFERS, &maxDrawBuffers);
         glGetIntegerv(GL_MAX_COLOR_ATTACHMENTS, &maxAttachments);
         maxDrawBuffers = std::max(1, std::min(maxDrawBuffers, maxAttachments));
-
-        // The shader's byte decoding, computed as SurfaceKernels.h computes it.
-        std::array<float, 512> byteToFloatTable{};
-        for (int b = 0; b < 256; ++b) {
-            byteToFloatTable[size_t(b)] = float(b) / 255.f;
-            byteToFloatTable[size_t(b) + 256] = srgbToLinear(float(b) / 255.f);
-        }
-        glCreateBuffers(1, &byteToFloatBuffer);
-        glNamedBufferStorage(byteToFloatBuffer, sizeof byteToFloatTable, byteToFloatTable.data(), 0);
-        byteToFloat = bufferTexture(GL_R32F, byteToFloatBuffer, 0, sizeof byteToFloatTable);
 
         glCreateVertexArrays(1, &emptyVao);
         glCreateBuffers(1, &frameUbo);
@@ -765,6 +777,9 @@ struct GBufferRaster::Gpu {
             if (variant & (1u << c)) defines += "#define " + outputDefine(kChannels[c].name) + " " +
                                                 std::to_string(location++) + "\n";
         if (variant & kVariantAlphaTest) defines += "#define ALPHA_TEST 1\n";
+        for (int slot = 0; slot < 4; ++slot)
+            if (variant & (kVariantTextureSlot0 << slot))
+                defines += "#define TEXTURE_SLOT_" + std::to_string(slot) + " 1\n";
         const bool miss = variant & kVariantMiss;
         // "#version" must come first: defines go right after the common block's version line.
         std::string common = kShaderCommon;
@@ -772,6 +787,12 @@ struct GBufferRaster::Gpu {
         common.insert(afterVersion, defines);
         GLuint p = miss ? linkProgram(common + kMissVS, common + kFragmentOutputs + kMissFS)
                         : linkProgram(common + kGeometryVS, common + kFragmentOutputs + kGeometryFS);
+        if (!miss) {
+            // The shader's sRGB decoding table, computed by the CPU's code.
+            std::array<float, 256> srgbTable{};
+            for (size_t b = 0; b < srgbTable.size(); ++b) srgbTable[b] = srgbToLinear(float(b) / 255.f);
+            glProgramUniform1fv(p, kLocSrgbToLinear, GLsizei(srgbTable.size()), srgbTable.data());
+        }
         programs.emplace(variant, p);
         return p;
     }
@@ -1062,7 +1083,6 @@ void GBufferRaster::execute(PassContext& ctx) {
     }
 
     glBindBufferBase(GL_UNIFORM_BUFFER, kBindFrame, g.frameUbo);
-    glBindTextureUnit(kUnitByteToFloat, g.byteToFloat);
     glViewport(0, 0, GLsizei(width), GLsizei(height));
 
     const bool cullBack = mCullMode == CullMode::Back;
@@ -1112,7 +1132,10 @@ void GBufferRaster::execute(PassContext& ctx) {
             const bool doubleSided = mat.flags.x != 0;
             const bool alphaMask = mAlphaTest && mat.flags.y != 0;
 
-            const GLuint program = g.program(groupMask | (alphaMask ? kVariantAlphaTest : 0u));
+            uint32_t textured = 0;
+            for (int slot = 0; slot < 4; ++slot)
+                if (mat.textures[slot] >= 0) textured |= kVariantTextureSlot0 << slot;
+            const GLuint program = g.program(groupMask | (alphaMask ? kVariantAlphaTest : 0u) | textured);
             if (program != boundProgram) {
                 glUseProgram(program);
                 boundProgram = program;
