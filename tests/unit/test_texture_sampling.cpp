@@ -170,3 +170,24 @@ TEST(TextureSampling, TransformMovesTheLookup) {
     none.image = -1;
     EXPECT_EQ(img.sample(none, 0.3f, 0.3f), glm::vec4(1.f));
 }
+
+// A reference with no sampler and no transform samples exactly as Loom did before samplers were honoured
+// (bilinear, repeat, the same arithmetic), so scenes without them render bit for bit as before.
+TEST(TextureSampling, DefaultReferenceKeepsTheBilinearRepeatArithmetic) {
+    const OneImage img;
+    TextureRef plain;
+    plain.image = 0;
+    for (float v = -1.37f; v < 2.f; v += 0.173f)
+        for (float u = -1.29f; u < 2.f; u += 0.117f) {
+            const float fx = u * float(OneImage::kW) - 0.5f, fy = v * float(OneImage::kH) - 0.5f;
+            const float x0f = std::floor(fx), y0f = std::floor(fy);
+            auto at = [&](int dx, int dy) {
+                const int x = ((int(x0f) + dx) % int(OneImage::kW) + int(OneImage::kW)) % int(OneImage::kW);
+                const int y = ((int(y0f) + dy) % int(OneImage::kH) + int(OneImage::kH)) % int(OneImage::kH);
+                return img.texel(uint32_t(x), uint32_t(y));
+            };
+            const glm::vec4 expected =
+                glm::mix(glm::mix(at(0, 0), at(1, 0), fx - x0f), glm::mix(at(0, 1), at(1, 1), fx - x0f), fy - y0f);
+            ASSERT_EQ(img.sample(plain, u, v), expected) << u << ", " << v;
+        }
+}
