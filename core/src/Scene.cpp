@@ -522,6 +522,9 @@ void Scene::rebuildView() {
         d.doubleSided = m.doubleSided ? 1u : 0u;
         d.alphaMask = m.alphaMode == AlphaMode::Mask ? 1u : 0u;
         d.alphaBlend = m.alphaMode == AlphaMode::Blend ? 1u : 0u;
+        d.ior = m.ior;
+        d.specularFactor = m.specularFactor;
+        d.specularColorFactor = m.specularColorFactor;
     }
     mImageViews.resize(images.size());
     for (size_t i = 0; i < images.size(); ++i)

@@ -32,7 +32,8 @@ namespace fs = std::filesystem;
 /// Required extensions Loom implements. KHR_mesh_quantization only widens the
 /// accessor types allowed for attributes, which the accessor reader handles.
 const std::vector<std::string> kSupportedRequired = {"KHR_materials_emissive_strength", "KHR_lights_punctual",
-                                                     "KHR_mesh_quantization"};
+                                                     "KHR_mesh_quantization", "KHR_texture_transform",
+                                                     "KHR_materials_ior", "KHR_materials_specular"};
 
 std::string labelOf(const char* kind, size_t index, const std::string& name) {
     std::string s = std::string(kind) + "[" + std::to_string(index) + "]";
@@ -477,9 +478,12 @@ private:
     void convertNodes(const std::vector<int>& roots);
     void convertAnimations();
 
-    int textureImage(const tinygltf::TextureInfo& info, const std::string& material, const char* slot);
-    int textureImage(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
-                     const std::string& material, const char* slot);
+    TextureRef textureRef(const tinygltf::TextureInfo& info, const std::string& material, const char* slot);
+    TextureRef textureRef(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
+                          const std::string& material, const char* slot);
+    void applySampler(int samplerIndex, const std::string& where, TextureRef& ref);
+    glm::mat3x2 textureTransform(const tinygltf::Value& ext, const std::string& where, int& texCoord);
+    void readIorAndSpecular(const tinygltf::Material& src, const std::string& label, Material& mat);
     uint32_t defaultMaterial();
     std::string meshLabel(size_t i) const { return labelOf("meshes", i, m.meshes[i].name); }
 
@@ -636,30 +640,33 @@ void Importer::convertImages() {
     }
 }
 
-int Importer::textureImage(const tinygltf::TextureInfo& info, const std::string& material, const char* slot) {
-    return textureImage(info.index, info.texCoord, info.extensions, material, slot);
+TextureRef Importer::textureRef(const tinygltf::TextureInfo& info, const std::string& material, const char* slot) {
+    return textureRef(info.index, info.texCoord, info.extensions, material, slot);
 }
 
-int Importer::textureImage(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
-                           const std::string& material, const char* slot) {
-    if (textureIndex < 0) return -1;
+TextureRef Importer::textureRef(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
+                                const std::string& material, const char* slot) {
+    TextureRef ref;
+    if (textureIndex < 0) return ref;
     const std::string where = material + "/" + slot;
     if (size_t(textureIndex) >= m.textures.size()) {
         warn(where + ": texture " + std::to_string(textureIndex) + " does not exist; the texture is ignored");
-        return -1;
+        return ref;
     }
+    auto transform = extensions.find("KHR_texture_transform");
+    if (transform != extensions.end()) ref.transform = textureTransform(transform->second, where, texCoord);
     if (texCoord != 0)
         warn(where + ": uses TEXCOORD_" + std::to_string(texCoord) + "; only TEXCOORD_0 is supported and used instead");
-    if (extensions.count("KHR_texture_transform"))
-        warn(where + ": KHR_texture_transform is not supported; the texture is mapped without the transform");
-    const int source = m.textures[size_t(textureIndex)].source;
+    const tinygltf::Texture& texture = m.textures[size_t(textureIndex)];
+    applySampler(texture.sampler, where, ref);
+    const int source = texture.source;
     if (source < 0 || size_t(source) >= m.images.size()) {
         warn(where + ": texture " + std::to_string(textureIndex) +
              " has no image Loom can read (only PNG and JPEG sources); the texture is ignored");
-        return -1;
+        return ref;
     }
-    const int image = mImageMap[size_t(source)];
-    if (image < 0) {
+    ref.image = mImageMap[size_t(source)];
+    if (ref.image < 0) {
         const tinygltf::Image& img = m.images[size_t(source)];
         std::string why = size_t(source) < mImageCtx.failures.size() ? mImageCtx.failures[size_t(source)] : "";
         if (why.empty())
@@ -667,7 +674,99 @@ int Importer::textureImage(int textureIndex, int texCoord, const tinygltf::Exten
                                    : "the image could not be decoded";
         warn(where + ": " + labelOf("images", size_t(source), img.name) + ": " + why + "; the texture is ignored");
     }
-    return image;
+    return ref;
+}
+
+/// The texture's sampler (glTF 2.0 section 5.26): wrap modes per axis, and one
+/// filter. Loom samples points from a single level (no mipmaps, no footprint),
+/// which GL calls magnification, so magFilter decides; without one, minFilter's
+/// filter within a level (NEAREST_MIPMAP_LINEAR filters as NEAREST, ...).
+/// Neither given: bilinear.
+void Importer::applySampler(int samplerIndex, const std::string& where, TextureRef& ref) {
+    if (samplerIndex < 0) return;  // glTF: repeat, and filtering left to the renderer
+    if (size_t(samplerIndex) >= m.samplers.size()) {
+        warn(where + ": sampler " + std::to_string(samplerIndex) + " does not exist; repeat and bilinear are used");
+        return;
+    }
+    const tinygltf::Sampler& sampler = m.samplers[size_t(samplerIndex)];
+    const std::string label = labelOf("samplers", size_t(samplerIndex), sampler.name);
+    auto wrap = [&](int mode, const char* name) {
+        switch (mode) {
+            case TINYGLTF_TEXTURE_WRAP_REPEAT:
+                return TextureWrap::Repeat;
+            case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE:
+                return TextureWrap::ClampToEdge;
+            case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT:
+                return TextureWrap::MirroredRepeat;
+            default:
+                break;
+        }
+        warn(where + ": " + label + ": unknown " + name + " " + std::to_string(mode) + "; REPEAT (10497) is used");
+        return TextureWrap::Repeat;
+    };
+    ref.wrapS = wrap(sampler.wrapS, "wrapS");
+    ref.wrapT = wrap(sampler.wrapT, "wrapT");
+    // The filter within one level: 0 nearest, 1 linear, -1 not given (or unknown, with a warning).
+    auto levelFilter = [&](int filter, const char* name) {
+        switch (filter) {
+            case -1:
+                return -1;
+            case TINYGLTF_TEXTURE_FILTER_NEAREST:
+            case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_NEAREST:
+            case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_LINEAR:
+                return 0;
+            case TINYGLTF_TEXTURE_FILTER_LINEAR:
+            case TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_NEAREST:
+            case TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_LINEAR:
+                return 1;
+            default:
+                break;
+        }
+        warn(where + ": " + label + ": unknown " + name + " " + std::to_string(filter) + "; ignored");
+        return -1;
+    };
+    const int mag = levelFilter(sampler.magFilter, "magFilter");
+    const int min = levelFilter(sampler.minFilter, "minFilter");
+    ref.nearest = (mag >= 0 ? mag : min) == 0 ? 1u : 0u;
+}
+
+/// KHR_texture_transform (offset, rotation, scale; texCoord overrides the
+/// reference's) as the affine map uv' = T * R * S * uv. The rotation turns uv
+/// "counter-clockwise" in glTF's v-down uv space: u' = cos * u + sin * v,
+/// v' = -sin * u + cos * v, which is what the extension's example (the lower
+/// left quadrant of the image, offset (0, 1), rotation pi/2, scale 0.5) and its
+/// sample model need (the matrix printed in the extension's GLSL listing turns
+/// the other way; KhronosGroup/glTF issue 1563).
+glm::mat3x2 Importer::textureTransform(const tinygltf::Value& ext, const std::string& where, int& texCoord) {
+    const std::string at = where + "/extensions/KHR_texture_transform";
+    glm::vec2 offset(0.f), scale(1.f);
+    float rotation = 0.f;
+    if (!ext.IsObject()) {
+        warn(at + ": not an object; the texture is mapped without a transform");
+        return glm::mat3x2(1.f);
+    }
+    auto pair = [&](const char* name, glm::vec2& out) {
+        if (!ext.Has(name)) return;
+        const tinygltf::Value& v = ext.Get(name);
+        if (!v.IsArray() || v.ArrayLen() != 2 || !v.Get(0).IsNumber() || !v.Get(1).IsNumber()) {
+            warn(at + ": " + name + " is not an array of two numbers; the default is used");
+            return;
+        }
+        out = glm::vec2(float(v.Get(0).GetNumberAsDouble()), float(v.Get(1).GetNumberAsDouble()));
+    };
+    pair("offset", offset);
+    pair("scale", scale);
+    if (ext.Has("rotation")) {
+        if (ext.Get("rotation").IsNumber())
+            rotation = float(ext.Get("rotation").GetNumberAsDouble());
+        else
+            warn(at + ": rotation is not a number; 0 is used");
+    }
+    if (ext.Has("texCoord") && ext.Get("texCoord").IsNumber()) texCoord = ext.Get("texCoord").GetNumberAsInt();
+    if (!allFinite(offset) || !allFinite(scale) || !std::isfinite(rotation))
+        fail(at, "NaN or infinite offset, rotation or scale", "finite numbers");
+    const float c = std::cos(rotation), sn = std::sin(rotation);
+    return glm::mat3x2(glm::vec2(c * scale.x, -sn * scale.x), glm::vec2(sn * scale.y, c * scale.y), offset);
 }
 
 uint32_t Importer::defaultMaterial() {
@@ -701,13 +800,25 @@ void Importer::convertMaterials() {
             const tinygltf::Value& v = strength->second.Get("emissiveStrength");
             if (v.IsNumber()) mat.emissiveFactor *= float(v.GetNumberAsDouble());
         }
+        readIorAndSpecular(src, label, mat);
         const bool finite = std::isfinite(mat.metallicFactor) && std::isfinite(mat.roughnessFactor) &&
-                            allFinite(mat.baseColorFactor) && allFinite(mat.emissiveFactor);
+                            allFinite(mat.baseColorFactor) && allFinite(mat.emissiveFactor) && std::isfinite(mat.ior) &&
+                            std::isfinite(mat.specularFactor) && allFinite(mat.specularColorFactor);
         if (!finite)
-            fail(label, "a material factor is NaN or infinite", "finite baseColor, metallic, roughness and emissive");
-        if (glm::any(glm::lessThan(mat.emissiveFactor, glm::vec3(0.f)))) {
-            warn(label + ": negative emissive factor clamped to 0");
-            mat.emissiveFactor = glm::max(mat.emissiveFactor, glm::vec3(0.f));
+            fail(label, "a material factor is NaN or infinite",
+                 "finite baseColor, metallic, roughness, emissive, ior and specular factors");
+        const auto nonNegative = [&](glm::vec3& factor, const char* name) {
+            if (!glm::any(glm::lessThan(factor, glm::vec3(0.f)))) return;
+            warn(label + ": negative " + name + " clamped to 0");
+            factor = glm::max(factor, glm::vec3(0.f));
+        };
+        nonNegative(mat.emissiveFactor, "emissive factor");
+        // KHR_materials_specular's colour is an F0 tint with no upper bound (the product with F0 is capped at 1).
+        nonNegative(mat.specularColorFactor, "specularColorFactor");
+        // KHR_materials_ior: >= 1, or exactly 0 (the extension's special value: a Fresnel term of 1).
+        if (mat.ior != 0.f && mat.ior < 1.f) {
+            warn(label + ": ior " + std::to_string(mat.ior) + " is below 1 (valid: >= 1, or 0); 1 is used");
+            mat.ior = 1.f;
         }
         // glTF bounds these factors to [0, 1]. A base colour above 1 reflects more light than arrives: a path
         // gains energy at every bounce, and a filter that remodulates by the albedo can overflow.
@@ -721,14 +832,15 @@ void Importer::convertMaterials() {
         unitRange(mat.baseColorFactor, "baseColorFactor");
         unitRange(mat.metallicFactor, "metallicFactor");
         unitRange(mat.roughnessFactor, "roughnessFactor");
+        unitRange(mat.specularFactor, "specularFactor");
         // Images are kept as stored; the slot decides the decoding when sampled (base colour and emission
         // are sRGB, metallic-roughness and normal maps linear), so one image may serve both kinds of slot.
-        mat.baseColorTexture = textureImage(pbr.baseColorTexture, label, "baseColorTexture");
-        mat.metallicRoughnessTexture = textureImage(pbr.metallicRoughnessTexture, label, "metallicRoughnessTexture");
-        mat.normalTexture = textureImage(src.normalTexture.index, src.normalTexture.texCoord,
-                                         src.normalTexture.extensions, label, "normalTexture");
+        mat.baseColorTexture = textureRef(pbr.baseColorTexture, label, "baseColorTexture");
+        mat.metallicRoughnessTexture = textureRef(pbr.metallicRoughnessTexture, label, "metallicRoughnessTexture");
+        mat.normalTexture = textureRef(src.normalTexture.index, src.normalTexture.texCoord,
+                                       src.normalTexture.extensions, label, "normalTexture");
         mat.normalScale = float(src.normalTexture.scale);
-        mat.emissiveTexture = textureImage(src.emissiveTexture, label, "emissiveTexture");
+        mat.emissiveTexture = textureRef(src.emissiveTexture, label, "emissiveTexture");
         mat.doubleSided = src.doubleSided;
         if (src.alphaMode == "MASK")
             mat.alphaMode = AlphaMode::Mask;
@@ -739,6 +851,36 @@ void Importer::convertMaterials() {
         mat.alphaCutoff = float(src.alphaCutoff);
         s.materials.push_back(std::move(mat));
     }
+}
+
+/// The factors of KHR_materials_ior and KHR_materials_specular, as given (convertMaterials validates them).
+void Importer::readIorAndSpecular(const tinygltf::Material& src, const std::string& label, Material& mat) {
+    // A number member of an extension object, or its default when absent; present but not a number is warned about.
+    auto number = [&](const tinygltf::Value& ext, const std::string& name, float fallback) {
+        if (!ext.Has(name)) return fallback;
+        const tinygltf::Value& v = ext.Get(name);
+        if (v.IsNumber()) return float(v.GetNumberAsDouble());
+        warn(label + ": " + name + " is not a number; the default is used");
+        return fallback;
+    };
+    auto ior = src.extensions.find("KHR_materials_ior");
+    if (ior != src.extensions.end() && ior->second.IsObject()) mat.ior = number(ior->second, "ior", 1.5f);
+    auto spec = src.extensions.find("KHR_materials_specular");
+    if (spec == src.extensions.end() || !spec->second.IsObject()) return;
+    const tinygltf::Value& ext = spec->second;
+    mat.specularFactor = number(ext, "specularFactor", 1.f);
+    if (ext.Has("specularColorFactor")) {
+        const tinygltf::Value& v = ext.Get("specularColorFactor");
+        if (v.IsArray() && v.ArrayLen() == 3 && v.Get(0).IsNumber() && v.Get(1).IsNumber() && v.Get(2).IsNumber())
+            mat.specularColorFactor =
+                glm::vec3(float(v.Get(0).GetNumberAsDouble()), float(v.Get(1).GetNumberAsDouble()),
+                          float(v.Get(2).GetNumberAsDouble()));
+        else
+            warn(label + ": specularColorFactor is not an array of three numbers; the default (1, 1, 1) is used");
+    }
+    for (const char* texture : {"specularTexture", "specularColorTexture"})
+        if (ext.Has(texture))
+            warn(label + ": KHR_materials_specular " + texture + " is not supported; the factor alone is used");
 }
 
 std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primIndex) {

@@ -22,6 +22,7 @@
 #include "loom/Camera.h"
 #include "loom/Error.h"
 #include "loom/Scene.h"
+#include "loom/SurfaceKernels.h"
 
 namespace loom {
 
@@ -160,10 +161,19 @@ layout(binding = 6) uniform samplerBuffer uTangents;    // RGBA32F
 layout(binding = 7) uniform samplerBuffer uUvs;         // RG32F
 layout(binding = 8) uniform usamplerBuffer uTriangles;  // RGB32UI: a triangle's three indices
 
-layout(binding = 0) uniform sampler2D uBaseColorTex;  // SRGB8_ALPHA8 view: decoded before filtering
-layout(binding = 1) uniform sampler2D uMetalRoughTex; // RGBA8
-layout(binding = 2) uniform sampler2D uNormalTex;     // RGBA8
-layout(binding = 3) uniform sampler2D uEmissiveTex;   // SRGB8_ALPHA8 view
+// Material images as stored (RGBA8UI: the bytes themselves), read with
+// texelFetch and filtered here as SurfaceKernels.h sampleTexture does, so the
+// two agree to float rounding: GL's own filtering weighs texels with a few
+// bits of precision, and llvmpipe decodes sRGB approximately (0.7 % off).
+layout(binding = 0) uniform usampler2D uBaseColorTex;  // sRGB
+layout(binding = 1) uniform usampler2D uMetalRoughTex; // linear
+layout(binding = 2) uniform usampler2D uNormalTex;     // linear
+layout(binding = 3) uniform usampler2D uEmissiveTex;   // sRGB
+// SurfaceKernels.h srgbToLinear(byte / 255) for each byte, computed by it
+// (Gpu::program). A uniform array: on llvmpipe a lookup in it costs less than
+// a buffer-texture fetch (with a buffer texture, the pass took 1.7 times as
+// long on data/scenes/materials).
+layout(location = 16) uniform float uSrgbToLinear[256];
 
 // Interpolated attributes: for derivatives and grazing rays only.
 in vec3 vObjPos;
@@ -175,10 +185,72 @@ in vec3 vNormalW;
 // (CameraKernels.h cameraRayDir through the inverse world matrix).
 layout(location = 9) uniform vec3 uObjRayOrigin;
 layout(location = 10) uniform mat3 uObjRayBasis;
+// Per texture slot (order of uTextures), its TextureRef: the
+// KHR_texture_transform as the affine map uv' = uUvTransform[slot] * (u, v, 1),
+// and its sampler (bits 0-1 wrapS, 2-3 wrapT as TextureWrap, bit 4 nearest).
+layout(location = 11) uniform mat3x2 uUvTransform[4];
+layout(location = 15) uniform uvec4 uSampling;
 
 
 vec3 fetchPosition(uint i) { return texelFetch(uPositions, int(i)).xyz; }
 vec3 fetchNormal(uint i) { return texelFetch(uNormals, int(i)).xyz; }
+
+// i mod n in [0, n), for |i| <= 2^24 + 1. Without an integer division (GLSL
+// leaves % undefined for negative operands, and llvmpipe divides integers one
+// lane at a time): the float quotient is off by at most one, which is
+// corrected; the clamp only guards the texel fetch.
+int floorMod(int i, int n) {
+    int m = i - n * int(floor(float(i) / float(n)));
+    m += m < 0 ? n : (m >= n ? -n : 0);
+    return clamp(m, 0, n - 1);
+}
+
+// SurfaceKernels.h wrapTexel (GL 4.5, table 8.20) of texels i and i + 1.
+ivec2 wrapTexels(int i, int n, uint mode) {
+    if (mode == 1u) return clamp(ivec2(i, i + 1), 0, n - 1);
+    const int period = mode == 2u ? 2 * n : n;
+    const int m0 = floorMod(i, period);
+    const ivec2 m = ivec2(m0, m0 + 1 == period ? 0 : m0 + 1);
+    return mode == 2u ? mix(m, period - 1 - m, greaterThanEqual(m, ivec2(n))) : m;
+}
+
+// SurfaceKernels.h sampleTexture's texelCoord.
+float texelCoord(float c) {
+    const float limit = 16777216.0;
+    return !(c >= -limit) ? -limit : (c > limit ? limit : c);
+}
+
+// A texel as SurfaceKernels.h sampleTexture's fetch decodes it: byte / 255,
+// and sRGB colour through srgbToLinear's values.
+vec4 fetchTexel(usampler2D tex, int x, int y, bool srgb) {
+    const uvec4 t = texelFetch(tex, ivec2(x, y), 0);
+    if (!srgb) return vec4(t) / 255.0;
+    return vec4(uSrgbToLinear[t.r], uSrgbToLinear[t.g], uSrgbToLinear[t.b], float(t.a) / 255.0);
+}
+
+// glm::mix's formula, x * (1 - a) + y * a, written out.
+vec4 lerp(vec4 x, vec4 y, float a) { return x * (1.0 - a) + y * a; }
+
+// SurfaceKernels.h sampleTexture for texture slot `slot`, term by term.
+vec4 sampleTexture(usampler2D tex, int slot, vec2 uv, bool srgb) {
+    const mat3x2 m = uUvTransform[slot];
+    uv = vec2(m[0][0] * uv.x + m[1][0] * uv.y + m[2][0], m[0][1] * uv.x + m[1][1] * uv.y + m[2][1]);
+    const uint sampling = uSampling[slot];
+    const uint wrapS = sampling & 3u, wrapT = (sampling >> 2) & 3u;
+    const ivec2 size = textureSize(tex, 0);
+    if ((sampling & 16u) != 0u) {
+        const int x = int(floor(texelCoord(uv.x * float(size.x))));
+        const int y = int(floor(texelCoord(uv.y * float(size.y))));
+        return fetchTexel(tex, wrapTexels(x, size.x, wrapS).x, wrapTexels(y, size.y, wrapT).x, srgb);
+    }
+    const float fx = texelCoord(uv.x * float(size.x) - 0.5);
+    const float fy = texelCoord(uv.y * float(size.y) - 0.5);
+    const float x0f = floor(fx), y0f = floor(fy);
+    const float tx = fx - x0f, ty = fy - y0f;
+    const ivec2 xs = wrapTexels(int(x0f), size.x, wrapS), ys = wrapTexels(int(y0f), size.y, wrapT);
+    return lerp(lerp(fetchTexel(tex, xs.x, ys.x, srgb), fetchTexel(tex, xs.y, ys.x, srgb), tx),
+                lerp(fetchTexel(tex, xs.x, ys.y, srgb), fetchTexel(tex, xs.y, ys.y, srgb), tx), ty);
+}
 vec4 fetchTangent(uint i) { return texelFetch(uTangents, int(i)); }
 vec2 fetchUv(uint i) { return texelFetch(uUvs, int(i)).xy; }
 
@@ -282,8 +354,10 @@ void main() {
         fn = -fn;
         n = -n;
     }
-    // No mipmaps and GL_LINEAR filtering: textureLod at level 0 is exactly
-    // SurfaceKernels.h sampleImage (bilinear, repeat, texel centres at (i + 0.5) / size).
+    // Each textured slot is compiled in only where the drawn material has
+    // it (TEXTURE_SLOT_<k>, a program variant): llvmpipe runs both sides of
+    // a branch, masked, so an untextured draw would still pay for sampling.
+#ifdef TEXTURE_SLOT_2
     if (uTextures.z >= 0) {
         const vec4 t4 = w * fetchTangent(i0) + u * fetchTangent(i1) + v * fetchTangent(i2);
         vec3 t = (world * vec4(t4.xyz, 0.0)).xyz;
@@ -292,24 +366,31 @@ void main() {
         if (tl > 1e-8) {
             t /= tl;
             const vec3 b = cross(n, t) * (t4.w < 0.0 ? -1.0 : 1.0);
-            vec3 m = textureLod(uNormalTex, uv, 0.0).xyz * 2.0 - 1.0;
+            vec3 m = sampleTexture(uNormalTex, 2, uv, false).xyz * 2.0 - 1.0;
             m.xy *= uEmissive.w;
             const vec3 mapped = t * m.x + b * m.y + n * m.z;
             if (dot(mapped, mapped) > 1e-12) n = normalize(mapped);
         }
     }
+#endif
     vec4 base = uBaseColorFactor;
-    if (uTextures.x >= 0) base *= textureLod(uBaseColorTex, uv, 0.0);
+#ifdef TEXTURE_SLOT_0
+    if (uTextures.x >= 0) base *= sampleTexture(uBaseColorTex, 0, uv, true);
+#endif
     float metallic = uMaterialParams.x, roughness = uMaterialParams.y;
+#ifdef TEXTURE_SLOT_1
     if (uTextures.y >= 0) {
-        const vec4 mr = textureLod(uMetalRoughTex, uv, 0.0);
+        const vec4 mr = sampleTexture(uMetalRoughTex, 1, uv, false);
         roughness *= mr.g;
         metallic *= mr.b;
     }
+#endif
     metallic = clamp(metallic, 0.0, 1.0);
     roughness = clamp(roughness, 0.0, 1.0);
     vec3 emission = uEmissive.xyz;
-    if (uTextures.w >= 0) emission *= textureLod(uEmissiveTex, uv, 0.0).rgb;
+#ifdef TEXTURE_SLOT_3
+    if (uTextures.w >= 0) emission *= sampleTexture(uEmissiveTex, 3, uv, true).rgb;
+#endif
 
     // View depth along the camera axis, as the RT pass measures it.
     const float depth = dot(posW - uFrame.camOrigin.xyz, uFrame.camForward.xyz);
@@ -465,14 +546,27 @@ struct FrameGpu {
 };
 static_assert(sizeof(FrameGpu) == 5 * 64 + 8 * 16);
 
-/// A material as the per-draw uniforms uBaseColorFactor ... uFlags carry it.
+/// A material as the per-draw uniforms uBaseColorFactor ... uFlags,
+/// uUvTransform and uSampling carry it.
 struct MaterialGpu {
     glm::vec4 baseColorFactor;
     glm::vec4 emissive;
     glm::vec4 params;
     glm::ivec4 textures;
     glm::uvec4 flags;
+    std::array<glm::mat3x2, 4> uvTransforms;  // order of textures
+    glm::uvec4 sampling;                      // order of textures: samplingBits
 };
+
+/// A texture reference's sampler as the shader's uSampling packs it. A wrap
+/// value out of range repeats, as SurfaceKernels.h wrapTexel does.
+uint32_t samplingBits(const TextureRef& t) {
+    auto mode = [](TextureWrap w) {
+        return w == TextureWrap::ClampToEdge || w == TextureWrap::MirroredRepeat ? uint32_t(w) : 0u;
+    };
+    static_assert(uint32_t(TextureWrap::ClampToEdge) == 1 && uint32_t(TextureWrap::MirroredRepeat) == 2);
+    return mode(t.wrapS) | mode(t.wrapT) << 2 | (t.nearest ? 16u : 0u);
+}
 
 // Texture units, uniform locations and the uniform-block binding used by the shaders.
 enum : GLuint {
@@ -497,7 +591,10 @@ enum : GLint {
     kLocTextures = 7,
     kLocFlags = 8,
     kLocObjRayOrigin = 9,
-    kLocObjRayBasis = 10
+    kLocObjRayBasis = 10,
+    kLocUvTransform = 11,  // four locations, one per texture slot
+    kLocSampling = 15,
+    kLocSrgbToLinear = 16  // 256 locations
 };
 constexpr GLuint kBindFrame = 0;
 
@@ -513,6 +610,7 @@ constexpr uint32_t kVBufferBit = channelBit(kVBuffer), kMeshIdBit = channelBit(k
 // order), plus these flags.
 constexpr uint32_t kVariantAlphaTest = 1u << 16;
 constexpr uint32_t kVariantMiss = 1u << 17;
+constexpr uint32_t kVariantTextureSlot0 = 1u << 18;  // bits 18..21: texture slots 0..3 (order of uTextures)
 
 [[noreturn]] void runtimeError(const std::string& what, const std::string& suggestion = {}) {
     throw Error(Error::Info{ErrorKind::Runtime, {}, "GBufferRaster", what, {}, suggestion});
@@ -646,14 +744,12 @@ struct GBufferRaster::Gpu {
         glm::vec3 center{0.f};  // of the object-space bounds, for front-to-back ordering
     };
     struct ImageGpu {
-        GLuint linear = 0;  // immutable RGBA8 storage
-        GLuint srgb = 0;    // SRGB8_ALPHA8 view of the same storage, when a colour slot samples it
+        GLuint texels = 0;  // immutable RGBA8UI storage: the bytes as stored
     };
     SceneKey sceneKey;
     std::vector<MeshGpu> meshes;
     std::vector<ImageGpu> images;
 
-    GLuint sampler = 0;
     GLuint emptyVao = 0;
     GLuint frameUbo = 0;
 
@@ -669,7 +765,7 @@ struct GBufferRaster::Gpu {
     std::array<GLuint, kChannelCount> colour{};  // renderbuffer per consumed channel
     std::vector<Group> groups;
 
-    // Programs by variant (channel bits | kVariantAlphaTest | kVariantMiss).
+    // Programs by variant (channel bits | kVariantAlphaTest | kVariantMiss | texture slot bits).
     std::map<uint32_t, GLuint> programs;
 
     Gpu() {
@@ -680,15 +776,6 @@ struct GBufferRaster::Gpu {
         glGetIntegerv(GL_MAX_DRAW_BUFFERS, &maxDrawBuffers);
         glGetIntegerv(GL_MAX_COLOR_ATTACHMENTS, &maxAttachments);
         maxDrawBuffers = std::max(1, std::min(maxDrawBuffers, maxAttachments));
-
-        // One sampler for every material texture: bilinear, no mipmaps,
-        // repeat, which is what SurfaceKernels.h sampleImage computes.
-        glCreateSamplers(1, &sampler);
-        glSamplerParameteri(sampler, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-        glSamplerParameteri(sampler, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-        glSamplerParameteri(sampler, GL_TEXTURE_WRAP_S, GL_REPEAT);
-        glSamplerParameteri(sampler, GL_TEXTURE_WRAP_T, GL_REPEAT);
-        for (GLuint unit : {kUnitBaseColor, kUnitMetalRough, kUnitNormal, kUnitEmissive}) glBindSampler(unit, sampler);
 
         glCreateVertexArrays(1, &emptyVao);
         glCreateBuffers(1, &frameUbo);
@@ -715,6 +802,9 @@ struct GBufferRaster::Gpu {
             if (variant & (1u << c)) defines += "#define " + outputDefine(kChannels[c].name) + " " +
                                                 std::to_string(location++) + "\n";
         if (variant & kVariantAlphaTest) defines += "#define ALPHA_TEST 1\n";
+        for (int slot = 0; slot < 4; ++slot)
+            if (variant & (kVariantTextureSlot0 << slot))
+                defines += "#define TEXTURE_SLOT_" + std::to_string(slot) + " 1\n";
         const bool miss = variant & kVariantMiss;
         // "#version" must come first: defines go right after the common block's version line.
         std::string common = kShaderCommon;
@@ -722,6 +812,12 @@ struct GBufferRaster::Gpu {
         common.insert(afterVersion, defines);
         GLuint p = miss ? linkProgram(common + kMissVS, common + kFragmentOutputs + kMissFS)
                         : linkProgram(common + kGeometryVS, common + kFragmentOutputs + kGeometryFS);
+        if (!miss) {
+            // The shader's sRGB decoding table, computed by the CPU's code.
+            std::array<float, 256> srgbTable{};
+            for (size_t b = 0; b < srgbTable.size(); ++b) srgbTable[b] = srgbToLinear(float(b) / 255.f);
+            glProgramUniform1fv(p, kLocSrgbToLinear, GLsizei(srgbTable.size()), srgbTable.data());
+        }
         programs.emplace(variant, p);
         return p;
     }
@@ -734,10 +830,8 @@ struct GBufferRaster::Gpu {
             glDeleteBuffers(1, &m.vbo);
             glDeleteBuffers(1, &m.ibo);
         }
-        for (ImageGpu& i : images) {
-            if (i.srgb) glDeleteTextures(1, &i.srgb);
-            if (i.linear) glDeleteTextures(1, &i.linear);
-        }
+        for (ImageGpu& i : images)
+            if (i.texels) glDeleteTextures(1, &i.texels);
         meshes.clear();
         images.clear();
         sceneKey = {};
@@ -815,39 +909,31 @@ struct GBufferRaster::Gpu {
             glVertexArrayElementBuffer(g.vao, g.ibo);
         }
 
-        // Which images are sampled as sRGB colour and which as linear data.
-        std::vector<uint8_t> usedSrgb(scene.images.size(), 0), usedLinear(scene.images.size(), 0);
-        auto mark = [&](int index, std::vector<uint8_t>& used) {
-            if (index >= 0 && size_t(index) < used.size()) used[size_t(index)] = 1;
-        };
-        for (const Material& m : scene.materials) {
-            mark(m.baseColorTexture, usedSrgb);
-            mark(m.emissiveTexture, usedSrgb);
-            mark(m.metallicRoughnessTexture, usedLinear);
-            mark(m.normalTexture, usedLinear);
-        }
+        // Images a material samples, uploaded once each whatever their slots
+        // (the shader decodes sRGB per slot).
+        std::vector<uint8_t> used(scene.images.size(), 0);
+        for (const Material& m : scene.materials)
+            for (const TextureRef* t :
+                 {&m.baseColorTexture, &m.emissiveTexture, &m.metallicRoughnessTexture, &m.normalTexture})
+                if (t->image >= 0 && size_t(t->image) < used.size()) used[size_t(t->image)] = 1;
         images.resize(scene.images.size());
         glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
         glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
         for (size_t i = 0; i < scene.images.size(); ++i) {
             const SceneImage& img = scene.images[i];
-            if (!(usedSrgb[i] || usedLinear[i]) || img.width == 0 || img.height == 0 ||
-                img.texels.size() < size_t(img.width) * img.height)
+            if (!used[i] || img.width == 0 || img.height == 0 || img.texels.size() < size_t(img.width) * img.height)
                 continue;
             // Row 0 of a SceneImage is glTF uv.y = 0, and GL's first row is t = 0:
-            // uploaded as is, no flip. One level: sampleImage has no mipmaps.
+            // uploaded as is, no flip. One level: sampleTexture has no mipmaps.
             ImageGpu& g = images[i];
-            glCreateTextures(GL_TEXTURE_2D, 1, &g.linear);
-            glTextureStorage2D(g.linear, 1, GL_RGBA8, GLsizei(img.width), GLsizei(img.height));
-            glTextureSubImage2D(g.linear, 0, 0, 0, GLsizei(img.width), GLsizei(img.height), GL_RGBA, GL_UNSIGNED_BYTE,
-                                img.texels.data());
-            if (usedSrgb[i]) {
-                // RGBA8 and SRGB8_ALPHA8 are view-compatible (GL 4.5, table 8.22):
-                // one copy of the texels, decoded to linear before filtering when
-                // sampled through the sRGB view (section 8.24).
-                glGenTextures(1, &g.srgb);
-                glTextureView(g.srgb, GL_TEXTURE_2D, g.linear, GL_SRGB8_ALPHA8, 0, 1, 0, 1);
-            }
+            glCreateTextures(GL_TEXTURE_2D, 1, &g.texels);
+            glTextureStorage2D(g.texels, 1, GL_RGBA8UI, GLsizei(img.width), GLsizei(img.height));
+            glTextureSubImage2D(g.texels, 0, 0, 0, GLsizei(img.width), GLsizei(img.height), GL_RGBA_INTEGER,
+                                GL_UNSIGNED_BYTE, img.texels.data());
+            // An integer texture with a linear filter is incomplete and reads as 0 (GL 4.5, section 8.17),
+            // even through texelFetch.
+            glTextureParameteri(g.texels, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+            glTextureParameteri(g.texels, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
         }
         checkGl("scene upload");
         sceneKey = keyOf(&scene);
@@ -1008,14 +1094,20 @@ void GBufferRaster::execute(PassContext& ctx) {
     for (size_t i = 0; i < materials.size(); ++i) {
         const Material m = i < scene->materials.size() ? scene->materials[i] : Material{};
         // A texture that was not uploaded (bad index, empty image) is treated as absent.
-        auto tex = [&](int index) {
-            return index >= 0 && size_t(index) < g.images.size() && g.images[size_t(index)].linear ? index : -1;
+        auto tex = [&](const TextureRef& t) {
+            return t.image >= 0 && size_t(t.image) < g.images.size() && g.images[size_t(t.image)].texels ? t.image : -1;
         };
         materials[i].baseColorFactor = m.baseColorFactor;
         materials[i].emissive = glm::vec4(m.emissiveFactor, m.normalScale);
         materials[i].params = glm::vec4(m.metallicFactor, m.roughnessFactor, m.alphaCutoff, 0.f);
         materials[i].textures = glm::ivec4(tex(m.baseColorTexture), tex(m.metallicRoughnessTexture),
                                            tex(m.normalTexture), tex(m.emissiveTexture));
+        const TextureRef* slots[4] = {&m.baseColorTexture, &m.metallicRoughnessTexture, &m.normalTexture,
+                                      &m.emissiveTexture};
+        for (size_t k = 0; k < 4; ++k) {
+            materials[i].uvTransforms[k] = slots[k]->transform;
+            materials[i].sampling[int(k)] = samplingBits(*slots[k]);
+        }
         materials[i].flags = glm::uvec4(m.doubleSided ? 1u : 0u, m.alphaMode == AlphaMode::Mask ? 1u : 0u,
                                         m.alphaMode == AlphaMode::Blend ? 1u : 0u, 0u);
     }
@@ -1070,7 +1162,10 @@ void GBufferRaster::execute(PassContext& ctx) {
             const bool doubleSided = mat.flags.x != 0;
             const bool alphaTested = mAlphaTest && (mat.flags.y != 0 || mat.flags.z != 0);
 
-            const GLuint program = g.program(groupMask | (alphaTested ? kVariantAlphaTest : 0u));
+            uint32_t textured = 0;
+            for (int slot = 0; slot < 4; ++slot)
+                if (mat.textures[slot] >= 0) textured |= kVariantTextureSlot0 << slot;
+            const GLuint program = g.program(groupMask | (alphaTested ? kVariantAlphaTest : 0u) | textured);
             if (program != boundProgram) {
                 glUseProgram(program);
                 boundProgram = program;
@@ -1093,14 +1188,13 @@ void GBufferRaster::execute(PassContext& ctx) {
             glBindTextureUnit(kUnitTangents, mesh.tangents);
             glBindTextureUnit(kUnitUvs, mesh.uvs);
             glBindTextureUnit(kUnitTriangles, mesh.triangles);
-            auto bindTex = [&](GLuint unit, int index, bool srgb) {
-                const Gpu::ImageGpu* img = index >= 0 ? &g.images[size_t(index)] : nullptr;
-                glBindTextureUnit(unit, img ? (srgb ? img->srgb : img->linear) : 0);
+            auto bindTex = [&](GLuint unit, int index) {
+                glBindTextureUnit(unit, index >= 0 ? g.images[size_t(index)].texels : 0);
             };
-            bindTex(kUnitBaseColor, mat.textures.x, true);
-            bindTex(kUnitMetalRough, mat.textures.y, false);
-            bindTex(kUnitNormal, mat.textures.z, false);
-            bindTex(kUnitEmissive, mat.textures.w, true);
+            bindTex(kUnitBaseColor, mat.textures.x);
+            bindTex(kUnitMetalRough, mat.textures.y);
+            bindTex(kUnitNormal, mat.textures.z);
+            bindTex(kUnitEmissive, mat.textures.w);
             const glm::mat4 worldInverse = glm::inverse(inst.world);
             const glm::mat3 normalMatrix = glm::inverseTranspose(glm::mat3(inst.world));
             glUniform4ui(kLocDraw, GLuint(i), matIndex, 0u, 0u);
@@ -1112,6 +1206,8 @@ void GBufferRaster::execute(PassContext& ctx) {
             glUniform4fv(kLocMaterialParams, 1, &mat.params[0]);
             glUniform4iv(kLocTextures, 1, &mat.textures[0]);
             glUniform4uiv(kLocFlags, 1, &mat.flags[0]);
+            glUniformMatrix3x2fv(kLocUvTransform, 4, GL_FALSE, &mat.uvTransforms[0][0][0]);
+            glUniform4uiv(kLocSampling, 1, &mat.sampling[0]);
             const glm::vec3 objOrigin = glm::vec3(worldInverse * glm::vec4(camera.position(), 1.f));
             const glm::mat3 objBasis = glm::mat3(worldInverse) * rayBasis;
             glUniform3fv(kLocObjRayOrigin, 1, &objOrigin[0]);

@@ -335,6 +335,8 @@ LOOM_HD inline BrdfInputs brdfInputs(const SurfaceHit& hit, bool multiScatter = 
     in.baseColor = hit.baseColor;
     in.metallic = hit.metallic;
     in.roughness = hit.roughness;
+    in.specularF0 = hit.specularF0;
+    in.specularF90 = hit.specularF90;
     in.multiScatter = multiScatter;
     return in;
 }
@@ -354,7 +356,7 @@ struct BrdfLobes {
     float f90 = 1.f;
     glm::vec3 msScale{0.f};       ///< Fms (1 - E(mu_o)) / (pi (1 - Eavg)); 0 for the plain model
     glm::vec3 diffuseScale{0.f};  ///< (1 - metallic) baseColor / pi, times (1 - Ed(mu_o)) / (1 - Ed_avg) compensated
-    float layerE = 0.f, layerEs = 0.f, layerC = 0.f;  ///< Ed(mu) = layerE E + layerEs Es + layerC
+    glm::vec3 layerE{0.f}, layerEs{0.f}, layerC{0.f};  ///< per channel, Ed(mu) = layerE E + layerEs Es + layerC
     glm::vec3 dielectricF0{0.04f};  ///< plain model: the diffuse weight is 1 - (f0 + (f90 - f0) (1 - wo.h)^5)
     float dielectricF90 = 1.f;
     float roughness = 1.f;
@@ -370,9 +372,9 @@ struct BrdfLobes {
 /// multiple scattering, albedo Ed) does not reflect, on both sides to stay reciprocal: (1 - Ed(mu_o)) (1 - Ed(mu_i)) /
 /// (1 - Ed_avg), the albedo-scaling layering of Kulla and Conty 2017 (slide 31) as in Dassault Systemes' Enterprise
 /// PBR shading model (2022, "Albedo scaling"). A white dielectric then reflects Ed(mu_o) + (1 - Ed(mu_o)) = 1 of the
-/// light: glTF's fresnel_mix on wo.h (Appendix B) would reflect up to 1.85 at grazing views of a smooth one. With a
-/// coloured dielectric f0 (KHR_materials_specular) the layer's albedo uses its largest channel, which never creates
-/// energy. Metals mix in by metallic as in the specification.
+/// light: glTF's fresnel_mix on wo.h (Appendix B) would reflect up to 1.85 at grazing views of a smooth one. Ed is
+/// taken per colour channel, so a coloured dielectric Fresnel (KHR_materials_specular) conserves energy channel by
+/// channel too. Metals mix in by metallic as in the specification.
 LOOM_HD inline BrdfLobes makeBrdfLobes(const BrdfInputs& in, float NdotV) {
     BrdfLobes L;
     const float m = in.metallic;
@@ -383,33 +385,33 @@ LOOM_HD inline BrdfLobes makeBrdfLobes(const BrdfInputs& in, float NdotV) {
     L.dielectricF0 = in.specularF0;
     L.dielectricF90 = in.specularF90;
     const GgxAlbedo eo = ggxAlbedo(NdotV, in.roughness), avg = ggxAlbedoAverage(in.roughness);
-    // The dielectric layer's scalar albedo, Ed(mu) = s0 (E - Es) + s90 Es + FmsLayer (1 - E).
-    const float s0 = glm::max(glm::max(in.specularF0.x, in.specularF0.y), in.specularF0.z), s90 = in.specularF90;
     const float lossAvg = 1.f - avg.e;  // energy single scattering loses, averaged over views
     // Below 1e-5 the lost energy is negligible and 1 / lossAvg would amplify rounding: no compensation there.
     const bool compensate = in.multiScatter && lossAvg > 1e-5f;
-    const float fmsLayer = compensate ? multiScatterFresnel(s0, s90, avg.e) : 0.f;
-    L.layerE = s0 - fmsLayer;
-    L.layerEs = s90 - s0;
+    // The dielectric layer's albedo, Ed(mu) = f0 (E - Es) + f90 Es + FmsLayer (1 - E).
+    const glm::vec3 fmsLayer = compensate ? multiScatterFresnel(in.specularF0, in.specularF90, avg.e) : glm::vec3(0.f);
+    L.layerE = in.specularF0 - fmsLayer;
+    L.layerEs = glm::vec3(in.specularF90) - in.specularF0;
     L.layerC = fmsLayer;
-    const float layerOut = L.layerE * eo.e + L.layerEs * eo.es + L.layerC;
+    const glm::vec3 layerOut = L.layerE * eo.e + L.layerEs * eo.es + L.layerC;
+    const glm::vec3 diffuseOut = glm::max(glm::vec3(1.f) - layerOut, glm::vec3(0.f));
     const glm::vec3 diffuse = ((1.f - m) * kInvPi) * in.baseColor;
     glm::vec3 fms(0.f);
     if (compensate) {
-        fms = (1.f - m) * multiScatterFresnel(in.specularF0, s90, avg.e) + m * multiScatterFresnel(in.baseColor, 1.f,
-                                                                                                   avg.e);
+        fms = (1.f - m) * fmsLayer + m * multiScatterFresnel(in.baseColor, 1.f, avg.e);
         L.msScale = fms * ((1.f - eo.e) * kInvPi / lossAvg);
     }
     if (in.multiScatter) {
-        const float layerAvg = L.layerE * avg.e + L.layerEs * avg.es + L.layerC;
-        L.diffuseScale = layerAvg < 1.f ? diffuse * (maxOr(1.f - layerOut, 0.f) / (1.f - layerAvg)) : glm::vec3(0.f);
+        const glm::vec3 layerAvg = L.layerE * avg.e + L.layerEs * avg.es + L.layerC;
+        for (int c = 0; c < 3; ++c)
+            L.diffuseScale[c] = layerAvg[c] < 1.f ? diffuse[c] * (diffuseOut[c] / (1.f - layerAvg[c])) : 0.f;
     } else {
         L.diffuseScale = diffuse;
     }
     // Lobe selection (variance only): the albedo of the GGX lobe against the other two, which the cosine-weighted
     // hemisphere samples. Neither is starved ([0.1, 0.9]); without the others the GGX lobe alone (1).
     const float spec = luminance(L.f0 * (eo.e - eo.es) + glm::vec3(L.f90 * eo.es));
-    const float other = luminance(fms) * (1.f - eo.e) + (1.f - m) * luminance(in.baseColor) * maxOr(1.f - layerOut, 0.f);
+    const float other = luminance(fms) * (1.f - eo.e) + (1.f - m) * luminance(in.baseColor * diffuseOut);
     L.pSpec = other > 0.f ? glm::clamp(spec / (spec + other), 0.1f, 0.9f) : 1.f;
     return L;
 }
@@ -425,7 +427,8 @@ LOOM_HD inline glm::vec3 otherLobes(const BrdfLobes& L, float NdotL, float w) {
     if (!L.multiScatter)
         return L.diffuseScale * (glm::vec3(1.f) - (L.dielectricF0 + (L.dielectricF90 - L.dielectricF0) * w));
     const GgxAlbedo ei = ggxAlbedo(NdotL, L.roughness);
-    return L.msScale * (1.f - ei.e) + L.diffuseScale * maxOr(1.f - (L.layerE * ei.e + L.layerEs * ei.es + L.layerC), 0.f);
+    const glm::vec3 diffuseIn = glm::max(glm::vec3(1.f) - (L.layerE * ei.e + L.layerEs * ei.es + L.layerC), glm::vec3(0.f));
+    return L.msScale * (1.f - ei.e) + L.diffuseScale * diffuseIn;
 }
 
 /// The BRDF value and the sampling pdf for one pair of directions.

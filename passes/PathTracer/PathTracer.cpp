@@ -241,8 +241,8 @@ void PathTracer::buildLights(const Scene& scene) {
         const MaterialData& md = view.materials[mesh.material];
         // Selection weight: mean emitted luminance (texture mean when textured) times area.
         float texMean = 1.f;
-        if (md.emissiveTexture >= 0) {
-            const SceneImage& img = scene.images[size_t(md.emissiveTexture)];
+        if (md.emissiveTexture.image >= 0) {
+            const SceneImage& img = scene.images[size_t(md.emissiveTexture.image)];
             double sum = 0.0;
             for (const auto& t : img.texels)
                 sum += pt::luminance(
@@ -266,7 +266,7 @@ void PathTracer::buildLights(const Scene& scene) {
             e.instance = i;
             e.primitive = t;
             e.doubleSided = mat.doubleSided ? 1u : 0u;
-            e.textured = md.emissiveTexture >= 0 ? 1u : 0u;
+            e.textured = md.emissiveTexture.image >= 0 ? 1u : 0u;
             e.radiance = mat.emissiveFactor;
             mTris.push_back(e);
         }

@@ -152,8 +152,8 @@ HWY_INLINE V multiScatterFresnel(D d, V f0, V f90, V eAvg) {
 /// BrdfVertex (BRDF.h, with its BrdfLobes) for one path per lane.
 struct VertexV {
     FrameV frame;
-    V3 wo, f0, msScale, diffuseScale, dielectricF0;
-    V f90, dielectricF90, layerE, layerEs, layerC;
+    V3 wo, f0, msScale, diffuseScale, dielectricF0, layerE, layerEs, layerC;
+    V f90, dielectricF90;
     V alpha, a2, pSpec, invA2, invPiA2, smithWo, specPdfScale;
     hn::Vec<hn::RebindToSigned<D>> row;  ///< the roughness row of the albedo table (2 kBrdfTableSize y)
     V rowFrac;
@@ -184,33 +184,34 @@ HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V me
     const V ea0 = hn::GatherIndex(d, avg, ia), sa0 = hn::GatherIndex(d, avg + 1, ia);
     const V ea1 = hn::GatherIndex(d, avg + 2, ia), sa1 = hn::GatherIndex(d, avg + 3, ia);
     const V eAvg = hn::MulAdd(ea1 - ea0, v.rowFrac, ea0), esAvg = hn::MulAdd(sa1 - sa0, v.rowFrac, sa0);
-    // The dielectric layer's scalar albedo.
-    const V s0 = hn::Max(hn::Max(specularF0.x, specularF0.y), specularF0.z), s90 = specularF90;
     const V lossAvg = one - eAvg;
     const M compensate = multiScatter ? hn::Gt(lossAvg, hn::Set(d, 1e-5f)) : hn::FirstN(d, 0);
     const V safeLoss = hn::IfThenElse(compensate, lossAvg, one);
-    const V fmsLayer = hn::IfThenElseZero(compensate, multiScatterFresnel(d, s0, s90, eAvg));
-    v.layerE = s0 - fmsLayer;
-    v.layerEs = s90 - s0;
+    // The dielectric layer's albedo per channel, Ed(mu) = f0 (E - Es) + f90 Es + FmsLayer (1 - E).
+    const V3 fmsLayer = {hn::IfThenElseZero(compensate, multiScatterFresnel(d, specularF0.x, specularF90, eAvg)),
+                         hn::IfThenElseZero(compensate, multiScatterFresnel(d, specularF0.y, specularF90, eAvg)),
+                         hn::IfThenElseZero(compensate, multiScatterFresnel(d, specularF0.z, specularF90, eAvg))};
+    v.layerE = sub(specularF0, fmsLayer);
+    v.layerEs = {specularF90 - specularF0.x, specularF90 - specularF0.y, specularF90 - specularF0.z};
     v.layerC = fmsLayer;
-    const V layerOut = hn::MulAdd(v.layerE, eo, hn::MulAdd(v.layerEs, eso, v.layerC));
-    const V diffuseW = oneMinusM * invPi;
-    const V3 diffuse = scale(base, diffuseW);
+    const V3 diffuseOut = {hn::Max(one - hn::MulAdd(v.layerE.x, eo, hn::MulAdd(v.layerEs.x, eso, v.layerC.x)), zero),
+                           hn::Max(one - hn::MulAdd(v.layerE.y, eo, hn::MulAdd(v.layerEs.y, eso, v.layerC.y)), zero),
+                           hn::Max(one - hn::MulAdd(v.layerE.z, eo, hn::MulAdd(v.layerEs.z, eso, v.layerC.z)), zero)};
+    const V3 diffuse = scale(base, oneMinusM * invPi);
     V3 fms = {zero, zero, zero};
     if (multiScatter) {
-        fms = {hn::MulAdd(oneMinusM, multiScatterFresnel(d, specularF0.x, s90, eAvg),
-                          m * multiScatterFresnel(d, base.x, one, eAvg)),
-               hn::MulAdd(oneMinusM, multiScatterFresnel(d, specularF0.y, s90, eAvg),
-                          m * multiScatterFresnel(d, base.y, one, eAvg)),
-               hn::MulAdd(oneMinusM, multiScatterFresnel(d, specularF0.z, s90, eAvg),
-                          m * multiScatterFresnel(d, base.z, one, eAvg))};
-        fms = {hn::IfThenElseZero(compensate, fms.x), hn::IfThenElseZero(compensate, fms.y),
-               hn::IfThenElseZero(compensate, fms.z)};
-        const V layerAvg = hn::MulAdd(v.layerE, eAvg, hn::MulAdd(v.layerEs, esAvg, v.layerC));
-        const M below1 = hn::Lt(layerAvg, one);
-        const V diffuseOut = hn::IfThenElseZero(
-            below1, hn::Div(hn::Max(one - layerOut, zero), hn::IfThenElse(below1, one - layerAvg, one)));
-        v.diffuseScale = scale(diffuse, diffuseOut);
+        fms = {hn::MulAdd(oneMinusM, fmsLayer.x, hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.x, one, eAvg))),
+               hn::MulAdd(oneMinusM, fmsLayer.y, hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.y, one, eAvg))),
+               hn::MulAdd(oneMinusM, fmsLayer.z, hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.z, one, eAvg)))};
+        // diffuse (1 - Ed(mu_o)) / (1 - Ed_avg), per channel; 0 where the layer reflects everything.
+        auto scaled = [&](V dc, V out, V le, V les, V lc) {
+            const V layerAvg = hn::MulAdd(le, eAvg, hn::MulAdd(les, esAvg, lc));
+            const M below1 = hn::Lt(layerAvg, one);
+            return hn::IfThenElseZero(below1, dc * hn::Div(out, hn::IfThenElse(below1, one - layerAvg, one)));
+        };
+        v.diffuseScale = {scaled(diffuse.x, diffuseOut.x, v.layerE.x, v.layerEs.x, v.layerC.x),
+                          scaled(diffuse.y, diffuseOut.y, v.layerE.y, v.layerEs.y, v.layerC.y),
+                          scaled(diffuse.z, diffuseOut.z, v.layerE.z, v.layerEs.z, v.layerC.z)};
     } else {
         v.diffuseScale = diffuse;
     }
@@ -228,8 +229,7 @@ HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V me
     const V3 specAlbedo = {hn::MulAdd(v.f0.x, eo - eso, v.f90 * eso), hn::MulAdd(v.f0.y, eo - eso, v.f90 * eso),
                            hn::MulAdd(v.f0.z, eo - eso, v.f90 * eso)};
     const V spec = luminance(d, specAlbedo);
-    const V other = hn::MulAdd(luminance(d, fms), one - eo,
-                               oneMinusM * luminance(d, base) * hn::Max(one - layerOut, zero));
+    const V other = hn::MulAdd(luminance(d, fms), one - eo, oneMinusM * luminance(d, mul(base, diffuseOut)));
     const V ratio = hn::Min(hn::Max(hn::Div(spec, spec + other), hn::Set(d, 0.1f)), hn::Set(d, 0.9f));
     v.pSpec = hn::IfThenElse(hn::Gt(other, zero), ratio, one);
     v.specPdfScale = hn::Div(v.pSpec, hn::Set(d, 2.f) * (v.wo.z + v.smithWo));
@@ -258,11 +258,11 @@ HWY_INLINE void evalVertex(D d, const VertexV& v, const V3& wi, bool multiScatte
     if (multiScatter) {
         V ei, esi;
         ggxAlbedo(d, v.row, v.rowFrac, hn::Min(wi.z, one), ei, esi);
-        const V diffuseIn = hn::Max(one - hn::MulAdd(v.layerE, ei, hn::MulAdd(v.layerEs, esi, v.layerC)), zero);
         const V msIn = one - ei;
-        other = {hn::MulAdd(v.msScale.x, msIn, v.diffuseScale.x * diffuseIn),
-                 hn::MulAdd(v.msScale.y, msIn, v.diffuseScale.y * diffuseIn),
-                 hn::MulAdd(v.msScale.z, msIn, v.diffuseScale.z * diffuseIn)};
+        auto diffuseIn = [&](V le, V les, V lc) { return hn::Max(one - hn::MulAdd(le, ei, hn::MulAdd(les, esi, lc)), zero); };
+        other = {hn::MulAdd(v.msScale.x, msIn, v.diffuseScale.x * diffuseIn(v.layerE.x, v.layerEs.x, v.layerC.x)),
+                 hn::MulAdd(v.msScale.y, msIn, v.diffuseScale.y * diffuseIn(v.layerE.y, v.layerEs.y, v.layerC.y)),
+                 hn::MulAdd(v.msScale.z, msIn, v.diffuseScale.z * diffuseIn(v.layerE.z, v.layerEs.z, v.layerC.z))};
     } else {
         const V f90w = v.dielectricF90 * w;
         other = {v.diffuseScale.x * (one - hn::MulAdd(v.dielectricF0.x, one - w, f90w)),

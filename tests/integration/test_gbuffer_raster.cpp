@@ -523,12 +523,12 @@ TEST(GBufferRaster, SurfaceMatchesSurfaceKernels) {
     }));
     Material m;
     m.baseColorFactor = glm::vec4(0.9f, 0.8f, 1.f, 1.f);
-    m.baseColorTexture = 0;
-    m.emissiveTexture = 0;
+    m.baseColorTexture.image = 0;
+    m.emissiveTexture.image = 0;
     m.emissiveFactor = glm::vec3(0.5f, 1.f, 2.f);
-    m.normalTexture = 1;
+    m.normalTexture.image = 1;
     m.normalScale = 0.8f;
-    m.metallicRoughnessTexture = 2;
+    m.metallicRoughnessTexture.image = 2;
     m.metallicFactor = 0.7f;
     m.roughnessFactor = 0.9f;
     Mesh mesh = rectMesh(-1.f, -1.f, 1.f, 1.f);
@@ -570,8 +570,8 @@ TEST(GBufferRaster, SurfaceMatchesSurfaceKernels) {
             const glm::vec3 toHit = glm::normalize(glm::vec3(posW) - cam.position());
             EXPECT_GT(glm::dot(toHit, glm::normalize(dir)), 1.f - 1e-6f);
             EXPECT_TRUE(near3(glm::vec3(texel<glm::vec4>(field(*graph, "faceNormalW"), x, y)), s.faceNormalW, 1e-5f));
-            // Textures: GL filters 8-bit texels with limited weight precision.
-            const float texTol = 1.5e-2f;
+            // Textures: the shader filters texels as sampleTexture does (texelFetch), to float rounding.
+            const float texTol = 1e-5f;
             EXPECT_TRUE(near3(glm::vec3(texel<glm::vec4>(field(*graph, "normW"), x, y)), s.normalW, texTol));
             EXPECT_TRUE(near3(glm::vec3(texel<glm::vec4>(field(*graph, "albedo"), x, y)), diffuseAlbedo(s), texTol));
             EXPECT_TRUE(near3(glm::vec3(texel<glm::vec4>(field(*graph, "emission"), x, y)), s.emission,
@@ -585,6 +585,171 @@ TEST(GBufferRaster, SurfaceMatchesSurfaceKernels) {
         }
     }
     EXPECT_GT(checked, 300);
+}
+
+// Samplers and texture transforms, per slot: GBufferRaster (sampleTexture in
+// GLSL over texelFetch) and GBufferRT (SurfaceKernels.h) give the same albedo,
+// specular albedo and emission. Where every slot a channel reads is nearest,
+// exactly the same texel, away from texel boundaries (where the two sides' uv
+// rounding may pick neighbours); bilinear to float rounding. Nearest slots
+// also read the texel that wrapTexel names, so a clamped uv outside [0, 1]
+// shows the edge texel in both G-buffers.
+TEST(GBufferRaster, SamplersAndTransformsMatchGBufferRT) {
+    constexpr uint32_t w = 128, h = 96, size = 4;
+    auto scene = std::make_shared<Scene>();
+    SceneImage img;
+    img.name = "checker";
+    img.width = img.height = size;
+    for (uint32_t y = 0; y < size; ++y)
+        for (uint32_t x = 0; x < size; ++x)
+            img.texels.emplace_back(uint8_t(20 + 70 * x), uint8_t(230 - 60 * y), uint8_t(40 * ((x + y) % 3) + 5), 255);
+    scene->images.push_back(img);
+    using W = TextureWrap;
+    auto texture = [](W s, W t, bool nearest, glm::mat3x2 transform = glm::mat3x2(1.f)) {
+        TextureRef r;
+        r.image = 0;
+        r.wrapS = s;
+        r.wrapT = t;
+        r.nearest = nearest ? 1u : 0u;
+        r.transform = transform;
+        return r;
+    };
+    // Three materials, side by side; the slots of one material sample differently.
+    Material m0;
+    m0.metallicFactor = 0.f;
+    m0.roughnessFactor = 0.7f;
+    m0.emissiveFactor = glm::vec3(1.f);
+    m0.baseColorTexture = texture(W::ClampToEdge, W::MirroredRepeat, true);
+    m0.emissiveTexture = texture(W::MirroredRepeat, W::ClampToEdge, false);
+    Material m1 = m0;
+    m1.baseColorTexture = texture(W::ClampToEdge, W::ClampToEdge, false,
+                                  glm::mat3x2(glm::vec2(0.8f, 0.3f), glm::vec2(-0.3f, 0.8f), glm::vec2(0.1f, -0.2f)));
+    m1.emissiveTexture = texture(W::Repeat, W::MirroredRepeat, true,
+                                 glm::mat3x2(glm::vec2(1.5f, 0.f), glm::vec2(0.f, -0.75f), glm::vec2(0.25f, 1.f)));
+    Material m2 = m0;
+    // Rotation by 0.5 rad, scale (1.25, 0.8), offset (0.3, 0.6), as the loader builds KHR_texture_transform.
+    const float c = std::cos(0.5f), sn = std::sin(0.5f);
+    m2.baseColorTexture =
+        texture(W::MirroredRepeat, W::Repeat, true,
+                glm::mat3x2(glm::vec2(c * 1.25f, -sn * 1.25f), glm::vec2(sn * 0.8f, c * 0.8f), glm::vec2(0.3f, 0.6f)));
+    m2.metallicFactor = 1.f;
+    m2.metallicRoughnessTexture = texture(W::ClampToEdge, W::ClampToEdge, true);
+    m2.emissiveTexture = TextureRef{};
+    scene->materials = {m0, m1, m2};
+    for (uint32_t i = 0; i < 3; ++i) {
+        const float x0 = -1.6f + 1.1f * float(i);
+        Mesh mesh = rectMesh(x0, -1.1f, x0 + 1.f, 1.1f, i);
+        mesh.uvs = {{-0.7f, 1.9f}, {1.8f, 1.9f}, {1.8f, -0.6f}, {-0.7f, -0.6f}};  // wraps and clamps
+        scene->meshes.push_back(mesh);
+        Node n;
+        n.translation = glm::vec3(0.f, 0.f, -3.f);
+        n.meshes = {i};
+        scene->nodes.push_back(n);
+        scene->roots.push_back(int(i));
+    }
+    scene->finalize();
+    scene->update(0.0);
+    Camera cam = makeCamera(w, h);
+
+    nlohmann::json g = {
+        {"loom_graph", 1},
+        {"name", "RasterVsRTTextures"},
+        {"passes", {{{"name", "Raster"}, {"type", "GBufferRaster"}}, {{"name", "RT"}, {"type", "GBufferRT"}}}},
+        {"edges", nlohmann::json::array()},
+        {"outputs", nlohmann::json::array()}};
+    for (const char* pass : {"Raster", "RT"})
+        for (const char* c : {"vbuffer", "albedo", "specAlbedo", "emission"})
+            g["outputs"].push_back(std::string(pass) + "." + c);
+    RenderGraph graph(parseGraph(g.dump()), registry());
+    CompileOptions o;
+    o.width = w;
+    o.height = h;
+    graph.compile(o);
+    graph.execute(FrameInfo{0, 0.0, scene.get(), &cam});
+    auto tex = [&](const char* pass, const char* c) -> const Texture& {
+        const Texture* t = graph.fieldTexture(std::string(pass) + "." + c);
+        if (!t) throw std::runtime_error(std::string(pass) + "." + c + " missing");
+        return *t;
+    };
+
+    const SceneView& view = scene->view();
+    const CameraData cd = makeCameraData(cam, w, h);
+    // How a slot reads at a uv: exact (nearest, the lookup off texel boundaries) or not, and the texel it names.
+    struct Lookup {
+        bool exact = true;
+        glm::vec4 texel{1.f};
+    };
+    auto lookup = [&](const TextureRef& t, glm::vec2 uv, bool srgb) {
+        Lookup l;
+        if (t.image < 0) return l;
+        if (!t.nearest) return Lookup{false, {}};
+        const glm::vec2 p = transformUv(t, uv) * float(size);
+        const glm::vec2 off = glm::abs(p - glm::round(p));
+        l.exact = off.x > 1e-3f && off.y > 1e-3f;
+        const int x = wrapTexel(int(std::floor(p.x)), int(size), t.wrapS);
+        const int y = wrapTexel(int(std::floor(p.y)), int(size), t.wrapT);
+        const glm::vec4 v = glm::vec4(img.texels[size_t(y) * size + size_t(x)]) / 255.f;
+        l.texel = srgb ? glm::vec4(srgbToLinear(v.r), srgbToLinear(v.g), srgbToLinear(v.b), v.a) : v;
+        return l;
+    };
+    int compared[3] = {0, 0, 0}, exact[3] = {0, 0, 0}, clampedEdge = 0;
+    for (uint32_t y = 0; y < h; ++y) {
+        for (uint32_t x = 0; x < w; ++x) {
+            const glm::uvec4 vr = texel<glm::uvec4>(tex("Raster", "vbuffer"), x, y);
+            const glm::uvec4 vt = texel<glm::uvec4>(tex("RT", "vbuffer"), x, y);
+            if (vt.x == kMissId || vr.x != vt.x || vr.y != vt.y) continue;
+            SCOPED_TRACE("pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")");
+            const SurfaceHit s =
+                evalSurface(view, vt.x, vt.y, bitsToFloat(vt.z), bitsToFloat(vt.w), pixelRayDir(cd, x, y));
+            const MaterialData& mat = view.materials[s.material];
+            const Lookup base = lookup(mat.baseColorTexture, s.uv, true);
+            const Lookup mr = lookup(mat.metallicRoughnessTexture, s.uv, false);
+            const Lookup emissive = lookup(mat.emissiveTexture, s.uv, true);
+            ++compared[s.material];
+            const glm::vec3 albedoRT = glm::vec3(texel<glm::vec4>(tex("RT", "albedo"), x, y));
+            const glm::vec3 albedoRaster = glm::vec3(texel<glm::vec4>(tex("Raster", "albedo"), x, y));
+            const glm::vec3 emissionRT = glm::vec3(texel<glm::vec4>(tex("RT", "emission"), x, y));
+            const glm::vec3 emissionRaster = glm::vec3(texel<glm::vec4>(tex("Raster", "emission"), x, y));
+            const glm::vec3 specRT = glm::vec3(texel<glm::vec4>(tex("RT", "specAlbedo"), x, y));
+            const glm::vec3 specRaster = glm::vec3(texel<glm::vec4>(tex("Raster", "specAlbedo"), x, y));
+            auto near3 = [](glm::vec3 a, glm::vec3 b, float tol) {
+                return glm::all(glm::lessThanEqual(glm::abs(a - b), glm::vec3(tol)));
+            };
+            // Bilinear is continuous: the two sides' uvs, a rounding error apart, give values as close.
+            const float texTol = 1e-5f;
+            if (base.exact && mr.exact) {
+                ++exact[s.material];
+                // The texel wrapTexel names, in both (the metallic from the B channel when textured).
+                const float metallic =
+                    mat.metallicFactor * (mat.metallicRoughnessTexture.image >= 0 ? mr.texel.b : 1.f);
+                EXPECT_TRUE(near3(albedoRT, glm::vec3(base.texel) * (1.f - metallic), 1e-6f)) << "RT albedo";
+                EXPECT_TRUE(near3(albedoRaster, albedoRT, 1e-6f)) << "albedo";
+                EXPECT_TRUE(near3(specRaster, specRT, 1e-5f)) << "specAlbedo";
+                const glm::vec2 uv = transformUv(mat.baseColorTexture, s.uv);
+                if (mat.baseColorTexture.wrapS == W::ClampToEdge && uv.x < 0.f) {
+                    // Left of the image: its first column, as texel (0, row).
+                    const int row = wrapTexel(int(std::floor(uv.y * size)), int(size), mat.baseColorTexture.wrapT);
+                    const glm::vec4 edge = glm::vec4(img.texels[size_t(row) * size]) / 255.f;
+                    EXPECT_EQ(albedoRT.r, srgbToLinear(edge.r));
+                    ++clampedEdge;
+                }
+            } else {
+                EXPECT_TRUE(near3(albedoRaster, albedoRT, texTol)) << "albedo";
+                EXPECT_TRUE(near3(specRaster, specRT, texTol)) << "specAlbedo";
+            }
+            if (emissive.exact) {
+                EXPECT_TRUE(near3(emissionRT, glm::vec3(emissive.texel), 1e-6f)) << "RT emission";
+                EXPECT_TRUE(near3(emissionRaster, emissionRT, 1e-6f)) << "emission";
+            } else {
+                EXPECT_TRUE(near3(emissionRaster, emissionRT, texTol)) << "emission";
+            }
+        }
+    }
+    for (int m = 0; m < 3; ++m) {
+        EXPECT_GT(compared[m], 500) << "material " << m;
+        if (m != 1) EXPECT_GT(exact[m], 400) << "material " << m;  // material 1's base colour is bilinear
+    }
+    EXPECT_GT(clampedEdge, 50);
 }
 
 // No instances: every pixel is a miss. No scene at all: a clear error.

@@ -421,6 +421,54 @@ TEST(Brdf, PlainModelIsTheSpecification) {
     }
 }
 
+TEST(Brdf, IorAndSpecularSetTheDielectricFresnel) {
+    // KHR_materials_ior and KHR_materials_specular: f0 = min(((ior - 1) / (ior + 1))^2 specularColor, 1) specular,
+    // f90 = specular; glTF's default is exactly 0.04 and 1.
+    MaterialData d;
+    EXPECT_EQ(dielectricF0(d), glm::vec3(0.04f));
+    d.ior = 1.33f;
+    EXPECT_NEAR(dielectricF0(d).x, (0.33 / 2.33) * (0.33 / 2.33), 1e-7);
+    d.ior = 0.f;  // the extension's special value: a Fresnel term of 1
+    EXPECT_EQ(dielectricF0(d), glm::vec3(1.f));
+    d.ior = 2.5f;
+    d.specularFactor = 0.5f;
+    d.specularColorFactor = glm::vec3(0.f, 1.f, 20.f);
+    const float f0 = (1.5f / 3.5f) * (1.5f / 3.5f);
+    EXPECT_NEAR(dielectricF0(d).x, 0.f, 1e-7);
+    EXPECT_NEAR(dielectricF0(d).y, 0.5f * f0, 1e-6);
+    EXPECT_NEAR(dielectricF0(d).z, 0.5f, 1e-6);  // clamped to 1 before the factor
+
+    // The energy compensation holds for any dielectric Fresnel: white dielectrics of ior 2.5 (f0 0.18), with a
+    // coloured and weakened specular, and with no specular at all (pure Lambert) reflect all the light.
+    const Frame frame = makeFrame(kNormal);
+    struct Fresnel {
+        glm::vec3 f0;
+        float f90;
+    };
+    for (const Fresnel& fr : {Fresnel{glm::vec3(f0), 1.f}, Fresnel{glm::vec3(0.02f, 0.1f, 0.3f) * 0.7f, 0.7f},
+                              Fresnel{glm::vec3(0.f), 0.f}}) {
+        for (float r : {0.05f, 0.5f, 1.f}) {
+            for (float view : {0.f, 60.f, 85.f}) {
+                BrdfInputs in{glm::vec3(1.f), 0.f, r};
+                in.specularF0 = fr.f0;
+                in.specularF90 = fr.f90;
+                const glm::dvec3 albedo = albedoByQuadrature(in, frame, direction(frame, view, 0.2f), 384, 192);
+                for (int k = 0; k < 3; ++k) {
+                    EXPECT_GE(albedo[k], 0.97) << "f0 " << fr.f0[k] << " roughness " << r << " view " << view;
+                    EXPECT_LE(albedo[k], 1.01) << "f0 " << fr.f0[k] << " roughness " << r << " view " << view;
+                }
+            }
+        }
+    }
+    // The plain model's Fresnel is f0 + (f90 - f0) (1 - wo.h)^5 with these values: head-on mirror reflection.
+    BrdfInputs mirror{glm::vec3(0.f), 0.f, 0.f};
+    mirror.specularF0 = glm::vec3(f0);
+    mirror.multiScatter = false;
+    const glm::vec3 n(0.f, 0.f, 1.f);
+    const double headOn = albedoByQuadrature(mirror, makeFrame(n), n).x;
+    EXPECT_NEAR(headOn, f0, 2e-3);
+}
+
 TEST(Brdf, CompensationIsTheMissingEnergy) {
     // Kulla and Conty's lobe returns exactly what single scattering loses: for a white metal (F = 1) the albedo of
     // the compensated BRDF minus the plain one is 1 - E(mu_o), and E(mu_o) is the plain model's own albedo.

@@ -24,6 +24,7 @@
 #include "loom/Error.h"
 #include "loom/RayScene.h"
 #include "loom/Scene.h"
+#include "loom/SurfaceKernels.h"
 
 using namespace loom;
 namespace fs = std::filesystem;
@@ -602,8 +603,8 @@ TEST_F(SceneFiles, DecodesTexturesToRgba8) {
     ASSERT_EQ(i16.texels.size(), 2u);
     EXPECT_EQ(i16.texels[0], glm::u8vec4(255, 255, 255, 255));
     EXPECT_EQ(i16.texels[1], glm::u8vec4(128, 128, 128, 255));
-    EXPECT_EQ(s->materials[0].baseColorTexture, 0);
-    EXPECT_EQ(s->materials[0].metallicRoughnessTexture, 1);
+    EXPECT_EQ(s->materials[0].baseColorTexture.image, 0);
+    EXPECT_EQ(s->materials[0].metallicRoughnessTexture.image, 1);
     EXPECT_EQ(s->view().images[1].texels, i16.texels.data());
 }
 
@@ -1119,7 +1120,7 @@ TEST_F(SceneFiles, MissingTextureImageIsAWarning) {
     g.j["meshes"][0]["primitives"][0]["material"] = 0;
     auto s = load(g);
     EXPECT_EQ(s->triangleCount(), 1u);
-    EXPECT_EQ(s->materials[0].baseColorTexture, -1);
+    EXPECT_EQ(s->materials[0].baseColorTexture.image, -1);
     EXPECT_TRUE(s->images.empty());
     EXPECT_TRUE(hasWarning(*s, "'Brick'", "missing.png")) << (s->warnings.empty() ? "" : s->warnings[0]);
 }
@@ -1133,8 +1134,215 @@ TEST_F(SceneFiles, UndecodableTextureIsAWarning) {
         json::array({{{"name", "Glow"}, {"emissiveTexture", {{"index", 0}}}, {"emissiveFactor", {1, 1, 1}}}});
     g.j["meshes"][0]["primitives"][0]["material"] = 0;
     auto s = load(g);
-    EXPECT_EQ(s->materials[0].emissiveTexture, -1);
+    EXPECT_EQ(s->materials[0].emissiveTexture.image, -1);
     EXPECT_TRUE(hasWarning(*s, "'Glow'/emissiveTexture", "decode"));
+}
+
+// ---------------------------------------------------------------------------
+// Samplers, KHR_texture_transform, KHR_materials_ior and KHR_materials_specular
+
+namespace {
+
+/// Texel (x, y) of the test images: every texel differs.
+glm::u8vec4 testTexel(uint32_t x, uint32_t y) {
+    return glm::u8vec4(uint8_t(30 + 60 * x), uint8_t(40 + 50 * y), uint8_t(10 * (x + y)), 255);
+}
+
+/// A 4 x 4 RGBA PNG of testTexel, as a data URI.
+std::string testImageUri() {
+    std::vector<uint8_t> rgba;
+    for (uint32_t y = 0; y < 4; ++y)
+        for (uint32_t x = 0; x < 4; ++x) {
+            const glm::u8vec4 t = testTexel(x, y);
+            rgba.insert(rgba.end(), {t.r, t.g, t.b, t.a});
+        }
+    std::vector<uint8_t> png;
+    auto append = [](void* ctx, void* data, int size) {
+        auto* out = static_cast<std::vector<uint8_t>*>(ctx);
+        out->insert(out->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
+    };
+    EXPECT_NE(stbi_write_png_to_func(append, &png, 4, 4, 4, rgba.data(), 16), 0);
+    return "data:image/png;base64," + base64(png);
+}
+
+/// testTexel(x, y) as a slot samples it: sRGB-decoded (colour slots) or not.
+glm::vec4 decodedTexel(uint32_t x, uint32_t y, bool srgb) {
+    const glm::vec4 c = glm::vec4(testTexel(x, y)) / 255.f;
+    return srgb ? glm::vec4(srgbToLinear(c.r), srgbToLinear(c.g), srgbToLinear(c.b), c.a) : c;
+}
+
+/// A base colour texture reference with a KHR_texture_transform.
+json transformedTexture(int index, json transform) {
+    return {{"index", index}, {"extensions", {{"KHR_texture_transform", std::move(transform)}}}};
+}
+
+}  // namespace
+
+TEST_F(SceneFiles, SamplersSetWrapModesAndFilter) {
+    Gltf g = triangleScene();
+    g.j["images"] = json::array({{{"uri", testImageUri()}}});
+    g.j["samplers"] = json::array({
+        {{"wrapS", 33071}, {"wrapT", 33648}, {"magFilter", 9728}, {"minFilter", 9987}},  // clamp, mirrored, nearest
+        {{"minFilter", 9986}},                       // NEAREST_MIPMAP_LINEAR and no magFilter: nearest
+        {{"magFilter", 9729}, {"minFilter", 9728}},  // magFilter decides: bilinear
+        {{"wrapS", 12345}},                          // unknown: repeat, with a warning
+    });
+    g.j["textures"] = json::array({{{"source", 0}, {"sampler", 0}},
+                                   {{"source", 0}, {"sampler", 1}},
+                                   {{"source", 0}, {"sampler", 2}},
+                                   {{"source", 0}, {"sampler", 3}},
+                                   {{"source", 0}},
+                                   {{"source", 0}, {"sampler", 9}}});
+    for (int t = 0; t < 6; ++t)
+        g.j["materials"].push_back(
+            {{"name", "M" + std::to_string(t)}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", t}}}}}});
+    g.j["meshes"][0]["primitives"][0]["material"] = 0;
+    auto s = load(g);
+    const SceneView& view = s->view();
+    auto tex = [&](size_t m) { return view.materials[m].baseColorTexture; };
+    using W = TextureWrap;
+    const std::tuple<W, W, uint32_t> expected[] = {{W::ClampToEdge, W::MirroredRepeat, 1u},
+                                                   {W::Repeat, W::Repeat, 1u},
+                                                   {W::Repeat, W::Repeat, 0u},
+                                                   {W::Repeat, W::Repeat, 0u},
+                                                   {W::Repeat, W::Repeat, 0u},
+                                                   {W::Repeat, W::Repeat, 0u}};
+    for (size_t m = 0; m < 6; ++m) {
+        SCOPED_TRACE("material " + std::to_string(m));
+        EXPECT_EQ(tex(m).image, 0);
+        EXPECT_EQ(tex(m).wrapS, std::get<0>(expected[m]));
+        EXPECT_EQ(tex(m).wrapT, std::get<1>(expected[m]));
+        EXPECT_EQ(tex(m).nearest, std::get<2>(expected[m]));
+        EXPECT_EQ(tex(m).transform, glm::mat3x2(1.f));
+        EXPECT_EQ(s->materials[m].baseColorTexture.wrapS, tex(m).wrapS);  // the view carries the scene's
+    }
+    EXPECT_EQ(s->warnings.size(), 2u);
+    EXPECT_TRUE(hasWarning(*s, "'M3'/baseColorTexture: samplers[3]", "wrapS 12345"));
+    EXPECT_TRUE(hasWarning(*s, "'M5'/baseColorTexture", "sampler 9 does not exist"));
+
+    // Sampling honours them. Nearest, clamped along u: outside [0, 1] the edge column; mirrored along v.
+    auto sample = [&](size_t m, float u, float v) { return sampleTexture(view, tex(m), {u, v}, true); };
+    EXPECT_EQ(sample(0, -0.3f, 0.3f), decodedTexel(0, 1, true));
+    EXPECT_EQ(sample(0, 1.7f, 0.3f), decodedTexel(3, 1, true));
+    EXPECT_EQ(sample(0, 0.6f, 1.3f), decodedTexel(2, 2, true));  // row 5 reflects to row 2
+    EXPECT_EQ(sample(0, 0.6f, 1.3f), sample(0, 0.6f, 0.7f));
+    EXPECT_EQ(sample(1, 1.6f, -0.3f), decodedTexel(2, 2, true));  // nearest, repeat
+    // Bilinear between texel centres: (u, v) = (0.25, 0.125) is halfway between texels (0, 0) and (1, 0).
+    EXPECT_EQ(sample(2, 0.25f, 0.125f), 0.5f * decodedTexel(0, 0, true) + 0.5f * decodedTexel(1, 0, true));
+}
+
+TEST_F(SceneFiles, TextureTransformMovesTexels) {
+    Gltf g = triangleScene();
+    g.j["extensionsUsed"] = {"KHR_texture_transform"};
+    g.j["extensionsRequired"] = {"KHR_texture_transform"};
+    g.j["images"] = json::array({{{"uri", testImageUri()}}});
+    g.j["samplers"] = json::array({{{"magFilter", 9728}}});
+    g.j["textures"] = json::array({{{"source", 0}, {"sampler", 0}}});
+    const float halfPi = kPi / 2.f;
+    auto baseColor = [&](const char* name, json transform) {
+        g.j["materials"].push_back(
+            {{"name", name}, {"pbrMetallicRoughness", {{"baseColorTexture", transformedTexture(0, transform)}}}});
+    };
+    // The extension's example: the lower left quadrant of the image, turned.
+    baseColor("Quadrant", {{"offset", {0, 1}}, {"rotation", halfPi}, {"scale", {0.5, 0.5}}});
+    baseColor("Offset", {{"offset", {0.25, 0.5}}});
+    baseColor("Scale", {{"scale", {2, 0.5}}});
+    baseColor("Rotation", {{"rotation", halfPi}});
+    baseColor("OtherSet", {{"texCoord", 1}});
+    // Every slot of a material with its own offset (the triangle has no TEXCOORD_0: uv is (0, 0) everywhere, so
+    // each slot reads the texel under its offset).
+    g.j["materials"].push_back({{"name", "Slots"},
+                                {"pbrMetallicRoughness",
+                                 {{"baseColorTexture", transformedTexture(0, {{"offset", {0.375, 0.125}}})},
+                                  {"metallicRoughnessTexture", transformedTexture(0, {{"offset", {0.625, 0.125}}})}}},
+                                {"normalTexture", transformedTexture(0, {{"offset", {0.125, 0.875}}})},
+                                {"emissiveTexture", transformedTexture(0, {{"offset", {0.875, 0.625}}})},
+                                {"emissiveFactor", {1, 1, 1}}});
+    g.j["meshes"][0]["primitives"][0]["material"] = 5;
+    auto s = load(g);
+    ASSERT_EQ(s->warnings.size(), 1u) << s->warnings[0];
+    EXPECT_TRUE(hasWarning(*s, "'OtherSet'/baseColorTexture", "TEXCOORD_1"));
+
+    const SceneView& view = s->view();
+    auto tex = [&](size_t m) { return view.materials[m].baseColorTexture; };
+    auto near = [](glm::vec2 a, glm::vec2 b) { return glm::all(glm::lessThan(glm::abs(a - b), glm::vec2(1e-6f))); };
+    // The quadrant's corners.
+    EXPECT_TRUE(near(transformUv(tex(0), {0.f, 0.f}), {0.f, 1.f}));
+    EXPECT_TRUE(near(transformUv(tex(0), {1.f, 0.f}), {0.f, 0.5f}));
+    EXPECT_TRUE(near(transformUv(tex(0), {0.f, 1.f}), {0.5f, 1.f}));
+    EXPECT_TRUE(near(transformUv(tex(0), {1.f, 1.f}), {0.5f, 0.5f}));
+    // Known texels at known uvs (nearest, inside texels).
+    auto sample = [&](size_t m, float u, float v) { return sampleTexture(view, tex(m), {u, v}, true); };
+    EXPECT_EQ(sample(0, 0.1f, 0.2f), decodedTexel(0, 3, true));  // (0.1, 0.95)
+    EXPECT_EQ(sample(0, 0.7f, 0.3f), decodedTexel(0, 2, true));  // (0.15, 0.65)
+    EXPECT_EQ(sample(0, 0.3f, 0.9f), decodedTexel(1, 3, true));  // (0.45, 0.85)
+    EXPECT_EQ(sample(1, 0.1f, 0.1f), decodedTexel(1, 2, true));  // (0.35, 0.6)
+    EXPECT_EQ(sample(2, 0.3f, 0.9f), decodedTexel(2, 1, true));  // (0.6, 0.45)
+    EXPECT_EQ(sample(3, 0.3f, 0.6f), decodedTexel(2, 2, true));  // (0.6, -0.3), repeated to (0.6, 0.7)
+    EXPECT_EQ(tex(4).transform, glm::mat3x2(1.f));               // texCoord only: no transform
+
+    // evalSurface reads every slot through its own transform.
+    const MaterialData& slots = view.materials[5];
+    EXPECT_EQ(slots.normalTexture.transform[2], glm::vec2(0.125f, 0.875f));
+    const SurfaceHit hit = evalSurface(view, 0, 0, 0.2f, 0.3f, glm::vec3(0.f, 0.f, -1.f));
+    EXPECT_EQ(hit.baseColor, glm::vec3(decodedTexel(1, 0, true)));
+    EXPECT_EQ(hit.roughness, decodedTexel(2, 0, false).g);
+    EXPECT_EQ(hit.metallic, decodedTexel(2, 0, false).b);
+    EXPECT_EQ(hit.emission, glm::vec3(decodedTexel(3, 2, true)));
+
+    // An infinite transform is bad input.
+    g.j["materials"][1]["pbrMetallicRoughness"]["baseColorTexture"] = transformedTexture(0, {{"offset", {1e39, 0}}});
+    const std::string msg = loadError(write("inf.gltf", g.text()));
+    EXPECT_NE(msg.find("'Offset'/baseColorTexture/extensions/KHR_texture_transform"), std::string::npos) << msg;
+}
+
+TEST_F(SceneFiles, IorAndSpecularFactorsAreLoaded) {
+    Gltf g = triangleScene();
+    g.j["extensionsUsed"] = {"KHR_materials_ior", "KHR_materials_specular"};
+    auto material = [&](const char* name, json extensions) {
+        json m = {{"name", name}};
+        if (!extensions.empty()) m["extensions"] = std::move(extensions);
+        g.j["materials"].push_back(std::move(m));
+    };
+    material("Water", {{"KHR_materials_ior", {{"ior", 1.33}}},
+                       {"KHR_materials_specular", {{"specularFactor", 0.5}, {"specularColorFactor", {0.2, 1.5, 0}}}}});
+    material("Plain", json::object());
+    material("SpecGloss", {{"KHR_materials_ior", {{"ior", 0}}}});  // 0: the extension's "Fresnel term 1"
+    material("Odd",
+             {{"KHR_materials_ior", {{"ior", 0.5}}},
+              {"KHR_materials_specular",
+               {{"specularFactor", 1.5}, {"specularColorFactor", {-1, 0.5, 2}}, {"specularTexture", {{"index", 0}}}}}});
+    g.j["meshes"][0]["primitives"][0]["material"] = 0;
+    auto s = load(g);
+    struct Expected {
+        float ior, specular;
+        glm::vec3 color;
+    };
+    const Expected expected[] = {{1.33f, 0.5f, {0.2f, 1.5f, 0.f}},
+                                 {1.5f, 1.f, glm::vec3(1.f)},
+                                 {0.f, 1.f, glm::vec3(1.f)},
+                                 {1.f, 1.f, {0.f, 0.5f, 2.f}}};
+    for (size_t m = 0; m < 4; ++m) {
+        SCOPED_TRACE(s->materials[m].name);
+        EXPECT_EQ(s->materials[m].ior, expected[m].ior);
+        EXPECT_EQ(s->materials[m].specularFactor, expected[m].specular);
+        EXPECT_EQ(s->materials[m].specularColorFactor, expected[m].color);
+        const MaterialData& d = s->view().materials[m];
+        EXPECT_EQ(d.ior, expected[m].ior);
+        EXPECT_EQ(d.specularFactor, expected[m].specular);
+        EXPECT_EQ(d.specularColorFactor, expected[m].color);
+    }
+    // The odd one's four problems, and nothing else (the extensions themselves are loaded, not ignored).
+    EXPECT_EQ(s->warnings.size(), 4u);
+    EXPECT_TRUE(hasWarning(*s, "'Odd'", "ior 0.5"));
+    EXPECT_TRUE(hasWarning(*s, "'Odd'", "specularFactor outside [0, 1]"));
+    EXPECT_TRUE(hasWarning(*s, "'Odd'", "negative specularColorFactor"));
+    EXPECT_TRUE(hasWarning(*s, "'Odd'", "specularTexture is not supported"));
+
+    g.j["materials"][0]["extensions"]["KHR_materials_ior"]["ior"] = 1e39;  // infinite as a float
+    const std::string msg = loadError(write("inf.gltf", g.text()));
+    EXPECT_NE(msg.find("'Water'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("NaN or infinite"), std::string::npos) << msg;
 }
 
 TEST_F(SceneFiles, UnsupportedRequiredExtension) {

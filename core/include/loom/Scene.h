@@ -36,21 +36,27 @@ struct SceneImage {
 
 enum class AlphaMode : uint8_t { Opaque, Mask, Blend };
 
-/// glTF metallic-roughness material. Texture fields index Scene::images (-1 = none).
+/// glTF metallic-roughness material. Texture references name an image of Scene::images (image -1 = none) with
+/// its sampler and KHR_texture_transform.
 struct Material {
     std::string name;
     glm::vec4 baseColorFactor{1.f};
     float metallicFactor = 1.f;   ///< glTF default is 1 (fully metallic) when absent
     float roughnessFactor = 1.f;
     glm::vec3 emissiveFactor{0.f};  ///< already multiplied by KHR_materials_emissive_strength
-    int baseColorTexture = -1;
-    int metallicRoughnessTexture = -1;  ///< G = roughness, B = metallic
-    int normalTexture = -1;
+    TextureRef baseColorTexture;
+    TextureRef metallicRoughnessTexture;  ///< G = roughness, B = metallic
+    TextureRef normalTexture;
     float normalScale = 1.f;
-    int emissiveTexture = -1;
+    TextureRef emissiveTexture;
     bool doubleSided = false;
     AlphaMode alphaMode = AlphaMode::Opaque;
     float alphaCutoff = 0.5f;
+    /// KHR_materials_ior: the dielectric's index of refraction, >= 1; 0 is the extension's special value for a
+    /// Fresnel term of 1 (with KHR_materials_specular, the specular-glossiness workflow).
+    float ior = 1.5f;
+    float specularFactor = 1.f;          ///< KHR_materials_specular: strength of the dielectric specular, [0, 1]
+    glm::vec3 specularColorFactor{1.f};  ///< KHR_materials_specular: F0 tint (linear), >= 0, may exceed 1
     bool isEmissive() const { return emissiveFactor.x > 0.f || emissiveFactor.y > 0.f || emissiveFactor.z > 0.f; }
 };
 

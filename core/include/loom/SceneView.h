@@ -25,6 +25,24 @@ struct ImageView8 {
     uint32_t width = 0, height = 0;
 };
 
+/// How texel coordinates outside an image are mapped into it, for each axis
+/// (glTF sampler wrapS/wrapT; the GL modes of the same names).
+enum class TextureWrap : uint32_t { Repeat, ClampToEdge, MirroredRepeat };
+
+/// One texture reference of a material: the image, its sampler and its
+/// KHR_texture_transform, as SurfaceKernels.h sampleTexture uses them.
+struct TextureRef {
+    int32_t image = -1;                       ///< index into the scene's images; -1 = no texture
+    TextureWrap wrapS = TextureWrap::Repeat;  ///< along u (image columns)
+    TextureWrap wrapT = TextureWrap::Repeat;  ///< along v (image rows)
+    /// 1: the nearest texel; 0: bilinear. Loom samples points (a ray, a pixel centre) from one level with no
+    /// footprint, so this is the sampler's magFilter, or minFilter's base filter when magFilter is not given.
+    uint32_t nearest = 0;
+    /// KHR_texture_transform as a 2x3 affine map (three columns): uv' = transform * (u, v, 1). Identity when the
+    /// reference has no transform.
+    glm::mat3x2 transform{1.f};
+};
+
 /// Material parameters as kernels need them (see Material in Scene.h).
 struct MaterialData {
     glm::vec4 baseColorFactor{1.f};
@@ -33,13 +51,16 @@ struct MaterialData {
     float roughnessFactor = 1.f;
     float normalScale = 1.f;
     float alphaCutoff = 0.5f;
-    int32_t baseColorTexture = -1;
-    int32_t metallicRoughnessTexture = -1;
-    int32_t normalTexture = -1;
-    int32_t emissiveTexture = -1;
+    TextureRef baseColorTexture;
+    TextureRef metallicRoughnessTexture;
+    TextureRef normalTexture;
+    TextureRef emissiveTexture;
     uint32_t doubleSided = 0;
-    uint32_t alphaMask = 0;   ///< 1 for AlphaMode::Mask
-    uint32_t alphaBlend = 0;  ///< 1 for AlphaMode::Blend (stochastic transparency, see surfaceCovers)
+    uint32_t alphaMask = 0;              ///< 1 for AlphaMode::Mask
+    uint32_t alphaBlend = 0;             ///< 1 for AlphaMode::Blend (stochastic transparency, see surfaceCovers)
+    float ior = 1.5f;                    ///< KHR_materials_ior: >= 1, or 0 (Fresnel term 1)
+    float specularFactor = 1.f;          ///< KHR_materials_specular, in [0, 1]
+    glm::vec3 specularColorFactor{1.f};  ///< KHR_materials_specular, >= 0 (may exceed 1)
 };
 
 struct InstanceView {

@@ -21,24 +21,63 @@ LOOM_HD inline float linearToSrgb(float c) {
     return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.f / 2.4f) - 0.055f;
 }
 
-/// Bilinear sample with repeat wrapping; texel centres at ((i + 0.5) / w).
+/// Texel index i along an axis of n texels, wrapped into [0, n) as GL 4.5 does
+/// it (section 8.14.2, table 8.20): repeat is i mod n; clamp to edge clamps;
+/// mirrored repeat runs 0 .. n-1, n-1 .. 0, 0 .. n-1, ... (edge texels twice).
+LOOM_HD inline int wrapTexel(int i, int n, TextureWrap wrap) {
+    if (wrap == TextureWrap::ClampToEdge) return i < 0 ? 0 : (i >= n ? n - 1 : i);
+    if (wrap == TextureWrap::MirroredRepeat) {
+        int m = i % (2 * n);
+        if (m < 0) m += 2 * n;
+        return m < n ? m : 2 * n - 1 - m;
+    }
+    const int m = i % n;
+    return m < 0 ? m + n : m;
+}
+
+/// KHR_texture_transform applied to a uv: transform * (u, v, 1).
+LOOM_HD inline glm::vec2 transformUv(const TextureRef& tex, glm::vec2 uv) {
+    const glm::mat3x2& m = tex.transform;
+    return glm::vec2(m[0][0] * uv.x + m[1][0] * uv.y + m[2][0], m[0][1] * uv.x + m[1][1] * uv.y + m[2][1]);
+}
+
+/// Samples a material's texture reference at a (not yet transformed) uv: the
+/// reference's KHR_texture_transform, then its sampler's filter and wrap modes
+/// on the one level Loom keeps (no mipmaps). Every texture read of a surface
+/// goes through here. Texel centres lie at ((i + 0.5) / size); nearest takes
+/// texel floor(u * size), bilinear weighs the four texels around
+/// u * size - 0.5, both wrapped per axis (wrapTexel), as GL samples level 0.
 /// sRGB images are decoded before filtering (as GL does for SRGB8_ALPHA8).
-LOOM_HD inline glm::vec4 sampleImage(const ImageView8& img, glm::vec2 uv, bool srgb) {
+/// A missing image reads as white.
+LOOM_HD inline glm::vec4 sampleTexture(const SceneView& scene, const TextureRef& tex, glm::vec2 uv, bool srgb) {
+    if (tex.image < 0 || uint32_t(tex.image) >= scene.imageCount) return glm::vec4(1.f);
+    const ImageView8& img = scene.images[tex.image];
     if (!img.texels || img.width == 0 || img.height == 0) return glm::vec4(1.f);
-    const float fx = uv.x * float(img.width) - 0.5f;
-    const float fy = uv.y * float(img.height) - 0.5f;
-    const float x0f = std::floor(fx), y0f = std::floor(fy);
-    const float tx = fx - x0f, ty = fy - y0f;
-    auto wrap = [](int i, int n) { int m = i % n; return m < 0 ? m + n : m; };
+    uv = transformUv(tex, uv);
     const int w = int(img.width), h = int(img.height);
-    const int x0 = wrap(int(x0f), w), x1 = wrap(int(x0f) + 1, w);
-    const int y0 = wrap(int(y0f), h), y1 = wrap(int(y0f) + 1, h);
+    // Texel coordinates in a range where float -> int is defined (NaN goes to the low end); past 2^24 a float has
+    // no fraction left to filter with anyway.
+    auto texelCoord = [](float c) {
+        const float limit = 16777216.f;
+        return !(c >= -limit) ? -limit : (c > limit ? limit : c);
+    };
     auto fetch = [&](int x, int y) {
         glm::u8vec4 t = img.texels[size_t(y) * img.width + size_t(x)];
         glm::vec4 c = glm::vec4(t) / 255.f;
         if (srgb) c = glm::vec4(srgbToLinear(c.r), srgbToLinear(c.g), srgbToLinear(c.b), c.a);
         return c;
     };
+    if (tex.nearest) {
+        const int x = int(std::floor(texelCoord(uv.x * float(w))));
+        const int y = int(std::floor(texelCoord(uv.y * float(h))));
+        return fetch(wrapTexel(x, w, tex.wrapS), wrapTexel(y, h, tex.wrapT));
+    }
+    const float fx = texelCoord(uv.x * float(w) - 0.5f);
+    const float fy = texelCoord(uv.y * float(h) - 0.5f);
+    const float x0f = std::floor(fx), y0f = std::floor(fy);
+    const float tx = fx - x0f, ty = fy - y0f;
+    const int x0 = wrapTexel(int(x0f), w, tex.wrapS), x1 = wrapTexel(int(x0f) + 1, w, tex.wrapS);
+    const int y0 = wrapTexel(int(y0f), h, tex.wrapT), y1 = wrapTexel(int(y0f) + 1, h, tex.wrapT);
     return glm::mix(glm::mix(fetch(x0, y0), fetch(x1, y0), tx), glm::mix(fetch(x0, y1), fetch(x1, y1), tx), ty);
 }
 
@@ -108,11 +147,11 @@ LOOM_HD inline float coverageAlpha(const SceneView& scene, uint32_t instance, ui
     const MeshView& mesh = scene.meshes[scene.instances[instance].mesh];
     const MaterialData& mat = scene.materials[mesh.material];
     float alpha = mat.baseColorFactor.a;
-    if (mat.baseColorTexture >= 0) {
+    if (mat.baseColorTexture.image >= 0) {
         const uint32_t i0 = mesh.indices[3 * prim], i1 = mesh.indices[3 * prim + 1], i2 = mesh.indices[3 * prim + 2];
         const float w = 1.f - u - v;
         const glm::vec2 uv = w * mesh.uvs[i0] + u * mesh.uvs[i1] + v * mesh.uvs[i2];
-        alpha *= sampleImage(scene.images[mat.baseColorTexture], uv, true).a;
+        alpha *= sampleTexture(scene, mat.baseColorTexture, uv, true).a;
     }
     return alpha;
 }
@@ -128,6 +167,16 @@ LOOM_HD inline bool surfaceCovers(const SceneView& scene, uint32_t instance, uin
     return true;
 }
 
+/// The dielectric's reflectance at normal incidence: ((ior - 1) / (ior + 1))^2 (KHR_materials_ior; ior = 0, the
+/// extension's special value, gives 1), tinted by specularColorFactor and clamped to 1, then scaled by
+/// specularFactor (KHR_materials_specular). glTF's default (ior 1.5, no specular extension) is 0.04.
+LOOM_HD inline glm::vec3 dielectricF0(const MaterialData& mat) {
+    if (mat.ior == 1.5f && mat.specularFactor == 1.f && mat.specularColorFactor == glm::vec3(1.f))
+        return glm::vec3(0.04f);  // exactly glTF's constant, not 0.2f^2
+    const float r = (mat.ior - 1.f) / (mat.ior + 1.f);
+    return glm::min(r * r * mat.specularColorFactor, glm::vec3(1.f)) * mat.specularFactor;
+}
+
 /// A primary or secondary hit, evaluated.
 struct SurfaceHit {
     glm::vec3 posW{0.f};
@@ -139,6 +188,8 @@ struct SurfaceHit {
     float alpha = 1.f;
     float metallic = 0.f;
     float roughness = 1.f;
+    glm::vec3 specularF0{0.04f};  ///< the dielectric's reflectance at normal incidence (KHR_materials_ior, _specular)
+    float specularF90 = 1.f;      ///< the dielectric's reflectance at grazing incidence (KHR_materials_specular)
     glm::vec3 emission{0.f};
     uint32_t material = 0;
     bool frontFacing = true;
@@ -167,15 +218,15 @@ LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance,
     glm::vec3 fn = glm::normalize(inst.normalMatrix * glm::cross(p1 - p0, p2 - p0));
     glm::vec3 n = glm::normalize(inst.normalMatrix *
                                  (w * mesh.normals[i0] + u * mesh.normals[i1] + v * mesh.normals[i2]));
-    if (full || mat.normalTexture >= 0 || mat.baseColorTexture >= 0 || mat.metallicRoughnessTexture >= 0 ||
-        mat.emissiveTexture >= 0)
+    if (full || mat.normalTexture.image >= 0 || mat.baseColorTexture.image >= 0 ||
+        mat.metallicRoughnessTexture.image >= 0 || mat.emissiveTexture.image >= 0)
         s.uv = w * mesh.uvs[i0] + u * mesh.uvs[i1] + v * mesh.uvs[i2];
     s.frontFacing = glm::dot(fn, rayDir) < 0.f;
     if (!s.frontFacing && mat.doubleSided) {
         fn = -fn;
         n = -n;
     }
-    if (mat.normalTexture >= 0) {
+    if (mat.normalTexture.image >= 0) {
         glm::vec4 t4 = w * mesh.tangents[i0] + u * mesh.tangents[i1] + v * mesh.tangents[i2];
         glm::vec3 t = glm::vec3(inst.world * glm::vec4(glm::vec3(t4), 0.f));
         t = t - n * glm::dot(n, t);
@@ -183,7 +234,7 @@ LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance,
         if (tl > 1e-8f) {
             t /= tl;
             const glm::vec3 b = glm::cross(n, t) * (t4.w < 0.f ? -1.f : 1.f);
-            glm::vec3 m = glm::vec3(sampleImage(scene.images[mat.normalTexture], s.uv, false)) * 2.f - 1.f;
+            glm::vec3 m = glm::vec3(sampleTexture(scene, mat.normalTexture, s.uv, false)) * 2.f - 1.f;
             m.x *= mat.normalScale;
             m.y *= mat.normalScale;
             const glm::vec3 mapped = t * m.x + b * m.y + n * m.z;
@@ -193,21 +244,22 @@ LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance,
     s.faceNormalW = fn;
     s.normalW = n;
     glm::vec4 base = mat.baseColorFactor;
-    if (mat.baseColorTexture >= 0) base *= sampleImage(scene.images[mat.baseColorTexture], s.uv, true);
+    if (mat.baseColorTexture.image >= 0) base *= sampleTexture(scene, mat.baseColorTexture, s.uv, true);
     s.baseColor = glm::vec3(base);
     s.alpha = base.a;
     s.metallic = mat.metallicFactor;
     s.roughness = mat.roughnessFactor;
-    if (mat.metallicRoughnessTexture >= 0) {
-        glm::vec4 mr = sampleImage(scene.images[mat.metallicRoughnessTexture], s.uv, false);
+    if (mat.metallicRoughnessTexture.image >= 0) {
+        glm::vec4 mr = sampleTexture(scene, mat.metallicRoughnessTexture, s.uv, false);
         s.roughness *= mr.g;
         s.metallic *= mr.b;
     }
     s.metallic = glm::clamp(s.metallic, 0.f, 1.f);
     s.roughness = glm::clamp(s.roughness, 0.f, 1.f);
+    s.specularF0 = dielectricF0(mat);
+    s.specularF90 = mat.specularFactor;
     s.emission = mat.emissiveFactor;
-    if (mat.emissiveTexture >= 0)
-        s.emission *= glm::vec3(sampleImage(scene.images[mat.emissiveTexture], s.uv, true));
+    if (mat.emissiveTexture.image >= 0) s.emission *= glm::vec3(sampleTexture(scene, mat.emissiveTexture, s.uv, true));
     return s;
 }
 
