@@ -23,10 +23,12 @@ public:
 
     enum class Device { Auto, Cpu, Cuda };
     enum class LightSamplingMode { Mis, Nee, Bsdf };
+    enum class EmissionWeights { Texture, Area };
 
 private:
     void buildLights(const Scene& scene);
     void buildEnvironment(const Scene& scene);
+    const std::vector<float>& triangleEmission(const Scene& scene, uint32_t instance);
 
     // Parameters.
     int mMaxBounces = 3;
@@ -37,6 +39,7 @@ private:
     Device mDevice = Device::Auto;
     int mSeed = 0;
     bool mSimdShading = true;
+    EmissionWeights mEmissionWeights = EmissionWeights::Texture;
 
     // Light data, rebuilt per frame (triangles) or per scene (environment).
     std::vector<pt::EmissiveTri> mTris;
@@ -45,6 +48,10 @@ private:
     std::vector<pt::PunctualLight> mPunctual;
     std::vector<float> mEnvMarginal, mEnvConditional;
     const void* mEnvSource = nullptr;  // the scene whose environment the CDFs describe
+    // Per mesh of an emissive-textured material: the mean emitted luminance over each triangle (empty until an
+    // instance of the mesh is first lit), for the scene mEmissionSource.
+    std::vector<std::vector<float>> mTriEmission;
+    const void* mEmissionSource = nullptr;
     pt::LightsView mLights;
 };
 
