@@ -214,9 +214,9 @@ void PathTracer::buildEnvironment(const Scene& scene) {
 constexpr double kEmissionSubdivisionsPerTexel = 4.0;
 /// A triangle's mean is measured at m * m points, m from 3 (triangles under a texel) to 64 (4096 points).
 constexpr uint32_t kEmissionMinSubdivision = 3, kEmissionMaxSubdivision = 64;
-/// Most surface evaluations one mesh's means may cost (about 0.5 s on one core); beyond it every triangle's
-/// subdivision shrinks in proportion (at least its centroid is evaluated).
-constexpr double kEmissionMeshBudget = double(1u << 22);
+/// Most surface evaluations one mesh's means may cost, once per scene (2^20: 0.12-0.15 s on two busy cores); beyond
+/// it every triangle's subdivision shrinks in proportion (at least its centroid is evaluated).
+constexpr double kEmissionMeshBudget = double(1u << 20);
 /// Weight, per unit area and relative to the emissive factor's luminance, of a triangle whose points all read black
 /// although they were sparser than kEmissionSubdivisionsPerTexel asks (the budget or the subdivision cap): a few bright
 /// texels may lie between them, so it stays a (dim) light and light sampling still reaches it.
