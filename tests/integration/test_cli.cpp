@@ -490,6 +490,15 @@ TEST_F(Cli, ASceneWithNoLightWarnsOnceAndNamesEnv) {
     EXPECT_CONTAINS(r.output, "renders black");
     EXPECT_CONTAINS(r.output, "--env 1,1,1");
     EXPECT_CONTAINS(r.output, "no environment (no --env)");
+    // bench and view load scenes the same way, and say it the same once.
+    r = loom(
+        "bench --scene dark.gltf --size 16x16 --frames 3 --warmup 1 --reference-spp 4 --graph PathTracerRaw "
+        "--brute-force-spp 1 --cache cache --out bench");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(warnings(r.output), 1u) << r.output;
+    r = loom("view --graph " + pt + " --scene dark.gltf --size 16x16 --headless --frames 2");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(warnings(r.output), 1u) << r.output;
     r = loom("render --graph " + pt + " --scene dark.gltf --size 16x16 -q --out out --env 0,0,0");
     EXPECT_EQ(warnings(r.output), 1u) << r.output;
     EXPECT_CONTAINS(r.output, "a black environment (--env)");
