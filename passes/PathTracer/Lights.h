@@ -121,6 +121,31 @@ struct LightSample {
     bool isTriangle = false;
 };
 
+/// Fills the selection CDF of n emissive triangles by power (n + 1 entries, from 0 to exactly 1; uniform when no
+/// triangle has power) and returns the power sum.
+inline double fillTriangleCdf(const EmissiveTri* tris, uint32_t n, float* cdf) {
+    double total = 0.0;
+    for (uint32_t i = 0; i < n; ++i) total += tris[i].power;
+    double acc = 0.0;
+    cdf[0] = 0.f;
+    for (uint32_t i = 0; i < n; ++i) {
+        acc += tris[i].power;
+        cdf[i + 1] = total > 0.0 ? float(acc / total) : float(i + 1) / float(n);
+    }
+    if (n > 0) cdf[n] = 1.f;
+    return total;
+}
+
+/// Sets each triangle's pdfArea: the area density of a light sample on it, with the probability that sampleLight's
+/// search of the CDF picks it (cdf[i + 1] - cdf[i], exactly as stored, times pTris). A triangle of no power has an
+/// empty interval, is never picked and gets density 0, so a BRDF-sampled hit on it gets the full MIS weight.
+inline void setTrianglePdfs(EmissiveTri* tris, uint32_t n, const float* cdf, float pTris) {
+    for (uint32_t i = 0; i < n; ++i) {
+        EmissiveTri& t = tris[i];
+        t.pdfArea = t.area > 0.f && t.power > 0.f ? pTris * (cdf[i + 1] - cdf[i]) / t.area : 0.f;
+    }
+}
+
 /// Area pdf of a triangle light point converted to solid angle, with selection.
 LOOM_HD inline float triLightPdf(const LightsView& L, const EmissiveTri& t, float dist2, float cosLight) {
     if (cosLight <= 0.f || L.triPowerSum <= 0.f) return 0.f;

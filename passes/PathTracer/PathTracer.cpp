@@ -305,14 +305,7 @@ void PathTracer::buildLights(const Scene& scene) {
         }
     }
     mTriCdf.assign(mTris.size() + 1, 0.f);
-    double total = 0.0;
-    for (size_t i = 0; i < mTris.size(); ++i) total += mTris[i].power;
-    double acc = 0.0;
-    for (size_t i = 0; i < mTris.size(); ++i) {
-        acc += mTris[i].power;
-        mTriCdf[i + 1] = total > 0.0 ? float(acc / total) : float(i + 1) / float(mTris.size());
-    }
-    if (!mTris.empty()) mTriCdf.back() = 1.f;
+    const double total = pt::fillTriangleCdf(mTris.data(), uint32_t(mTris.size()), mTriCdf.data());
 
     mPunctual.clear();
     for (const Light& l : scene.lights) {
@@ -340,14 +333,7 @@ void PathTracer::buildLights(const Scene& scene) {
     L.pTris = total > 0.0 ? 1.f / kinds : 0.f;
     L.pPunctual = !mPunctual.empty() ? 1.f / kinds : 0.f;
     L.pEnv = L.hasEnv ? 1.f / kinds : 0.f;
-    // The area density of a light sample on triangle i, with the probability that sampleLight's search of the CDF
-    // picks it (triCdf[i + 1] - triCdf[i], exactly as stored): a triangle of no power has an empty interval, is
-    // never picked and has density 0, so a BRDF-sampled hit on it gets the full MIS weight.
-    for (size_t i = 0; i < mTris.size(); ++i) {
-        pt::EmissiveTri& t = mTris[i];
-        const float select = mTriCdf[i + 1] - mTriCdf[i];
-        t.pdfArea = t.area > 0.f && t.power > 0.f && total > 0.0 ? L.pTris * select / t.area : 0.f;
-    }
+    pt::setTrianglePdfs(mTris.data(), uint32_t(mTris.size()), mTriCdf.data(), L.pTris);
 }
 
 void PathTracer::execute(PassContext& ctx) {
