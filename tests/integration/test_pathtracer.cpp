@@ -483,16 +483,16 @@ TEST(PathTracerLights, LightSamplePdfIsTheDensityOfTheSamples) {
 TEST_F(HalfBlackEmitter, LightSamplingIsUnbiasedWithLowerVariance) {
     auto scene = load();
     const uint32_t W = 32, H = 32, frames = 16, B = 8;
-    auto estimate = [&](const char* mode, const char* weights) {
+    auto estimate = [&](const char* mode, const char* weights, bool lambert = true) {
         auto g = ptGraph({{"maxBounces", 2},
                           {"samplesPerPixel", 8},
                           {"lightSampling", mode},
-                          {"lambertOnly", true},
+                          {"lambertOnly", lambert},
                           {"emissionWeights", weights}},
                          W, H, scene);
         const BlockEstimate e = estimateBlocks(*g, *scene, W, H, B, frames);
-        std::printf("%s, %s weights: image mean %.5f +- %.5f, mean per-pixel variance %.3g\n", mode, weights,
-                    e.mean.back(), e.se.back(), e.pixelVariance);
+        std::printf("%s, %s weights%s: image mean %.5f +- %.5f, mean per-pixel variance %.3g\n", mode, weights,
+                    lambert ? "" : ", glTF BRDF", e.mean.back(), e.se.back(), e.pixelVariance);
         return e;
     };
     const BlockEstimate bsdf = estimate("bsdf", "texture");
@@ -502,6 +502,11 @@ TEST_F(HalfBlackEmitter, LightSamplingIsUnbiasedWithLowerVariance) {
     expectSameImage(mis, bsdf, "mis vs bsdf");
     expectSameImage(neeArea, bsdf, "nee (area weights) vs bsdf");
     expectSameImage(misArea, bsdf, "mis (area weights) vs bsdf");
+    // The glTF BRDF, whose MIS runs in SIMD lanes (ShadeSimd.cpp), over the whole image: its specular lobe on the
+    // emitter's underside reflects the lit floor, which BRDF sampling alone finds in a handful of paths, so blocks
+    // that see only that can read exactly 0 at this sample count.
+    const BlockEstimate misGltf = estimate("mis", "texture", false), bsdfGltf = estimate("bsdf", "texture", false);
+    EXPECT_NEAR(misGltf.mean.back(), bsdfGltf.mean.back(), 4.5 * std::hypot(misGltf.se.back(), bsdfGltf.se.back()));
     EXPECT_GT(bsdf.mean.back(), 0.02);  // lit
     std::printf("variance ratio texture / area weights: nee %.3f, mis %.3f\n",
                 nee.pixelVariance / neeArea.pixelVariance, mis.pixelVariance / misArea.pixelVariance);
