@@ -130,6 +130,51 @@ inline CliResult runLoom(const std::filesystem::path& dir, const std::string& ar
 }
 #endif
 
+/// Writes dir/NAME.gltf and its buffer dir/NAME.bin: one node drawing one mesh of triangles (positions and uvs, xyz
+/// and uv per vertex; three indices per triangle) with `material` (a glTF material object, or null for none).
+/// `images` are image files (uris relative to dir) that become textures 0, 1, ... for the material to name.
+/// Returns the .gltf's path.
+inline std::filesystem::path writeTriangleGltf(const std::filesystem::path& dir, const std::string& name,
+                                               const std::vector<float>& positions, const std::vector<float>& uvs,
+                                               const std::vector<uint32_t>& indices, const nlohmann::json& material,
+                                               const std::vector<std::string>& images = {}) {
+    using json = nlohmann::json;
+    std::string bin;
+    json views = json::array(), accessors = json::array();
+    auto add = [&](const void* data, size_t bytes, int componentType, size_t count, const char* type) {
+        views.push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", bytes}});
+        bin.append(static_cast<const char*>(data), bytes);
+        accessors.push_back(
+            {{"bufferView", views.size() - 1}, {"componentType", componentType}, {"count", count}, {"type", type}});
+        return int(accessors.size() - 1);
+    };
+    const size_t vertices = positions.size() / 3;
+    json attributes = {{"POSITION", add(positions.data(), positions.size() * 4, 5126, vertices, "VEC3")}};
+    if (!uvs.empty()) attributes["TEXCOORD_0"] = add(uvs.data(), uvs.size() * 4, 5126, vertices, "VEC2");
+    json primitive = {{"attributes", attributes},
+                      {"indices", add(indices.data(), indices.size() * 4, 5125, indices.size(), "SCALAR")}};
+    json doc = {{"asset", {{"version", "2.0"}}},
+                {"buffers", {{{"uri", name + ".bin"}, {"byteLength", bin.size()}}}},
+                {"bufferViews", views},
+                {"accessors", accessors},
+                {"meshes", {{{"name", name}, {"primitives", {primitive}}}}},
+                {"nodes", {{{"name", name}, {"mesh", 0}}}},
+                {"scenes", {{{"nodes", {0}}}}},
+                {"scene", 0}};
+    if (!material.is_null()) {
+        doc["materials"] = json::array({material});
+        doc["meshes"][0]["primitives"][0]["material"] = 0;
+    }
+    for (size_t i = 0; i < images.size(); ++i) {
+        doc["images"].push_back({{"uri", images[i]}});
+        doc["textures"].push_back({{"source", i}});
+    }
+    std::ofstream(dir / (name + ".bin"), std::ios::binary).write(bin.data(), std::streamsize(bin.size()));
+    const std::filesystem::path gltf = dir / (name + ".gltf");
+    std::ofstream(gltf, std::ios::binary) << doc.dump(1);
+    return gltf;
+}
+
 /// A fresh folder per test (named after the suite and test), removed afterwards.
 class TempDirTest : public ::testing::Test {
 protected:

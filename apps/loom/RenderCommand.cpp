@@ -36,6 +36,7 @@ struct RenderOptions {
     double fps = 60.0;
     bool quiet = false;
     bool poison = false;
+    bool hold = false;
     SceneOptions scene;
 };
 
@@ -60,6 +61,9 @@ void runRender(const RenderOptions& o) {
     if (o.startFrame > 1000000000)
         throwBadInput("--start-frame", fmt::format("first frame {} is out of range", o.startFrame), "0 to 1000000000");
     checkFpsAndThreads(o.fps, o.threads);
+    if (o.hold && o.scene.scene.empty())
+        throwBadInput("--hold", "there is no scene whose time it could hold (no --scene)", "--scene with --hold",
+                      "add --scene, or drop --hold");
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
     ensureWritableDir(o.out, "--out");
@@ -102,15 +106,25 @@ void runRender(const RenderOptions& o) {
     const bool showProgress = !o.quiet && isatty(STDERR_FILENO);
     nlohmann::json statsJson = {
         {"graph", o.graph}, {"width", width}, {"height", height}, {"frames", nlohmann::json::array()}};
+    // --hold: every iteration shows the scene and camera at the time of --start-frame K, as frame index K + i (the
+    // random numbers of each pass advance as in any run); nothing moves after the first, so accumulation never
+    // restarts. The outputs are written once, after the last iteration, under frame K's name.
+    const double heldTime = double(o.startFrame) / o.fps;
+    if (o.hold) statsJson["heldFrame"] = {{"frame", o.startFrame}, {"time", heldTime}, {"iterations", o.frames}};
     uint64_t written = 0;
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames; ++i) {
-        const FrameInfo frame = sceneFrame(scene.get(), o.startFrame + i, o.fps, width, height, i == 0);
+        const uint64_t index = o.startFrame + i;
+        const FrameInfo frame = o.hold ? sceneFrameAt(scene.get(), index, heldTime, width, height, i == 0)
+                                       : sceneFrame(scene.get(), index, o.fps, width, height, i == 0);
         graph.execute(frame);
-        for (const auto& out : graph.outputs()) {
-            const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
-            writeImage(outDir / frameFileName(out.pass, out.channel, frame.frameIndex, tex->format()), *tex);
-            ++written;
+        if (!o.hold || i + 1 == o.frames) {
+            const uint64_t named = o.hold ? o.startFrame : frame.frameIndex;
+            for (const auto& out : graph.outputs()) {
+                const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
+                writeImage(outDir / frameFileName(out.pass, out.channel, named, tex->format()), *tex);
+                ++written;
+            }
         }
         if (!o.statsFile.empty()) {
             nlohmann::json jf = {{"frame", frame.frameIndex}, {"passes", nlohmann::json::object()}};
@@ -128,8 +142,14 @@ void runRender(const RenderOptions& o) {
     if (!o.statsFile.empty()) writeFileAtomic(o.statsFile, statsJson.dump(2) + "\n");
 
     if (!o.quiet) {
-        std::cout << fmt::format("Rendered {} frame(s) at {}x{}: {} output image(s), {} dump(s) in {}\n", o.frames,
-                                 width, height, written, dumped, o.out);
+        if (o.hold)
+            std::cout << fmt::format(
+                "Held frame {} (t = {:g} s) for {} iteration(s) at {}x{}: {} output image(s) (the last iteration's, "
+                "numbered {}), {} dump(s) in {}\n",
+                o.startFrame, heldTime, o.frames, width, height, written, o.startFrame, dumped, o.out);
+        else
+            std::cout << fmt::format("Rendered {} frame(s) at {}x{}: {} output image(s), {} dump(s) in {}\n", o.frames,
+                                     width, height, written, dumped, o.out);
         std::cout << fmt::format("  {:24} {:>12} {:>12}\n", "pass", "mean ms", "total ms");
         double total = 0;
         for (const auto& t : graph.timings()) {
@@ -158,6 +178,10 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--stats", o->statsFile, "write per-frame timings and counters as JSON");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_flag("--quiet,-q", o->quiet, "no progress bar or summary");
+    cmd->add_flag("--hold", o->hold,
+                  "hold one frame: run --frames iterations of frame --start-frame at its scene time and camera "
+                  "(fresh random numbers each; an accumulating graph converges that frame) and write the outputs "
+                  "once, after the last, under that frame's number");
     cmd->add_flag("--poison", o->poison, "fill transient memory with NaN when its lifetime starts (debug)");
     addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runRender(*o); });

@@ -96,6 +96,11 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
             scene->loadEnvironmentMap(o.env);
         }
     }
+    if (!scene->emitsLight())
+        spdlog::warn(
+            "{} has no light: no emissive surface, no punctual light and {}, so it renders black; light it "
+            "with --env, e.g. --env 1,1,1 (a uniform white sky) or --env sky.hdr",
+            o.scene, o.env.empty() ? "no environment (no --env)" : "a black environment (--env)");
     return scene;
 }
 
@@ -107,22 +112,23 @@ void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t wi
     if (firstFrame) scene.camera.cut();
 }
 
-FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool first) {
+FrameInfo sceneFrameAt(Scene* scene, uint64_t index, double time, uint32_t width, uint32_t height, bool first) {
     FrameInfo f;
     f.frameIndex = index;
-    f.time = double(index) / fps;
-    beginSceneFrame(scene, f.frameIndex, f.time, width, height, first);
-    f.scene = &scene;
-    f.camera = &scene.camera;
+    f.time = time;
+    if (!scene) return f;
+    beginSceneFrame(*scene, f.frameIndex, f.time, width, height, first);
+    f.scene = scene;
+    f.camera = &scene->camera;
     return f;
 }
 
+FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool first) {
+    return sceneFrameAt(&scene, index, double(index) / fps, width, height, first);
+}
+
 FrameInfo sceneFrame(Scene* scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool first) {
-    if (scene) return sceneFrame(*scene, index, fps, width, height, first);
-    FrameInfo f;
-    f.frameIndex = index;
-    f.time = double(index) / fps;
-    return f;
+    return sceneFrameAt(scene, index, double(index) / fps, width, height, first);
 }
 
 }  // namespace loom::cli

@@ -31,5 +31,8 @@ void beginSceneFrame(Scene& scene, uint64_t frameIndex, double time, uint32_t wi
 FrameInfo sceneFrame(Scene& scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool firstFrame);
 /// The same for a graph that may run without a scene (nullptr: the clock alone).
 FrameInfo sceneFrame(Scene* scene, uint64_t index, double fps, uint32_t width, uint32_t height, bool firstFrame);
+/// Frame `index` shown at scene time `time` (seconds), whatever the clock says: `loom render --hold` runs many
+/// frame indices (fresh random numbers) at one time. nullptr: no scene.
+FrameInfo sceneFrameAt(Scene* scene, uint64_t index, double time, uint32_t width, uint32_t height, bool firstFrame);
 
 }  // namespace loom::cli

@@ -454,6 +454,22 @@ bool Scene::hasMotion() const {
     return false;
 }
 
+bool Scene::emitsLight() const {
+    const auto notBlack = [](glm::vec3 c) { return c.x > 0.f || c.y > 0.f || c.z > 0.f; };
+    for (const Instance& inst : instances) {
+        const Material& m = materials[meshes[inst.mesh].material];
+        if (!m.isEmissive() || meshes[inst.mesh].triangleCount() == 0) continue;
+        if (m.emissiveTexture.image < 0) return true;
+        for (const glm::u8vec4& t : images[size_t(m.emissiveTexture.image)].texels)
+            if (t.r || t.g || t.b) return true;
+    }
+    for (const Light& l : lights)
+        if (l.intensity > 0.f && notBlack(l.color)) return true;
+    if (environment.intensity <= 0.f) return false;
+    if (environment.isConstant()) return notBlack(environment.color);
+    return std::any_of(environment.texels.begin(), environment.texels.end(), notBlack);
+}
+
 void Scene::loadEnvironmentMap(const std::filesystem::path& path) {
     const std::string name = path.string();
     std::error_code ec;

@@ -117,7 +117,9 @@ void AccumulatePass::declareParams(ParamList& p) {
             "stop after this many frames and keep their mean (0 = never stop); lowering it below the frames "
             "already accumulated restarts");
     p.add("autoReset", &mAutoReset, true)
-        .doc("restart when the camera or a scene instance moved in this frame (jitter alone does not restart)");
+        .doc(
+            "restart when the camera or a scene instance moved in this frame (jitter alone does not restart); "
+            "`loom render --hold` keeps an animated scene at one frame's time, to converge that frame");
     p.add("enabled", &mEnabled, true).doc("false: dst is a copy of src and the accumulated state is cleared");
 }
 

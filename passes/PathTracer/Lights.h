@@ -1,16 +1,18 @@
 #pragma once
 // Light sampling for next-event estimation: emissive triangles chosen in
-// proportion to their power, punctual lights (KHR_lights_punctual), and the
-// environment (importance-sampled when it is an HDR map). Plain views built
-// by the pass each frame (emissive triangles move with their instances).
+// proportion to their power (area times the mean emitted luminance over the
+// triangle, its emissive texture's footprint included), punctual lights
+// (KHR_lights_punctual), and the environment (importance-sampled when it is an
+// HDR map). Plain views built by the pass each frame (emissive triangles move
+// with their instances).
 #include <cmath>
 #include <cstdint>
-
 #include <glm/glm.hpp>
 
 #include "BRDF.h"  // kPi, kInvPi, luminance
 #include "loom/Kernel.h"
 #include "loom/SceneView.h"
+#include "loom/SurfaceKernels.h"
 
 namespace loom::pt {
 
@@ -18,13 +20,13 @@ struct EmissiveTri {
     glm::vec3 p0, e1, e2;   ///< world space: p0, p1 - p0, p2 - p0
     glm::vec3 normal;       ///< unit geometric normal (front side)
     float area = 0.f;
-    float power = 0.f;      ///< selection weight: area * luminance(emission)
+    float power = 0.f;  ///< selection weight: area * mean luminance of the emission over the triangle; 0: no light
     uint32_t instance = 0, primitive = 0;
     uint32_t doubleSided = 0;
     uint32_t textured = 0;  ///< emission varies over the triangle (emissive texture): evaluate the material
     glm::vec3 radiance{0.f};  ///< emitted radiance when not textured
-    float pdfArea = 0.f;      ///< pTris * power / triPowerSum / area: area density of a light sample on it, selection
-                              ///< included (filled by the pass with the LightsView)
+    float pdfArea = 0.f;      ///< pTris * (triCdf[i + 1] - triCdf[i]) / area: area density of a light sample on it,
+                              ///< selection included (the probability sampleLight picks it; filled by the pass)
 };
 
 enum PunctualType : uint32_t { kPoint = 0, kSpot = 1, kDirectional = 2 };
@@ -119,6 +121,31 @@ struct LightSample {
     bool isTriangle = false;
 };
 
+/// Fills the selection CDF of n emissive triangles by power (n + 1 entries, from 0 to exactly 1; uniform when no
+/// triangle has power) and returns the power sum.
+inline double fillTriangleCdf(const EmissiveTri* tris, uint32_t n, float* cdf) {
+    double total = 0.0;
+    for (uint32_t i = 0; i < n; ++i) total += tris[i].power;
+    double acc = 0.0;
+    cdf[0] = 0.f;
+    for (uint32_t i = 0; i < n; ++i) {
+        acc += tris[i].power;
+        cdf[i + 1] = total > 0.0 ? float(acc / total) : float(i + 1) / float(n);
+    }
+    if (n > 0) cdf[n] = 1.f;
+    return total;
+}
+
+/// Sets each triangle's pdfArea: the area density of a light sample on it, with the probability that sampleLight's
+/// search of the CDF picks it (cdf[i + 1] - cdf[i], exactly as stored, times pTris). A triangle of no power has an
+/// empty interval, is never picked and gets density 0, so a BRDF-sampled hit on it gets the full MIS weight.
+inline void setTrianglePdfs(EmissiveTri* tris, uint32_t n, const float* cdf, float pTris) {
+    for (uint32_t i = 0; i < n; ++i) {
+        EmissiveTri& t = tris[i];
+        t.pdfArea = t.area > 0.f && t.power > 0.f ? pTris * (cdf[i + 1] - cdf[i]) / t.area : 0.f;
+    }
+}
+
 /// Area pdf of a triangle light point converted to solid angle, with selection.
 LOOM_HD inline float triLightPdf(const LightsView& L, const EmissiveTri& t, float dist2, float cosLight) {
     if (cosLight <= 0.f || L.triPowerSum <= 0.f) return 0.f;
@@ -212,6 +239,34 @@ LOOM_HD inline LightSample sampleLight(const LightsView& L, glm::vec3 p, float u
     s.Li = envRadiance(env, s.wi);
     s.valid = true;
     return s;
+}
+
+/// Barycentrics (u, v) of point k of a stratified set of m * m points on a triangle: the centroids of the m * m
+/// equal-area triangles of its m-fold subdivision (midpoint rule). Points k < m (m + 1) / 2 are the centroids of the
+/// upright sub-triangles, row by row; the rest those of the inverted ones.
+LOOM_HD inline glm::vec2 subTriangleCentroid(uint32_t m, uint32_t k) {
+    const uint32_t upright = m * (m + 1) / 2;
+    const bool inverted = k >= upright;
+    if (inverted) k -= upright;
+    const uint32_t rowLength0 = inverted ? m - 1 : m;  // sub-triangles in row 0; each row has one fewer
+    uint32_t i = 0;
+    while (k >= rowLength0 - i) k -= rowLength0 - i++;
+    const float offset = inverted ? 2.f / 3.f : 1.f / 3.f;
+    return glm::vec2((float(i) + offset) / float(m), (float(k) + offset) / float(m));
+}
+
+/// Mean luminance of the emission over triangle `prim` of an instance, from the material evaluated (evalSurface,
+/// so the texture is sampled exactly as shading samples it) at the m * m points of subTriangleCentroid. The mean
+/// over area: the barycentric grid is uniform over the triangle under any affine transform of it.
+LOOM_HD inline float meanEmittedLuminance(const SceneView& scene, uint32_t instance, uint32_t prim, uint32_t m) {
+    float sum = 0.f;
+    for (uint32_t k = 0; k < m * m; ++k) {
+        const glm::vec2 b = subTriangleCentroid(m, k);
+        // The direction only decides which side faces the viewer; emission does not depend on it.
+        sum += luminance(
+            evalSurface(scene, instance, prim, b.x, b.y, glm::vec3(0.f, 0.f, -1.f), SurfaceEval::Shading).emission);
+    }
+    return sum / float(m * m);
 }
 
 /// Power heuristic (Veach 1997, eq. 9.13) with beta = 2.

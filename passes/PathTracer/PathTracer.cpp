@@ -152,6 +152,11 @@ void PathTracer::declareParams(ParamList& p) {
     p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda"})
         .doc("where to run; without a usable CUDA device, auto and cuda run on the CPU");
     p.add("seed", &mSeed, 0).range(0, 1 << 30).doc("decorrelates runs that share frame indices");
+    p.addEnum("emissionWeights", &mEmissionWeights, EmissionWeights::Texture, {"texture", "area"})
+        .doc(
+            "light selection: emissive triangles by area times their emission's mean over the triangle (an emissive "
+            "texture's footprint included; black ones are no lights), or by area times the emissive factor alone "
+            "(ignores the texture, for comparison)");
     p.add("simdShading", &mSimdShading, true)
         .doc("CPU: shade several paths at once in SIMD lanes (MIS with the glTF BRDF; other modes always run per "
              "path); false runs the per-path kernel, for comparison");
@@ -176,6 +181,7 @@ void PathTracer::compile(const CompileInfo&) {
 
 void PathTracer::setScene(const std::shared_ptr<const Scene>&) {
     mEnvSource = nullptr;
+    mEmissionSource = nullptr;
 }
 
 void PathTracer::buildEnvironment(const Scene& scene) {
@@ -228,8 +234,67 @@ void PathTracer::buildEnvironment(const Scene& scene) {
     mEnvSource = &scene;
 }
 
-void PathTracer::buildLights(const Scene& scene) {
+/// Subdivisions per texel along a triangle's longest edge in its emissive texture when its mean emission is measured:
+/// every sub-triangle (one sample point each) then spans at most a quarter texel along each of its edges, so the
+/// bilinear filter's variation is resolved and a triangle over black texels reads exactly 0.
+constexpr double kEmissionSubdivisionsPerTexel = 4.0;
+/// A triangle's mean is measured at m * m points, m from 3 (triangles under a texel) to 64 (4096 points).
+constexpr uint32_t kEmissionMinSubdivision = 3, kEmissionMaxSubdivision = 64;
+/// Most surface evaluations one mesh's means may cost, once per scene (2^20: 0.12-0.15 s on two busy cores); beyond
+/// it every triangle's subdivision shrinks in proportion (at least its centroid is evaluated).
+constexpr double kEmissionMeshBudget = double(1u << 20);
+/// Weight, per unit area and relative to the emissive factor's luminance, of a triangle whose points all read black
+/// although they were sparser than kEmissionSubdivisionsPerTexel asks (the budget or the subdivision cap): a few bright
+/// texels may lie between them, so it stays a (dim) light and light sampling still reaches it.
+constexpr float kUnresolvedEmissionWeight = 1e-3f;
+
+const std::vector<float>& PathTracer::triangleEmission(const Scene& scene, uint32_t instance) {
+    if (mEmissionSource != &scene) {
+        mTriEmission.assign(scene.meshes.size(), {});
+        mEmissionSource = &scene;
+    }
+    const uint32_t meshIndex = scene.instances[instance].mesh;
+    std::vector<float>& means = mTriEmission[meshIndex];
+    const Mesh& mesh = scene.meshes[meshIndex];
+    const uint32_t n = mesh.triangleCount();
+    if (means.size() == n) return means;
+    const Material& mat = scene.materials[mesh.material];
+    const SceneImage& image = scene.images[size_t(mat.emissiveTexture.image)];
+    // Subdivision each triangle needs for its texel footprint (its longest uv edge in texels), and what the caps allow.
+    const glm::dvec2 size(image.width, image.height);
+    std::vector<uint32_t> needed(n), used(n);
+    double total = 0.0;
+    for (uint32_t t = 0; t < n; ++t) {
+        const glm::dvec2 uv0 = mesh.uvs[mesh.indices[3 * t]], uv1 = mesh.uvs[mesh.indices[3 * t + 1]],
+                         uv2 = mesh.uvs[mesh.indices[3 * t + 2]];
+        const double edge = std::max(
+            {glm::length((uv1 - uv0) * size), glm::length((uv2 - uv1) * size), glm::length((uv0 - uv2) * size)});
+        const double m = std::isfinite(edge) ? std::ceil(kEmissionSubdivisionsPerTexel * edge) : 1e6;
+        needed[t] = uint32_t(std::clamp(m, double(kEmissionMinSubdivision), 1e6));
+        used[t] = std::min(needed[t], kEmissionMaxSubdivision);
+        total += double(used[t]) * used[t];
+    }
+    if (total > kEmissionMeshBudget) {
+        const double shrink = std::sqrt(kEmissionMeshBudget / total);
+        for (uint32_t& m : used) m = std::max(1u, uint32_t(double(m) * shrink));
+    }
+    means.resize(n);
     const SceneView& view = scene.view();
+    const float unresolved = kUnresolvedEmissionWeight * pt::luminance(mat.emissiveFactor);
+    // Triangles are independent: the means do not depend on the thread count.
+    parallelFor2D(
+        n, 1,
+        [&](const Tile& tile) {
+            for (uint32_t t = tile.x0; t < tile.x1; ++t) {
+                const float mean = pt::meanEmittedLuminance(view, instance, t, used[t]);
+                means[t] = mean > 0.f || used[t] >= needed[t] ? mean : unresolved;
+            }
+        },
+        64, 1);
+    return means;
+}
+
+void PathTracer::buildLights(const Scene& scene) {
     mTris.clear();
     mInstanceTriBase.assign(scene.instances.size(), 0xFFFFFFFFu);
     for (uint32_t i = 0; i < scene.instances.size(); ++i) {
@@ -238,18 +303,12 @@ void PathTracer::buildLights(const Scene& scene) {
         const Material& mat = scene.materials[mesh.material];
         if (!mat.isEmissive() || !inst.visible()) continue;
         mInstanceTriBase[i] = uint32_t(mTris.size());
-        const MaterialData& md = view.materials[mesh.material];
-        // Selection weight: mean emitted luminance (texture mean when textured) times area.
-        float texMean = 1.f;
-        if (md.emissiveTexture.image >= 0) {
-            const SceneImage& img = scene.images[size_t(md.emissiveTexture.image)];
-            double sum = 0.0;
-            for (const auto& t : img.texels)
-                sum += pt::luminance(
-                    glm::vec3(srgbToLinear(t.r / 255.f), srgbToLinear(t.g / 255.f), srgbToLinear(t.b / 255.f)));
-            texMean = img.texels.empty() ? 1.f : float(sum / double(img.texels.size()));
-        }
-        const float lum = pt::luminance(mat.emissiveFactor) * texMean;
+        // Selection weight: area times the mean emitted luminance over the triangle. A textured emitter's mean is
+        // its own (a triangle over black texels is no light); the "area" weighting ignores the texture.
+        const bool textured = mat.emissiveTexture.image >= 0;
+        const bool perTriangle = textured && mEmissionWeights == EmissionWeights::Texture;
+        const std::vector<float>* means = perTriangle ? &triangleEmission(scene, i) : nullptr;
+        const float lum = pt::luminance(mat.emissiveFactor);
         for (uint32_t t = 0; t < mesh.triangleCount(); ++t) {
             const glm::vec3 a = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t]], 1.f));
             const glm::vec3 b = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t + 1]], 1.f));
@@ -262,24 +321,17 @@ void PathTracer::buildLights(const Scene& scene) {
             const float len = glm::length(cr);
             e.area = 0.5f * len;
             e.normal = len > 0.f ? cr / len : glm::vec3(0.f, 1.f, 0.f);
-            e.power = e.area > 0.f ? e.area * lum : 0.f;
+            e.power = e.area > 0.f ? e.area * (means ? (*means)[t] : lum) : 0.f;
             e.instance = i;
             e.primitive = t;
             e.doubleSided = mat.doubleSided ? 1u : 0u;
-            e.textured = md.emissiveTexture.image >= 0 ? 1u : 0u;
+            e.textured = textured ? 1u : 0u;
             e.radiance = mat.emissiveFactor;
             mTris.push_back(e);
         }
     }
     mTriCdf.assign(mTris.size() + 1, 0.f);
-    double total = 0.0;
-    for (size_t i = 0; i < mTris.size(); ++i) total += mTris[i].power;
-    double acc = 0.0;
-    for (size_t i = 0; i < mTris.size(); ++i) {
-        acc += mTris[i].power;
-        mTriCdf[i + 1] = total > 0.0 ? float(acc / total) : float(i + 1) / float(mTris.size());
-    }
-    if (!mTris.empty()) mTriCdf.back() = 1.f;
+    const double total = pt::fillTriangleCdf(mTris.data(), uint32_t(mTris.size()), mTriCdf.data());
 
     mPunctual.clear();
     for (const Light& l : scene.lights) {
@@ -307,7 +359,7 @@ void PathTracer::buildLights(const Scene& scene) {
     L.pTris = total > 0.0 ? 1.f / kinds : 0.f;
     L.pPunctual = !mPunctual.empty() ? 1.f / kinds : 0.f;
     L.pEnv = L.hasEnv ? 1.f / kinds : 0.f;
-    for (pt::EmissiveTri& t : mTris) t.pdfArea = t.area > 0.f ? L.pTris * (t.power / L.triPowerSum) / t.area : 0.f;
+    pt::setTrianglePdfs(mTris.data(), uint32_t(mTris.size()), mTriCdf.data(), L.pTris);
 }
 
 void PathTracer::execute(PassContext& ctx) {
@@ -498,6 +550,9 @@ void PathTracer::execute(PassContext& ctx) {
     ctx.stats().set("rays", double(rays));
     ctx.stats().set("paths", double(uint64_t(w) * h * spp));
     ctx.stats().set("nonFiniteSamplesDropped", double(dropped));
+    ctx.stats().set("emissiveTriangles", double(mTris.size()));
+    ctx.stats().set("lightTriangles", double(std::count_if(mTris.begin(), mTris.end(),
+                                                           [](const pt::EmissiveTri& t) { return t.pdfArea > 0.f; })));
     // Throughput of this frame (timing only; it never changes the image).
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (seconds > 0.0) ctx.stats().set("pathsPerSecond", double(uint64_t(w) * h * spp) / seconds);

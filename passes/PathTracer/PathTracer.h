@@ -24,10 +24,12 @@ public:
     enum class Device { Auto, Cpu, Cuda };
     enum class LightSamplingMode { Mis, Nee, Bsdf };
     enum class CullMode { None, Back };
+    enum class EmissionWeights { Texture, Area };
 
 private:
     void buildLights(const Scene& scene);
     void buildEnvironment(const Scene& scene);
+    const std::vector<float>& triangleEmission(const Scene& scene, uint32_t instance);
 
     // Parameters.
     int mMaxBounces = 3;
@@ -42,6 +44,7 @@ private:
     bool mSimdShading = true;
     CullMode mCullMode = CullMode::Back;
     bool mAlphaTest = true;
+    EmissionWeights mEmissionWeights = EmissionWeights::Texture;
 
     // Light data, rebuilt per frame (triangles) or per scene (environment).
     std::vector<pt::EmissiveTri> mTris;
@@ -50,6 +53,10 @@ private:
     std::vector<pt::PunctualLight> mPunctual;
     std::vector<float> mEnvMarginal, mEnvConditional;
     const void* mEnvSource = nullptr;  // the scene whose environment the CDFs describe
+    // Per mesh of an emissive-textured material: the mean emitted luminance over each triangle (empty until an
+    // instance of the mesh is first lit), for the scene mEmissionSource.
+    std::vector<std::vector<float>> mTriEmission;
+    const void* mEmissionSource = nullptr;
     pt::LightsView mLights;
 };
 

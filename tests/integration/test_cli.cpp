@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -470,4 +471,110 @@ TEST_F(Cli, ACameraPathOnAnAnimatedCameraIsIgnoredWithAWarning) {
              " --size 16x16 --camera-path orbit -q --out out");
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_EQ(r.output.find("ignored"), std::string::npos) << r.output;
+}
+
+TEST_F(Cli, ASceneWithNoLightWarnsOnceAndNamesEnv) {
+    // One grey triangle: no emission, no punctual light; black until --env lights it.
+    loom::test::writeTriangleGltf(mDir, "dark", {-1, -1, 0, 1, -1, 0, 0, 1, 0}, {}, {0, 1, 2},
+                                  {{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1}}}}});
+    const std::string pt = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/PathTracer.json");
+    const auto warnings = [](const std::string& text) {
+        size_t n = 0;
+        for (size_t at = text.find("has no light"); at != std::string::npos; at = text.find("has no light", at + 1))
+            ++n;
+        return n;
+    };
+    RunResult r = loom("render --graph " + pt + " --scene dark.gltf --size 16x16 --frames 3 -q --out out");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(warnings(r.output), 1u) << r.output;
+    EXPECT_CONTAINS(r.output, "renders black");
+    EXPECT_CONTAINS(r.output, "--env 1,1,1");
+    EXPECT_CONTAINS(r.output, "no environment (no --env)");
+    // bench and view load scenes the same way, and say it the same once.
+    r = loom(
+        "bench --scene dark.gltf --size 16x16 --frames 3 --warmup 1 --reference-spp 4 --graph PathTracerRaw "
+        "--brute-force-spp 1 --cache cache --out bench");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(warnings(r.output), 1u) << r.output;
+    r = loom("view --graph " + pt + " --scene dark.gltf --size 16x16 --headless --frames 2");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(warnings(r.output), 1u) << r.output;
+    r = loom("render --graph " + pt + " --scene dark.gltf --size 16x16 -q --out out --env 0,0,0");
+    EXPECT_EQ(warnings(r.output), 1u) << r.output;
+    EXPECT_CONTAINS(r.output, "a black environment (--env)");
+    // Lit by the environment, by an emitter, or by a punctual light: no word.
+    r = loom("render --graph " + pt + " --scene dark.gltf --size 16x16 -q --out out --env 1,1,1");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(warnings(r.output), 0u) << r.output;
+    for (const char* lit : {"cornell_box.gltf", "materials.gltf"}) {
+        r = loom("render --graph " + pt + " --scene " + quoted(loom::test::dataScene(lit)) +
+                 " --size 16x16 -q --out out");
+        EXPECT_EQ(warnings(r.output), 0u) << lit << "\n" << r.output;
+    }
+}
+
+// --hold converges one frame of an animated scene: every iteration sees the scene and camera at the time of
+// --start-frame (its vbuffer at the first and the last iteration is byte for byte that of a plain render of that
+// frame, and not that of the frame whose index the last iteration has), the random numbers advance (the squared
+// error against a longer held run falls as 1/N), and only the held result is written, under the frame's number.
+TEST_F(Cli, HoldAccumulatesOneFrameOfAnAnimatedScene) {
+    writeText("held.json", R"({"loom_graph": 1, "name": "Held", "passes": [
+        {"name": "GBuffer", "type": "GBufferRT"},
+        {"name": "PathTracer", "type": "PathTracer", "params": {"maxBounces": 3}},
+        {"name": "Accumulate", "type": "AccumulatePass", "params": {"precision": "double"}}],
+      "edges": [["PathTracer.color", "Accumulate.src"]], "outputs": ["Accumulate.dst"]})");
+    const std::string scene = quoted(loom::test::dataScene("cornell_dynamic.gltf"));
+    const auto run = [&](const std::string& out, const std::string& extra) {
+        const RunResult r =
+            loom("render --graph held.json --scene " + scene + " --size 32x32 -q --out " + out + " " + extra);
+        EXPECT_EQ(r.code, 0) << r.output;
+        return r;
+    };
+    // Frame 30 held for 16 iterations (indices 30-45), and plain renders of frames 30 and 45.
+    run("held", "--start-frame 30 --frames 16 --hold --dump GBuffer.vbuffer --dump-frames 30,45");
+    run("plain30", "--start-frame 30 --frames 1 --dump GBuffer.vbuffer");
+    run("plain45", "--start-frame 45 --frames 1 --dump GBuffer.vbuffer");
+    const std::vector<std::string> expected = {"Accumulate.dst.0030.exr", "GBuffer.vbuffer.0030.exr",
+                                               "GBuffer.vbuffer.0045.exr"};
+    EXPECT_EQ(files("held"), expected);
+    const std::string first = readText("held/GBuffer.vbuffer.0030.exr");
+    ASSERT_FALSE(first.empty());
+    EXPECT_EQ(readText("held/GBuffer.vbuffer.0045.exr"), first);
+    EXPECT_EQ(readText("plain30/GBuffer.vbuffer.0030.exr"), first);
+    EXPECT_NE(readText("plain45/GBuffer.vbuffer.0045.exr"), first);  // the scene moves between frames 30 and 45
+
+    // Squared error against 128 iterations of 16 spp (2048 spp) for N = 1, 4, 16, 64 iterations of 1 spp.
+    run("ref", "--start-frame 30 --frames 128 --hold --set PathTracer.samplesPerPixel=16 --set PathTracer.seed=9");
+    const loom::Texture ref = loom::readImage(path("ref/Accumulate.dst.0030.exr"));
+    std::vector<double> xs, ys;
+    for (int n : {1, 4, 16, 64}) {
+        const std::string out = "n" + std::to_string(n);
+        run(out, "--start-frame 30 --hold --frames " + std::to_string(n));
+        const loom::Texture img = loom::readImage(path(out + "/Accumulate.dst.0030.exr"));
+        ASSERT_EQ(img.width(), ref.width());
+        const auto a = img.view<glm::vec4>(), b = ref.view<glm::vec4>();
+        double se = 0.0;
+        for (uint32_t y = 0; y < img.height(); ++y)
+            for (uint32_t x = 0; x < img.width(); ++x)
+                for (int k = 0; k < 3; ++k)
+                    se += double(a.at(x, y)[k] - b.at(x, y)[k]) * (a.at(x, y)[k] - b.at(x, y)[k]);
+        const double mse = se / (3.0 * img.width() * img.height());
+        std::printf("held %2d iterations: MSE %.4g\n", n, mse);
+        xs.push_back(std::log(double(n)));
+        ys.push_back(std::log(mse));
+    }
+    double mx = 0, my = 0, sxy = 0, sxx = 0;
+    for (size_t i = 0; i < xs.size(); ++i) {
+        mx += xs[i] / double(xs.size());
+        my += ys[i] / double(xs.size());
+    }
+    for (size_t i = 0; i < xs.size(); ++i) {
+        sxy += (xs[i] - mx) * (ys[i] - my);
+        sxx += (xs[i] - mx) * (xs[i] - mx);
+    }
+    std::printf("fitted slope of log MSE over log N: %.3f\n", sxy / sxx);
+    EXPECT_NEAR(sxy / sxx, -1.0, 0.2);
+
+    // Nonsense: --hold needs a scene whose time it holds.
+    expectBadInput(render("--hold --frames 4"), {"--hold", "--scene"});
 }

@@ -938,8 +938,8 @@ TEST_F(SceneFiles, CubicSplineAnimationFromFile) {
     EXPECT_NEAR(s->nodes[0].scale.y, 1.f, 1e-6f);
 }
 
-TEST(SceneInCode, FinalizeBuildsInstancesDepthFirst) {
-    Scene s;
+/// One triangle (0,0,0), (1,0,0), (0,1,0) facing +Z, made in code.
+Mesh triangleMesh() {
     Mesh m;
     m.name = "tri";
     m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
@@ -947,7 +947,12 @@ TEST(SceneInCode, FinalizeBuildsInstancesDepthFirst) {
     m.tangents.assign(3, glm::vec4(1, 0, 0, 1));
     m.uvs.assign(3, glm::vec2(0));
     m.indices = {0, 1, 2};
-    s.meshes.push_back(m);
+    return m;
+}
+
+TEST(SceneInCode, FinalizeBuildsInstancesDepthFirst) {
+    Scene s;
+    s.meshes.push_back(triangleMesh());
     s.materials.emplace_back();
     s.nodes.resize(4);
     s.nodes[0].children = {2, 1};
@@ -974,6 +979,47 @@ TEST(SceneInCode, FinalizeBuildsInstancesDepthFirst) {
 
     s.nodes[1].children = {0};  // a cycle
     EXPECT_THROW(s.finalize(), Error);
+}
+
+// What lights a scene (the CLI warns when nothing does): an emissive material on an instance (with a texel that is
+// not black when its emission is textured), a punctual light of some intensity, an environment that is not black.
+TEST(SceneInCode, EmitsLightOnlyWhenSomethingDoes) {
+    Scene s;
+    s.meshes.push_back(triangleMesh());
+    s.materials.emplace_back();
+    s.nodes.resize(1);
+    s.nodes[0].meshes = {0};
+    s.roots = {0};
+    s.finalize();
+    EXPECT_FALSE(s.emitsLight());
+    s.materials[0].emissiveFactor = glm::vec3(0.f, 0.f, 2.f);
+    EXPECT_TRUE(s.emitsLight());
+    SceneImage black;
+    black.width = black.height = 2;
+    black.texels.assign(4, glm::u8vec4(0, 0, 0, 255));
+    s.images.push_back(black);
+    s.materials[0].emissiveTexture.image = 0;
+    EXPECT_FALSE(s.emitsLight());  // an emissive factor times a black texture
+    s.images[0].texels[3].g = 1;
+    EXPECT_TRUE(s.emitsLight());
+    s.materials[0].emissiveFactor = glm::vec3(0.f);
+    Light l;
+    l.intensity = 0.f;
+    s.lights.push_back(l);
+    EXPECT_FALSE(s.emitsLight());
+    s.lights[0].intensity = 3.f;
+    EXPECT_TRUE(s.emitsLight());
+    s.lights.clear();
+    s.environment.color = glm::vec3(0.1f);
+    EXPECT_TRUE(s.emitsLight());
+    s.environment.intensity = 0.f;
+    EXPECT_FALSE(s.emitsLight());
+    s.environment = Environment{};
+    s.environment.width = s.environment.height = 1;
+    s.environment.texels = {glm::vec3(0.f)};
+    EXPECT_FALSE(s.emitsLight());  // a black map
+    s.environment.texels[0].x = 0.5f;
+    EXPECT_TRUE(s.emitsLight());
 }
 
 TEST_F(SceneFiles, OrbitAndDollyCameraPaths) {

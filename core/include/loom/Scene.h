@@ -235,6 +235,9 @@ public:
     float animationLength() const;  ///< longest animation, seconds
     size_t triangleCount() const;  ///< over instances
     bool hasMotion() const;  ///< animations or a camera path
+    /// Whether anything lights the scene: an instance of an emissive material (with a texel that is not black when
+    /// the emission is textured), a punctual light of nonzero intensity, or an environment that is not black.
+    bool emitsLight() const;
     bool cameraAnimated() const { return mCameraAnimated; }  ///< the glTF camera is animated (setCameraPose ignored)
 
     const RayScene& rayScene() const { return *mRayScene; }
