@@ -31,9 +31,9 @@ namespace fs = std::filesystem;
 
 /// Required extensions Loom implements. KHR_mesh_quantization only widens the
 /// accessor types allowed for attributes, which the accessor reader handles.
-const std::vector<std::string> kSupportedRequired = {"KHR_materials_emissive_strength", "KHR_lights_punctual",
-                                                     "KHR_mesh_quantization", "KHR_texture_transform",
-                                                     "KHR_materials_ior", "KHR_materials_specular"};
+const std::vector<std::string> kSupportedRequired = {
+    "KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_mesh_quantization",
+    "KHR_texture_transform",           "KHR_materials_ior",   "KHR_materials_specular"};
 
 std::string labelOf(const char* kind, size_t index, const std::string& name) {
     std::string s = std::string(kind) + "[" + std::to_string(index) + "]";

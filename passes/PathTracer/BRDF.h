@@ -352,7 +352,7 @@ LOOM_HD inline glm::vec3 brdfF0(const BrdfInputs& in) {
 ///   f = F(wo.h) D V + msScale (1 - ei) + diffuseScale * diffuseIn,
 ///   diffuseIn = 1 - (layerE ei + layerEs esi + layerC)   (compensated), or 1 - Fdielectric(wo.h)  (plain).
 struct BrdfLobes {
-    glm::vec3 f0{0.04f};          ///< Fresnel of the specular lobe, F = f0 + (f90 - f0) (1 - wo.h)^5
+    glm::vec3 f0{0.04f};  ///< Fresnel of the specular lobe, F = f0 + (f90 - f0) (1 - wo.h)^5
     float f90 = 1.f;
     glm::vec3 msScale{0.f};       ///< Fms (1 - E(mu_o)) / (pi (1 - Eavg)); 0 for the plain model
     glm::vec3 diffuseScale{0.f};  ///< (1 - metallic) baseColor / pi, times (1 - Ed(mu_o)) / (1 - Ed_avg) compensated
@@ -360,7 +360,7 @@ struct BrdfLobes {
     glm::vec3 dielectricF0{0.04f};  ///< plain model: the diffuse weight is 1 - (f0 + (f90 - f0) (1 - wo.h)^5)
     float dielectricF90 = 1.f;
     float roughness = 1.f;
-    float pSpec = 1.f;            ///< probability of sampling the GGX lobe (specularLobeProbability())
+    float pSpec = 1.f;  ///< probability of sampling the GGX lobe (specularLobeProbability())
     bool multiScatter = true;
 };
 
@@ -427,7 +427,8 @@ LOOM_HD inline glm::vec3 otherLobes(const BrdfLobes& L, float NdotL, float w) {
     if (!L.multiScatter)
         return L.diffuseScale * (glm::vec3(1.f) - (L.dielectricF0 + (L.dielectricF90 - L.dielectricF0) * w));
     const GgxAlbedo ei = ggxAlbedo(NdotL, L.roughness);
-    const glm::vec3 diffuseIn = glm::max(glm::vec3(1.f) - (L.layerE * ei.e + L.layerEs * ei.es + L.layerC), glm::vec3(0.f));
+    const glm::vec3 diffuseIn =
+        glm::max(glm::vec3(1.f) - (L.layerE * ei.e + L.layerEs * ei.es + L.layerC), glm::vec3(0.f));
     return L.msScale * (1.f - ei.e) + L.diffuseScale * diffuseIn;
 }
 

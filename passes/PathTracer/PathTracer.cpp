@@ -144,11 +144,13 @@ void PathTracer::declareParams(ParamList& p) {
     p.add("lambertOnly", &mLambertOnly, false).doc("replace the glTF BRDF by baseColor/pi (validation)");
     p.add("indirectClamp", &mIndirectClamp, 0.f)
         .range(0.f, 1e6f)
-        .doc("firefly guard: the largest channel of any contribution after the first bounce is clamped to this "
-             "(biased, darker); 0 = off, as references need");
+        .doc(
+            "firefly guard: the largest channel of any contribution after the first bounce is clamped to this "
+            "(biased, darker); 0 = off, as references need");
     p.add("energyCompensation", &mEnergyCompensation, true)
-        .doc("multiple-scattering energy compensation of the glTF BRDF (a white furnace reflects 1 at every "
-             "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
+        .doc(
+            "multiple-scattering energy compensation of the glTF BRDF (a white furnace reflects 1 at every "
+            "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
     p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda"})
         .doc("where to run; without a usable CUDA device, auto and cuda run on the CPU");
     p.add("seed", &mSeed, 0).range(0, 1 << 30).doc("decorrelates runs that share frame indices");

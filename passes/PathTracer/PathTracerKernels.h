@@ -26,7 +26,7 @@ struct PathTracerSettings {
     uint32_t lightSampling = kMis;
     bool lambertOnly = false;  ///< f = baseColor / pi, for analytic tests
     bool multiScatter = true;  ///< the BRDF's energy compensation (BrdfInputs::multiScatter)
-    float indirectClamp = 0.f; ///< firefly guard: largest channel of one indirect contribution; 0 = off
+    float indirectClamp = 0.f;  ///< firefly guard: largest channel of one indirect contribution; 0 = off
 };
 
 /// The firefly guard of the real-time graphs: a contribution that reaches the pixel after the first bounce (what
@@ -115,7 +115,8 @@ LOOM_HD inline bool shadeEmission(PathState& st, const RayHit& hit, const SceneV
             else if (set.lightSampling == kMis)
                 w = powerHeuristic(st.prevBsdfPdf, lights.pEnv * envPdf(lights.env, rayDir));
         }
-        const glm::vec3 c = directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
+        const glm::vec3 c =
+            directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
         r.color += c;
         (directSlot ? r.direct : r.indirect) += c;
         return false;
@@ -136,7 +137,8 @@ LOOM_HD inline bool shadeEmission(PathState& st, const RayHit& hit, const SceneV
                 w = powerHeuristic(st.prevBsdfPdf, triLightPdf(lights, t, glm::dot(d, d), cosLight));
             }
         }
-        const glm::vec3 c = directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
+        const glm::vec3 c =
+            directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
         r.color += c;
         (directSlot ? r.direct : r.indirect) += c;
     }
@@ -250,7 +252,8 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
                     f = lambertEval(s, n, ls.wi);
                     bsdfPdf = cosI * kInvPi;
                 } else {
-                    bv = makeBrdfVertex(brdfInputs(s, set.multiScatter), n, wo, !lastVertex);  // no MIS weight at the last vertex
+                    bv = makeBrdfVertex(brdfInputs(s, set.multiScatter), n, wo,
+                                        !lastVertex);  // no MIS weight at the last vertex
                     bvReady = true;
                     const BrdfEval e = evalBrdfVertex(bv, ls.wi);
                     f = e.f;

@@ -200,9 +200,12 @@ HWY_INLINE void makeVertex(D d, const V3& n, const V3& woW, const V3& base, V me
     const V3 diffuse = scale(base, oneMinusM * invPi);
     V3 fms = {zero, zero, zero};
     if (multiScatter) {
-        fms = {hn::MulAdd(oneMinusM, fmsLayer.x, hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.x, one, eAvg))),
-               hn::MulAdd(oneMinusM, fmsLayer.y, hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.y, one, eAvg))),
-               hn::MulAdd(oneMinusM, fmsLayer.z, hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.z, one, eAvg)))};
+        fms = {hn::MulAdd(oneMinusM, fmsLayer.x,
+                          hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.x, one, eAvg))),
+               hn::MulAdd(oneMinusM, fmsLayer.y,
+                          hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.y, one, eAvg))),
+               hn::MulAdd(oneMinusM, fmsLayer.z,
+                          hn::IfThenElseZero(compensate, m * multiScatterFresnel(d, base.z, one, eAvg)))};
         // diffuse (1 - Ed(mu_o)) / (1 - Ed_avg), per channel; 0 where the layer reflects everything.
         auto scaled = [&](V dc, V out, V le, V les, V lc) {
             const V layerAvg = hn::MulAdd(le, eAvg, hn::MulAdd(les, esAvg, lc));
@@ -259,7 +262,9 @@ HWY_INLINE void evalVertex(D d, const VertexV& v, const V3& wi, bool multiScatte
         V ei, esi;
         ggxAlbedo(d, v.row, v.rowFrac, hn::Min(wi.z, one), ei, esi);
         const V msIn = one - ei;
-        auto diffuseIn = [&](V le, V les, V lc) { return hn::Max(one - hn::MulAdd(le, ei, hn::MulAdd(les, esi, lc)), zero); };
+        auto diffuseIn = [&](V le, V les, V lc) {
+            return hn::Max(one - hn::MulAdd(le, ei, hn::MulAdd(les, esi, lc)), zero);
+        };
         other = {hn::MulAdd(v.msScale.x, msIn, v.diffuseScale.x * diffuseIn(v.layerE.x, v.layerEs.x, v.layerC.x)),
                  hn::MulAdd(v.msScale.y, msIn, v.diffuseScale.y * diffuseIn(v.layerE.y, v.layerEs.y, v.layerC.y)),
                  hn::MulAdd(v.msScale.z, msIn, v.diffuseScale.z * diffuseIn(v.layerE.z, v.layerEs.z, v.layerC.z))};
@@ -499,7 +504,8 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
             ++st.r.rays;
             st.shadowDir = get3(b.lightDir, j);
             st.shadowTMax = shadowRayTMax(b.lightDistance[j]);
-            st.shadowContrib = st.bounce == 0 ? get3(b.contrib, j) : clampIndirect(get3(b.contrib, j), set.indirectClamp);
+            st.shadowContrib =
+                st.bounce == 0 ? get3(b.contrib, j) : clampIndirect(get3(b.contrib, j), set.indirectClamp);
             st.shadowNearSurface = st.bounce == 0;
             requests[j] |= kShadowRay;
         }

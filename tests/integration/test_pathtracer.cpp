@@ -868,6 +868,6 @@ TEST(PathTracer, GlossyReflectionOfASmallLightHasNoFireflies) {
     }
     std::printf("glossy reflection of a small light: largest sample %.2f (light %.1f), mean %.5f\n", largest, Le,
                 sum / (16.0 * W * H));
-    EXPECT_GT(largest, 0.5f * Le);   // the reflection is in view
-    EXPECT_LE(largest, 2.f * Le);    // and no sample exceeds what MIS allows
+    EXPECT_GT(largest, 0.5f * Le);  // the reflection is in view
+    EXPECT_LE(largest, 2.f * Le);   // and no sample exceeds what MIS allows
 }

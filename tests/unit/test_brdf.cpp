@@ -398,15 +398,16 @@ TEST(Brdf, PlainModelIsTheSpecification) {
     const Frame frame = makeFrame(kNormal);
     for (int i = 0; i < 5000; ++i) {
         // Roughness from 0.2: sharper lobes amplify the float rounding of the directions beyond the tolerance.
-        BrdfInputs in{glm::vec3(rng.uniform(), rng.uniform(), rng.uniform()), rng.uniform(), 0.2f + 0.8f * rng.uniform()};
+        BrdfInputs in{glm::vec3(rng.uniform(), rng.uniform(), rng.uniform()), rng.uniform(),
+                      0.2f + 0.8f * rng.uniform()};
         in.multiScatter = false;
         const glm::vec3 wo = direction(frame, 85.f * rng.uniform(), 2.f * kPi * rng.uniform());
         const glm::vec3 wi = direction(frame, 85.f * rng.uniform(), 2.f * kPi * rng.uniform());
         const double alpha = std::max(double(in.roughness) * in.roughness, 1e-3), a2 = alpha * alpha;
         const glm::dvec3 n(kNormal), v(wo), l(wi), h = glm::normalize(v + l);
         const double NdotL = glm::dot(n, l), NdotV = glm::dot(n, v), NdotH = glm::dot(n, h), VdotH = glm::dot(v, h);
-        const double Vis = 0.5 / (NdotL * std::sqrt(NdotV * NdotV * (1 - a2) + a2) +
-                                  NdotV * std::sqrt(NdotL * NdotL * (1 - a2) + a2));
+        const double Vis =
+            0.5 / (NdotL * std::sqrt(NdotV * NdotV * (1 - a2) + a2) + NdotV * std::sqrt(NdotL * NdotL * (1 - a2) + a2));
         const double dd = NdotH * NdotH * (a2 - 1) + 1;
         const double D = a2 / (kPiD * dd * dd);
         const double specular = Vis * D, w = std::pow(1 - std::fabs(VdotH), 5.0);
