@@ -24,6 +24,7 @@ struct EmissiveTri {
     uint32_t instance = 0, primitive = 0;
     uint32_t doubleSided = 0;
     uint32_t textured = 0;  ///< emission varies over the triangle (emissive texture): evaluate the material
+    uint32_t alphaTested = 0;  ///< alphaMode MASK or BLEND (with alpha testing on): emission scaled by coverage
     glm::vec3 radiance{0.f};  ///< emitted radiance when not textured
     float pdfArea = 0.f;      ///< pTris * (triCdf[i + 1] - triCdf[i]) / area: area density of a light sample on it,
                               ///< selection included (the probability sampleLight picks it; filled by the pass)
@@ -118,7 +119,8 @@ struct LightSample {
     bool valid = false;
     uint32_t instance = 0, primitive = 0;  ///< emissive triangle (for evaluating textured emission)
     glm::vec2 bary{0.f};
-    bool isTriangle = false;
+    bool isTriangle = false;   ///< the caller evaluates the emission at the point (lightSampleRadiance())
+    bool alphaTested = false;  ///< the emitter's coverage there scales it (expectedCoverage())
 };
 
 /// Fills the selection CDF of n emissive triangles by power (n + 1 entries, from 0 to exactly 1; uniform when no
@@ -178,7 +180,8 @@ LOOM_HD inline LightSample sampleLight(const LightsView& L, glm::vec3 p, float u
         s.instance = t.instance;
         s.primitive = t.primitive;
         s.bary = glm::vec2(bu, bv);
-        s.isTriangle = t.textured != 0;  // untextured: the radiance is known
+        s.isTriangle = t.textured != 0 || t.alphaTested != 0;  // else the radiance is known
+        s.alphaTested = t.alphaTested != 0;
         s.Li = t.radiance;
         s.valid = true;
         return s;

@@ -328,6 +328,7 @@ void PathTracer::buildLights(const Scene& scene) {
             e.primitive = t;
             e.doubleSided = mat.doubleSided ? 1u : 0u;
             e.textured = textured ? 1u : 0u;
+            e.alphaTested = mAlphaTest && mat.alphaMode != AlphaMode::Opaque ? 1u : 0u;
             e.radiance = mat.emissiveFactor;
             mTris.push_back(e);
         }

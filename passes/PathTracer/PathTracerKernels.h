@@ -188,11 +188,14 @@ LOOM_HD inline ScatterFrame scatterFrame(const SurfaceHit& s, glm::vec3 wo) {
 
 /// Radiance a light sample carries toward a shading point with normals (n, fn): the light's own value, or for a
 /// textured emitter the material evaluated at the sampled point (only where the sample can reach the surface).
+/// An alpha-tested emitter's coverage there scales it: a MASK emitter emits nothing where it is cut out, a BLEND
+/// emitter its mean over its stochastic transparency (alpha times its radiance), as rays that hit it see.
 LOOM_HD inline glm::vec3 lightSampleRadiance(const SceneView& scene, const LightSample& ls, glm::vec3 n, glm::vec3 fn) {
     if (!ls.isTriangle || !(glm::dot(n, ls.wi) > 0.f && glm::dot(fn, ls.wi) > 0.f)) return ls.Li;
     const SurfaceHit e =
         evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi, SurfaceEval::Shading);
-    return emittedRadiance(scene, e, ls.wi);
+    const glm::vec3 Le = emittedRadiance(scene, e, ls.wi);
+    return ls.alphaTested ? Le * expectedCoverage(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y) : Le;
 }
 
 /// Length of a shadow ray toward a light point at `distance` (stopping just short of the light's own surface), or

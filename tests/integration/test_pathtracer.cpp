@@ -871,3 +871,43 @@ TEST(PathTracer, GlossyReflectionOfASmallLightHasNoFireflies) {
     EXPECT_GT(largest, 0.5f * Le);  // the reflection is in view
     EXPECT_LE(largest, 2.f * Le);   // and no sample exceeds what MIS allows
 }
+
+// An alpha-tested emitter lights the scene as rays that hit it see it: a MASK emitter cut out everywhere (alpha
+// 0.25 below the cutoff 0.5) lights nothing, also through light sampling; a BLEND emitter of alpha 0.5 gives, by
+// light sampling, exactly half the light of the opaque one (its mean over the stochastic transparency), and BRDF
+// sampling, which meets it through the any-hit filter, converges to the same.
+TEST(PathTracer, AlphaTestedEmittersLightAsTheyAreSeen) {
+    const uint32_t W = 32, H = 32;
+    auto render = [&](AlphaMode mode, float alpha, const char* sampling, int spp) {
+        Material emitter = lambert(glm::vec3(0.5f), glm::vec3(5.f));
+        emitter.baseColorFactor.a = alpha;
+        emitter.alphaMode = mode;
+        auto scene = sceneOf({quad(glm::vec3(-2.f, 0.f, -2.f), glm::vec3(0.f, 0.f, 4.f), glm::vec3(4.f, 0.f, 0.f)),
+                              quad(glm::vec3(-0.5f, 1.5f, -0.5f), glm::vec3(1.f, 0.f, 0.f), glm::vec3(0.f, 0.f, 1.f))},
+                             {lambert(glm::vec3(0.8f)), emitter});
+        scene->finalize();
+        lookAt(*scene, glm::vec3(0.f, 1.2f, 0.f), glm::vec3(0.f, 0.f, 0.001f), 0.9f);  // under the emitter
+        auto g = ptGraph({{"maxBounces", 1}, {"lightSampling", sampling}, {"samplesPerPixel", spp}}, W, H, scene);
+        frame(*g, *scene, 0, W, H);
+        std::vector<glm::vec3> out;
+        auto c = g->fieldTexture("PT.color")->view<glm::vec4>();
+        for (uint32_t y = 0; y < H; ++y)
+            for (uint32_t x = 0; x < W; ++x) out.push_back(glm::vec3(c.at(x, y)));
+        return out;
+    };
+    auto mean = [](const std::vector<glm::vec3>& img) {
+        double s = 0.0;
+        for (const auto& v : img) s += v.g;
+        return s / double(img.size());
+    };
+    const auto opaque = render(AlphaMode::Opaque, 1.f, "nee", 4);
+    ASSERT_GT(mean(opaque), 0.05);
+    for (const char* sampling : {"nee", "bsdf", "mis"})
+        EXPECT_EQ(mean(render(AlphaMode::Mask, 0.25f, sampling, 4)), 0.0) << sampling;
+    const auto blend = render(AlphaMode::Blend, 0.5f, "nee", 4);
+    for (size_t i = 0; i < blend.size(); ++i) ASSERT_EQ(blend[i], 0.5f * opaque[i]) << i;
+    const double bsdf = mean(render(AlphaMode::Blend, 0.5f, "bsdf", 256));
+    std::printf("BLEND emitter, alpha 0.5: light sampling %.5f, BRDF sampling %.5f (opaque %.5f)\n", mean(blend), bsdf,
+                mean(opaque));
+    EXPECT_NEAR(bsdf, mean(blend), 0.03 * mean(blend));
+}

@@ -167,6 +167,15 @@ LOOM_HD inline bool surfaceCovers(const SceneView& scene, uint32_t instance, uin
     return true;
 }
 
+/// The mean of surfaceCovers() over its random key: 0 or 1 for MASK by the cutoff, alpha (in [0, 1]) for BLEND, 1
+/// for OPAQUE. Light sampling weights an alpha-tested emitter's radiance by it.
+LOOM_HD inline float expectedCoverage(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v) {
+    const MaterialData& mat = scene.materials[scene.meshes[scene.instances[instance].mesh].material];
+    if (mat.alphaMask) return coverageAlpha(scene, instance, prim, u, v) >= mat.alphaCutoff ? 1.f : 0.f;
+    if (mat.alphaBlend) return glm::clamp(coverageAlpha(scene, instance, prim, u, v), 0.f, 1.f);
+    return 1.f;
+}
+
 /// The dielectric's reflectance at normal incidence: ((ior - 1) / (ior + 1))^2 (KHR_materials_ior; ior = 0, the
 /// extension's special value, gives 1), tinted by specularColorFactor and clamped to 1, then scaled by
 /// specularFactor (KHR_materials_specular). glTF's default (ior 1.5, no specular extension) is 0.04.
