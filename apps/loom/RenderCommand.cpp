@@ -112,12 +112,22 @@ void runRender(const RenderOptions& o) {
     const double heldTime = double(o.startFrame) / o.fps;
     if (o.hold) statsJson["heldFrame"] = {{"frame", o.startFrame}, {"time", heldTime}, {"iterations", o.frames}};
     uint64_t written = 0;
+    // Frames after the first on which a pass restarted an accumulation (a pass's "reset" counter: AccumulatePass
+    // restarts when the scene or the camera moves), so a reference that cannot converge does not pass silently.
+    uint64_t restarts = 0;
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames; ++i) {
         const uint64_t index = o.startFrame + i;
         const FrameInfo frame = o.hold ? sceneFrameAt(scene.get(), index, heldTime, width, height, i == 0)
                                        : sceneFrame(scene.get(), index, o.fps, width, height, i == 0);
         graph.execute(frame);
+        if (i > 0) {
+            const auto stats = graph.lastStats();
+            restarts += std::any_of(stats.begin(), stats.end(), [](const auto& pass) {
+                const auto reset = pass.second.find("reset");
+                return reset != pass.second.end() && reset->second != 0.0;
+            });
+        }
         if (!o.hold || i + 1 == o.frames) {
             const uint64_t named = o.hold ? o.startFrame : frame.frameIndex;
             for (const auto& out : graph.outputs()) {
@@ -140,6 +150,11 @@ void runRender(const RenderOptions& o) {
         }
     }
     if (!o.statsFile.empty()) writeFileAtomic(o.statsFile, statsJson.dump(2) + "\n");
+    if (restarts > 0)
+        spdlog::warn("an accumulation restarted on {} of the {} frames after the first, because the scene or the "
+                     "camera moved: the images do not converge. To converge one frame K of a moving scene, hold it: "
+                     "--start-frame K --frames N --hold",
+                     restarts, o.frames - 1);
 
     if (!o.quiet) {
         if (o.hold)

@@ -534,6 +534,19 @@ TEST_F(Cli, HoldAccumulatesOneFrameOfAnAnimatedScene) {
     run("held", "--start-frame 30 --frames 16 --hold --dump GBuffer.vbuffer --dump-frames 30,45");
     run("plain30", "--start-frame 30 --frames 1 --dump GBuffer.vbuffer");
     run("plain45", "--start-frame 45 --frames 1 --dump GBuffer.vbuffer");
+    // Accumulating a moving scene without --hold restarts every frame: one warning that names --hold. Held, or on
+    // a still scene, none.
+    const RunResult moving = run("moving", "--start-frame 30 --frames 3");
+    const std::string restarted = "restarted on 2 of the 2 frames";
+    const size_t at = moving.output.find(restarted);
+    ASSERT_NE(at, std::string::npos) << moving.output;
+    EXPECT_EQ(moving.output.find(restarted, at + 1), std::string::npos) << moving.output;  // once
+    EXPECT_NE(moving.output.find("--hold"), std::string::npos) << moving.output;
+    EXPECT_EQ(run("held3", "--start-frame 30 --frames 3 --hold").output.find("restarted"), std::string::npos);
+    const RunResult still = loom("render --graph held.json --scene " + quoted(loom::test::dataScene("cornell_box.gltf")) +
+                                 " --size 32x32 -q --out still --frames 3");
+    EXPECT_EQ(still.code, 0) << still.output;
+    EXPECT_EQ(still.output.find("restarted"), std::string::npos) << still.output;
     const std::vector<std::string> expected = {"Accumulate.dst.0030.exr", "GBuffer.vbuffer.0030.exr",
                                                "GBuffer.vbuffer.0045.exr"};
     EXPECT_EQ(files("held"), expected);
