@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Regenerates passes/PathTracer/BrdfTables.h and compares it with the committed file: the same layout and every
-number within 1e-6 (the generator's float arithmetic may round differently under other compiler flags)."""
+number within 2e-5: the generator's float arithmetic rounds differently under other compiler flags (entries moved by
+up to 4.5e-6 between the release and the debug build), while a change of the BRDF moves them by far more."""
 import re
 import subprocess
 import sys
@@ -21,7 +22,7 @@ if layout_c != layout_g or len(values_c) != len(values_g):
     sys.exit("BrdfTables.h is out of date (layout): run build/release/bin/loom_gen_brdf_tables "
              "passes/PathTracer/BrdfTables.h")
 worst = max(abs(a - b) for a, b in zip(values_c, values_g))
-if worst > 1e-6:
+if worst > 2e-5:
     sys.exit(f"BrdfTables.h is out of date (largest difference {worst:.2e}): run "
              "build/release/bin/loom_gen_brdf_tables passes/PathTracer/BrdfTables.h")
 print(f"{len(values_c)} values agree within {worst:.1e}")
