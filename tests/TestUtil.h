@@ -16,8 +16,11 @@
 #include <vector>
 
 #include "loom/Error.h"
+#include "loom/Graph.h"
 #include "loom/Plugin.h"
+#include "loom/RenderGraph.h"
 #include "loom/RenderPass.h"
+#include "loom/Scene.h"
 
 namespace loom::test {
 
@@ -40,6 +43,18 @@ Error expectError(Fn&& fn) {
 inline PluginRegistry& pluginRegistry() {
     static PluginRegistry r({LOOM_TEST_PLUGIN_DIR}, false);
     return r;
+}
+
+/// The graph of JSON `g` with the build's plugins, on `scene` (none: nullptr), compiled at w x h (other options
+/// from `base`).
+inline std::unique_ptr<RenderGraph> compiledGraph(const nlohmann::json& g, const std::shared_ptr<Scene>& scene,
+                                                  uint32_t w, uint32_t h, CompileOptions base = {}) {
+    auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), pluginRegistry());
+    if (scene) graph->setScene(scene);
+    base.width = w;
+    base.height = h;
+    graph->compile(base);
+    return graph;
 }
 
 /// A test pass that emits "color" = fn(frame index, x, y) (zero without fn): any frame-dependent input a test

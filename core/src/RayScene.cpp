@@ -133,8 +133,8 @@ bool RayScene::hasAlphaTestedGeometry() const {
 
 namespace {
 /// Is hit h of a ray along d a back face to cull (kRayCullBackFaces): a single-sided material whose front (counter-
-/// clockwise) face looks away from the ray? ngObj is Embree's geometric normal in the instance's object space; the
-/// normal matrix carries it to world space, as facesRay does with the normal it rebuilds from the vertices.
+/// clockwise) face looks away from the ray? ngObj is Embree's geometric normal, (p1 - p0) x (p2 - p0) in the
+/// instance's object space; the normal matrix carries it to world space.
 bool culled(const SceneView& view, const RayHit& h, glm::vec3 ngObj, glm::vec3 d) {
     const InstanceView& inst = view.instances[h.instance];
     return !view.materials[view.meshes[inst.mesh].material].doubleSided &&

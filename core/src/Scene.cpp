@@ -541,6 +541,7 @@ void Scene::rebuildView() {
         d.ior = m.ior;
         d.specularFactor = m.specularFactor;
         d.specularColorFactor = m.specularColorFactor;
+        d.specularF0 = dielectricF0(d);
     }
     mImageViews.resize(images.size());
     for (size_t i = 0; i < images.size(); ++i)

@@ -224,14 +224,8 @@ Texture renderField(RenderGraph& graph, Scene& scene, uint64_t frameIndex, const
 /// A graph of the passes given (name, type, params) marking `outputs`, compiled at kW x kH for `scene`.
 std::unique_ptr<RenderGraph> makeGraph(const json& passes, const std::vector<std::string>& outputs,
                                        const std::shared_ptr<Scene>& scene) {
-    json g = {{"loom_graph", 1}, {"name", "alpha"}, {"passes", passes}, {"outputs", outputs}};
-    auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), test::pluginRegistry());
-    graph->setScene(scene);
-    CompileOptions o;
-    o.width = kW;
-    o.height = kH;
-    graph->compile(o);
-    return graph;
+    return test::compiledGraph({{"loom_graph", 1}, {"name", "alpha"}, {"passes", passes}, {"outputs", outputs}},
+                               scene, kW, kH);
 }
 
 /// PathTracer's colour for one frame; with `viaVBuffer` its primary hits come from GBufferRT's vbuffer.

@@ -45,13 +45,7 @@ std::unique_ptr<RenderGraph> ptGraph(const nlohmann::json& params, uint32_t w, u
         g["outputs"].push_back("PT.direct");
         g["outputs"].push_back("PT.indirect");
     }
-    auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), registry());
-    graph->setScene(scene);
-    CompileOptions o;
-    o.width = w;
-    o.height = h;
-    graph->compile(o);
-    return graph;
+    return test::compiledGraph(g, scene, w, h);
 }
 
 void frame(RenderGraph& g, Scene& scene, uint64_t index, uint32_t w, uint32_t h) {

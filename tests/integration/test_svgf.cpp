@@ -457,13 +457,7 @@ std::unique_ptr<RenderGraph> sceneGraph(const std::shared_ptr<Scene>& scene, uin
                           {{"name", "SVGF"}, {"type", "SVGFPass"}, {"params", svgfParams}}}},
                         {"edges", edges},
                         {"outputs", {"SVGF.filtered", "SVGF.historyLength", "PT.color"}}};
-    auto graph = std::make_unique<RenderGraph>(parseGraph(g.dump()), registry());
-    graph->setScene(scene);
-    CompileOptions o = base;
-    o.width = w;
-    o.height = h;
-    graph->compile(o);
-    return graph;
+    return test::compiledGraph(g, scene, w, h, base);
 }
 
 void renderFrame(RenderGraph& g, Scene& scene, uint64_t frame, double time, uint32_t w, uint32_t h) {

@@ -61,7 +61,18 @@ struct MaterialData {
     float ior = 1.5f;                    ///< KHR_materials_ior: >= 1, or 0 (Fresnel term 1)
     float specularFactor = 1.f;          ///< KHR_materials_specular, in [0, 1]
     glm::vec3 specularColorFactor{1.f};  ///< KHR_materials_specular, >= 0 (may exceed 1)
+    glm::vec3 specularF0{0.04f};         ///< dielectricF0() of the three above, computed once per material
 };
+
+/// The dielectric's reflectance at normal incidence: ((ior - 1) / (ior + 1))^2 (KHR_materials_ior; ior = 0, the
+/// extension's special value, gives 1), tinted by specularColorFactor and clamped to 1, then scaled by
+/// specularFactor (KHR_materials_specular). In double, so glTF's default (ior 1.5, no specular extension) is 0.04f
+/// exactly. Scene fills MaterialData::specularF0 with it; kernels read the field.
+inline glm::vec3 dielectricF0(const MaterialData& mat) {
+    const double r = (double(mat.ior) - 1.0) / (double(mat.ior) + 1.0);
+    const glm::dvec3 f0 = glm::min(r * r * glm::dvec3(mat.specularColorFactor), glm::dvec3(1.0));
+    return glm::vec3(f0 * double(mat.specularFactor));
+}
 
 struct InstanceView {
     glm::mat4 world{1.f};

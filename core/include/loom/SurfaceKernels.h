@@ -95,17 +95,6 @@ LOOM_HD inline glm::vec3 specularAlbedo(glm::vec3 f0, float NdotV, float roughne
     return glm::clamp(f0 * a + b, 0.f, 1.f);
 }
 
-/// Does the front face (counter-clockwise winding) of a triangle face a ray
-/// travelling along rayDir? Cheaper than evalSurface, for culling.
-LOOM_HD inline bool facesRay(const SceneView& scene, uint32_t instance, uint32_t prim, glm::vec3 rayDir) {
-    const InstanceView& inst = scene.instances[instance];
-    const MeshView& mesh = scene.meshes[inst.mesh];
-    const uint32_t* idx = mesh.indices + 3 * prim;
-    const glm::vec3 p0 = mesh.positions[idx[0]];
-    const glm::vec3 n = inst.normalMatrix * glm::cross(mesh.positions[idx[1]] - p0, mesh.positions[idx[2]] - p0);
-    return glm::dot(n, rayDir) < 0.f;
-}
-
 /// A 32-bit integer hash with full avalanche (Wellons' "lowbias32" from hash-prospector). Only 32-bit integer
 /// arithmetic, so GBufferRaster's GLSL computes the same bits.
 LOOM_HD inline uint32_t hash32(uint32_t x) {
@@ -156,17 +145,6 @@ LOOM_HD inline float coverageAlpha(const SceneView& scene, uint32_t instance, ui
     return alpha;
 }
 
-/// Does a ray of coverage `key` stop at this hit? By the material's glTF alphaMode: OPAQUE always; MASK where the
-/// coverage alpha reaches alphaCutoff; BLEND with probability alpha (stochastic transparency: the surface is there
-/// when coverageRandom < alpha, so on average a fraction 1 - alpha of what lies behind shows through).
-LOOM_HD inline bool surfaceCovers(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v,
-                                  uint32_t key) {
-    const MaterialData& mat = scene.materials[scene.meshes[scene.instances[instance].mesh].material];
-    if (mat.alphaMask) return coverageAlpha(scene, instance, prim, u, v) >= mat.alphaCutoff;
-    if (mat.alphaBlend) return coverageRandom(key, instance, prim) < coverageAlpha(scene, instance, prim, u, v);
-    return true;
-}
-
 /// The mean of surfaceCovers() over its random key: 0 or 1 for MASK by the cutoff, alpha (in [0, 1]) for BLEND, 1
 /// for OPAQUE. Light sampling weights an alpha-tested emitter's radiance by it.
 LOOM_HD inline float expectedCoverage(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v) {
@@ -176,14 +154,14 @@ LOOM_HD inline float expectedCoverage(const SceneView& scene, uint32_t instance,
     return 1.f;
 }
 
-/// The dielectric's reflectance at normal incidence: ((ior - 1) / (ior + 1))^2 (KHR_materials_ior; ior = 0, the
-/// extension's special value, gives 1), tinted by specularColorFactor and clamped to 1, then scaled by
-/// specularFactor (KHR_materials_specular). glTF's default (ior 1.5, no specular extension) is 0.04.
-LOOM_HD inline glm::vec3 dielectricF0(const MaterialData& mat) {
-    if (mat.ior == 1.5f && mat.specularFactor == 1.f && mat.specularColorFactor == glm::vec3(1.f))
-        return glm::vec3(0.04f);  // exactly glTF's constant, not 0.2f^2
-    const float r = (mat.ior - 1.f) / (mat.ior + 1.f);
-    return glm::min(r * r * mat.specularColorFactor, glm::vec3(1.f)) * mat.specularFactor;
+/// Does a ray of coverage `key` stop at this hit? By the material's glTF alphaMode: OPAQUE always; MASK where the
+/// coverage alpha reaches alphaCutoff; BLEND with probability alpha (stochastic transparency: the surface is there
+/// when coverageRandom < alpha, so on average a fraction 1 - alpha of what lies behind shows through). Its mean over
+/// keys is expectedCoverage(); the random number is drawn only where the coverage is fractional.
+LOOM_HD inline bool surfaceCovers(const SceneView& scene, uint32_t instance, uint32_t prim, float u, float v,
+                                  uint32_t key) {
+    const float coverage = expectedCoverage(scene, instance, prim, u, v);
+    return coverage >= 1.f || (coverage > 0.f && coverageRandom(key, instance, prim) < coverage);
 }
 
 /// A primary or secondary hit, evaluated.
@@ -265,7 +243,7 @@ LOOM_HD inline SurfaceHit evalSurface(const SceneView& scene, uint32_t instance,
     }
     s.metallic = glm::clamp(s.metallic, 0.f, 1.f);
     s.roughness = glm::clamp(s.roughness, 0.f, 1.f);
-    s.specularF0 = dielectricF0(mat);
+    s.specularF0 = mat.specularF0;
     s.specularF90 = mat.specularFactor;
     s.emission = mat.emissiveFactor;
     if (mat.emissiveTexture.image >= 0) s.emission *= glm::vec3(sampleTexture(scene, mat.emissiveTexture, s.uv, true));
