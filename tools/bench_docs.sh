@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The `loom bench` runs behind docs/BENCHMARKS.md ("loom bench: run time against error"): the data scenes at
-# 640x360 and 1280x720 with a static camera, a moving camera and a moving object. References are cached
+# The equal-error `loom bench` runs over the data scenes at 640x360 and 1280x720 with a static camera, a moving
+# camera and a moving object (their last results, measured before the energy-compensated BRDF, are in the git
+# history of docs/BENCHMARKS.md; rerun this to replace them). References are cached
 # (~/.cache/loom/references or $LOOM_CACHE), so a rerun only pays for the graphs and the brute-force curve.
 #
 #   tools/bench_docs.sh [OUT]          (OUT defaults to build/bench; plots are copied to docs/img/)
