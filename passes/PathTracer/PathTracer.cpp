@@ -28,6 +28,25 @@ const char kSpecAlbedo[] = "specAlbedo";
 const char kEmission[] = "emission";
 const char kDirect[] = "direct";
 const char kIndirect[] = "indirect";
+const char kGradient[] = "gradient";
+// History of the temporal gradients: the primary hit and luminance of each 3x3 block's sample of the frame.
+const char kGradientHits[] = "gradientHits";
+const char kGradientLuminance[] = "gradientLuminance";
+
+/// Side of the square blocks of pixels that each give one temporal-gradient sample (A-SVGF's strata).
+constexpr uint32_t kGradientBlock = 3;
+
+/// The pixel of block (bx, by) whose sample frame `frameIndex` keeps for the next frame's temporal gradient: one
+/// of the block's pixels at random (a hash of block and frame), so the samples do not form a fixed pattern.
+glm::uvec2 gradientPixel(uint32_t bx, uint32_t by, uint64_t frameIndex, uint32_t w, uint32_t h) {
+    const uint64_t k = pt::mix64((uint64_t(by) << 32 | bx) ^ pt::mix64(frameIndex + 0x6A09E667F3BCC909ull)) % 9u;
+    return {std::min(bx * kGradientBlock + uint32_t(k % 3), w - 1), std::min(by * kGradientBlock + uint32_t(k / 3), h - 1)};
+}
+
+/// Rec. 709 luminance, what the temporal gradients compare.
+float gradientLuminance(glm::vec3 c) {
+    return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b;
+}
 
 bool finite(glm::vec3 v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -123,9 +142,68 @@ void traceNextRays(const SecondaryRays& sr, TileScratch& ts, uint32_t n) {
         ts.hits[ts.live[j]] = h;
     }
 }
+/// What every batch of paths shares.
+struct BatchContext {
+    const SecondaryRays& secondary;
+    const SceneView& view;
+    const pt::LightsView& lights;
+    const pt::PathTracerSettings& set;
+    bool simd;
+    uint32_t lanes;
+};
+
+/// Runs paths ts.paths[0, count) (begun, their first hits in ts.hits) to their ends as a small wavefront: each round
+/// shades every live path, then traces all their shadow rays as one Embree stream, then all their continuation rays
+/// as another.
+void runPaths(const BatchContext& b, TileScratch& ts, uint32_t count) {
+    for (uint32_t k = 0; k < count; ++k) ts.live[k] = k;
+    uint32_t live = count;
+    while (live > 0) {
+        if (b.simd) {
+            for (uint32_t j = 0; j < live; j += b.lanes)
+                pt::shadeVerticesSimd(ts.paths.data(), ts.hits.data(), &ts.live[j], std::min(b.lanes, live - j), b.view,
+                                      b.lights, b.set, &ts.requests[j]);
+        } else {
+            for (uint32_t j = 0; j < live; ++j) {
+                const uint32_t k = ts.live[j];
+                ts.requests[j] = pt::shadeVertex(ts.paths[k], ts.hits[k], b.view, b.lights, b.set);
+            }
+        }
+        uint32_t shadows = 0, next = 0;
+        for (uint32_t j = 0; j < live; ++j) {
+            const uint32_t k = ts.live[j];
+            const uint32_t request = ts.requests[j];
+            ts.shadow[shadows] = k;
+            shadows += (request & pt::kShadowRay) ? 1u : 0u;
+            ts.live[next] = k;
+            next += (request & pt::kNextRay) ? 1u : 0u;
+        }
+        traceShadowRays(b.secondary, ts, shadows);
+        traceNextRays(b.secondary, ts, next);
+        live = next;
+    }
+}
+
+/// Sums a pixel's samples as the colour output does: in sample order, in double, non-finite samples dropped.
+struct PixelSum {
+    glm::dvec3 sum{0.0}, direct{0.0}, indirect{0.0};
+    uint32_t kept = 0;
+    /// Adds one path's result; false when it was dropped.
+    bool add(const pt::PathResult& r) {
+        if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) return false;
+        sum += glm::dvec3(r.color);
+        direct += glm::dvec3(r.direct);
+        indirect += glm::dvec3(r.indirect);
+        ++kept;
+        return true;
+    }
+    double inverse() const { return kept ? 1.0 / double(kept) : 0.0; }
+    glm::vec3 color() const { return glm::vec3(sum * inverse()); }
+};
+
 }  // namespace
 
-void PathTracer::reflect(Reflection& r, const CompileInfo&) const {
+void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
     r.input(kVBuffer, Format::RGBA32U).optional().doc("primary hits from a G-buffer (else camera rays)");
     r.output(kColor, Format::RGBA32F).doc("path-traced radiance, mean over samplesPerPixel");
     r.output(kAlbedo, Format::RGBA32F).optional().doc("diffuse reflectance at the primary hit");
@@ -133,6 +211,19 @@ void PathTracer::reflect(Reflection& r, const CompileInfo&) const {
     r.output(kEmission, Format::RGBA32F).optional().doc("emitted radiance at the primary hit");
     r.output(kDirect, Format::RGBA32F).optional().doc("direct lighting part of color");
     r.output(kIndirect, Format::RGBA32F).optional().doc("indirect lighting part of color");
+    r.output(kGradient, Format::RG32F)
+        .optional()
+        .doc(
+            "temporal gradients (A-SVGF), on last frame's pixel grid: for one pixel of each 3x3 block, (luminance of "
+            "its samples re-shaded this frame at the same surface points with the same random numbers, their "
+            "luminance last frame), replicated over the block; (0, 0) without history or on a miss. Equal where the "
+            "shading did not change");
+    if (!info.wired || info.isOutputConsumed(kGradient)) {
+        r.history(kGradientHits, Format::RGBA32U)
+            .doc("primary hit (instance, primitive, u and v bits) of each 3x3 block's gradient sample (gradient only)");
+        r.history(kGradientLuminance, Format::R32F)
+            .doc("colour luminance of each 3x3 block's gradient sample (gradient only)");
+    }
 }
 
 void PathTracer::declareParams(ParamList& p) {
@@ -365,6 +456,106 @@ void PathTracer::buildLights(const Scene& scene) {
     pt::setTrianglePdfs(mTris.data(), uint32_t(mTris.size()), mTriCdf.data(), L.pTris);
 }
 
+namespace {
+
+/// A block's gradient sample: last frame's pixel and primary hit.
+struct GradientSample {
+    glm::uvec2 block, pixel;
+    RayHit hit;
+};
+
+/// Writes a block's gradient value into each of its pixels.
+void fillBlock(ImageView<glm::vec2> out, glm::uvec2 block, glm::vec2 value) {
+    for (uint32_t y = block.y * kGradientBlock; y < std::min(out.height, (block.y + 1) * kGradientBlock); ++y)
+        for (uint32_t x = block.x * kGradientBlock; x < std::min(out.width, (block.x + 1) * kGradientBlock); ++x)
+            out.at(x, y) = value;
+}
+
+/// The temporal gradients (output `gradient`): last frame's gradient sample of every block re-shaded now, at the
+/// same surface point (its hit follows animated instances) along last frame's camera ray with last frame's random
+/// numbers, next to its luminance then. Where nothing changed both are the same. Returns the rays traced.
+uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camera& camera, uint32_t spp,
+                        uint64_t frame, ImageView<glm::vec2> out) {
+    const uint32_t w = out.width, h = out.height;
+    if (!ctx.historyValid() || ctx.frameIndex() == 0) {
+        ctx.output(kGradient)->clear();
+        return 0;
+    }
+    const auto prevHits = ctx.historyPrev(kGradientHits).view<glm::uvec4>();
+    const auto prevLum = ctx.historyPrev(kGradientLuminance).view<float>();
+    // Last frame's camera rays, exactly: its pose and jitter.
+    Camera prev = camera;
+    prev.world = camera.prevWorld;
+    prev.jitter = camera.prevJitter;
+    prev.aspect = float(w) / float(h);
+    const CameraData prevCam = makeCameraData(prev, w, h);
+    const SceneView& view = batch.view;
+    const uint32_t blocksX = (w + kGradientBlock - 1) / kGradientBlock, blocksY = (h + kGradientBlock - 1) / kGradientBlock;
+    std::vector<uint64_t> tileRays;
+    const uint32_t tileBlocks = 16;
+    const uint32_t tilesX = (blocksX + tileBlocks - 1) / tileBlocks, tilesY = (blocksY + tileBlocks - 1) / tileBlocks;
+    tileRays.assign(size_t(tilesX) * tilesY, 0);
+    parallelFor2D(
+        blocksX, blocksY,
+        [&](const Tile& tile) {
+            TileScratch& ts = tileScratch();
+            ts.resize(1);
+            uint64_t rays = 0;
+            std::vector<GradientSample> samples;
+            for (uint32_t by = tile.y0; by < tile.y1; ++by)
+                for (uint32_t bx = tile.x0; bx < tile.x1; ++bx) {
+                    const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex() - 1, w, h);
+                    const glm::uvec4 e = prevHits.at(q.x, q.y);
+                    const bool valid = e.x < view.instanceCount &&
+                                       e.y < view.meshes[view.instances[e.x].mesh].triangleCount;
+                    if (!valid) {
+                        fillBlock(out, glm::uvec2(bx, by), glm::vec2(0.f));
+                        continue;
+                    }
+                    RayHit hit;
+                    hit.instance = e.x;
+                    hit.primitive = e.y;
+                    hit.u = bitsToFloat(e.z);
+                    hit.v = bitsToFloat(e.w);
+                    samples.push_back({glm::uvec2(bx, by), q, hit});
+                }
+            // Paths sample-minor, as the colour's: each sample's sums in the same order give the same bits.
+            const uint64_t total = uint64_t(samples.size()) * spp;
+            PixelSum acc;
+            uint32_t current = 0, seen = 0;
+            for (uint64_t first = 0; first < total; first += kPathBatch) {
+                const uint32_t count = uint32_t(std::min<uint64_t>(kPathBatch, total - first));
+                for (uint32_t k = 0; k < count; ++k) {
+                    const uint64_t item = first + k;
+                    const GradientSample& g = samples[size_t(item / spp)];
+                    const uint32_t s = uint32_t(item % spp);
+                    pt::beginPath(ts.paths[k], prevCam.origin, glm::normalize(pixelRayDir(prevCam, g.pixel.x, g.pixel.y)),
+                                  pt::PathRng(g.pixel.y * w + g.pixel.x, frame - 1, s));
+                    ts.hits[k] = g.hit;
+                }
+                runPaths(batch, ts, count);
+                for (uint32_t k = 0; k < count; ++k) {
+                    rays += ts.paths[k].r.rays;
+                    acc.add(ts.paths[k].r);
+                    if (++seen < spp) continue;
+                    const GradientSample& g = samples[current++];
+                    fillBlock(out, g.block,
+                              glm::vec2(gradientLuminance(acc.color()), prevLum.at(g.pixel.x, g.pixel.y)));
+                    acc = PixelSum{};
+                    seen = 0;
+                }
+            }
+            tileRays[size_t(tile.y0 / tileBlocks) * tilesX + tile.x0 / tileBlocks] = rays;
+        },
+        tileBlocks);
+    uint64_t rays = 0;
+    for (uint64_t r : tileRays) rays += r;
+    ctx.stats().set("gradientSamples", double(uint64_t(blocksX) * blocksY));
+    return rays;
+}
+
+}  // namespace
+
 void PathTracer::execute(PassContext& ctx) {
     const auto start = std::chrono::steady_clock::now();
     const Scene* scene = ctx.scene();
@@ -407,6 +598,13 @@ void PathTracer::execute(PassContext& ctx) {
     const ImageView<glm::vec4> color = view4(kColor), albedo = view4(kAlbedo), specAlbedo = view4(kSpecAlbedo),
                                emission = view4(kEmission), direct = view4(kDirect), indirect = view4(kIndirect);
     const bool wantsPrimary = albedo.data || specAlbedo.data || emission.data;
+    const BatchContext batch{secondary, view, lights, set, simd, lanes};
+    // Temporal gradients: this frame keeps one sample per block (hit, luminance) for the next one.
+    Texture* gradientTex = ctx.output(kGradient);
+    const ImageView<glm::uvec4> gradientHits =
+        gradientTex ? ctx.historyCur(kGradientHits).view<glm::uvec4>() : ImageView<glm::uvec4>{};
+    const ImageView<float> gradientLum =
+        gradientTex ? ctx.historyCur(kGradientLuminance).view<float>() : ImageView<float>{};
     const bool split = direct.data || indirect.data;
 
     // Per-tile counters, summed in tile order afterwards (deterministic).
@@ -457,65 +655,41 @@ void PathTracer::execute(PassContext& ctx) {
         // order, so results depend neither on batching nor on threads.
         const uint64_t totalPaths = uint64_t(tilePixels) * spp;
         uint32_t accPixel = 0;  // pixel whose sums are being accumulated
-        glm::dvec3 sum(0.0), sumDirect(0.0), sumIndirect(0.0);
-        uint32_t kept = 0, samplesSeen = 0;
+        PixelSum acc;
+        uint32_t samplesSeen = 0;
         auto finishPixel = [&](uint32_t i) {
             const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
-            const double inv = kept ? 1.0 / double(kept) : 0.0;
-            color.at(x, y) = glm::vec4(glm::vec3(sum * inv), 1.f);
+            const double inv = acc.inverse();
+            color.at(x, y) = glm::vec4(acc.color(), 1.f);
             if (split) {
-                if (direct.data) direct.at(x, y) = glm::vec4(glm::vec3(sumDirect * inv), 1.f);
-                if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(sumIndirect * inv), 1.f);
+                if (direct.data) direct.at(x, y) = glm::vec4(glm::vec3(acc.direct * inv), 1.f);
+                if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(acc.indirect * inv), 1.f);
             }
-            sum = sumDirect = sumIndirect = glm::dvec3(0.0);
-            kept = 0;
+            // This frame's gradient sample of the pixel's block, for the next frame.
+            if (gradientHits.data && gradientPixel(x / kGradientBlock, y / kGradientBlock, ctx.frameIndex(), w, h) ==
+                                         glm::uvec2(x, y)) {
+                const RayHit& p = ts.primary[i];
+                gradientHits.at(x, y) = glm::uvec4(p.hit() ? p.instance : kInvalidId, p.primitive, floatBits(p.u),
+                                                   floatBits(p.v));
+                gradientLum.at(x, y) = gradientLuminance(acc.color());
+            }
+            acc = PixelSum{};
         };
         for (uint64_t first = 0; first < totalPaths; first += kPathBatch) {
             const uint32_t count = uint32_t(std::min<uint64_t>(kPathBatch, totalPaths - first));
-            uint32_t live = count;
             for (uint32_t k = 0; k < count; ++k) {
                 const uint64_t item = first + k;
                 const uint32_t i = uint32_t(item / spp), s = uint32_t(item % spp);
                 const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
                 pt::beginPath(ts.paths[k], cam.origin, ts.dir[i], pt::PathRng(y * w + x, frame, s));
                 ts.hits[k] = ts.primary[i];
-                ts.live[k] = k;
             }
-            while (live > 0) {
-                if (simd) {
-                    for (uint32_t j = 0; j < live; j += lanes)
-                        pt::shadeVerticesSimd(ts.paths.data(), ts.hits.data(), &ts.live[j], std::min(lanes, live - j),
-                                              view, lights, set, &ts.requests[j]);
-                } else {
-                    for (uint32_t j = 0; j < live; ++j) {
-                        const uint32_t k = ts.live[j];
-                        ts.requests[j] = pt::shadeVertex(ts.paths[k], ts.hits[k], view, lights, set);
-                    }
-                }
-                uint32_t shadows = 0, next = 0;
-                for (uint32_t j = 0; j < live; ++j) {
-                    const uint32_t k = ts.live[j];
-                    const uint32_t request = ts.requests[j];
-                    ts.shadow[shadows] = k;
-                    shadows += (request & pt::kShadowRay) ? 1u : 0u;
-                    ts.live[next] = k;
-                    next += (request & pt::kNextRay) ? 1u : 0u;
-                }
-                traceShadowRays(secondary, ts, shadows);
-                traceNextRays(secondary, ts, next);
-                live = next;
-            }
+            runPaths(batch, ts, count);
             for (uint32_t k = 0; k < count; ++k) {
                 const pt::PathResult& r = ts.paths[k].r;
                 rays += r.rays;
-                if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) {
-                    ++dropped;  // never written: a NaN would spread through every filter downstream
-                } else {
-                    sum += glm::dvec3(r.color);
-                    sumDirect += glm::dvec3(r.direct);
-                    sumIndirect += glm::dvec3(r.indirect);
-                    ++kept;
-                }
+                // A dropped sample is never written: a NaN would spread through every filter downstream.
+                if (!acc.add(r)) ++dropped;
                 if (++samplesSeen == spp) {
                     finishPixel(accPixel++);
                     samplesSeen = 0;
@@ -546,6 +720,8 @@ void PathTracer::execute(PassContext& ctx) {
         tileDropped[tileIndex] = dropped;
     });
     uint64_t rays = 0, dropped = 0;
+    if (gradientTex)
+        rays += traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
     for (size_t i = 0; i < tileRays.size(); ++i) {
         rays += tileRays[i];
         dropped += tileDropped[i];

@@ -24,9 +24,9 @@
 
 namespace loom::svgf {
 
-/// Edge-stopping parameters (Falcor's defaults).
+/// Edge-stopping parameters (the paper's).
 struct AtrousParams {
-    float phiColor = 10.f;
+    float phiColor = 4.f;
     float phiNormal = 128.f;
     float phiDepth = 1.f;
 };

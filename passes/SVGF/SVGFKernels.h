@@ -83,7 +83,17 @@ struct TemporalParams {
     float maxHistory = 32.f;    ///< history length cap
     bool temporal = true;       ///< false: no reprojection, every frame starts from history length 1
     bool split = false;         ///< two signals (direct, indirect) instead of one (color)
+    /// The variance handed on is the luminance's per-sample variance times max(1 / n, varianceFloor): the variance
+    /// of the accumulated mean (the sum of its squared weights: 1 / n while the blend is a plain mean, alpha / (2 -
+    /// alpha) in the exponential average's steady state). 1: the per-sample variance itself (Falcor).
+    float varianceFloor = 1.f;
 };
+
+/// varianceFloor for colour blend factor alpha: the squared weights of an exponential average sum to
+/// alpha / (2 - alpha) in its steady state.
+inline float meanVarianceFloor(float alpha) {
+    return alpha >= 1.f ? 1.f : alpha / (2.f - alpha);
+}
 
 /// Everything the temporal stage reads and writes. Optional views have data == nullptr.
 struct TemporalViews {
@@ -96,6 +106,9 @@ struct TemporalViews {
     ImageView<const glm::vec2> prevMoments0, prevMoments1, prevLinearZ;  // moments: (m1, m2) of each signal
     ImageView<const float> prevLength;
     ImageView<const uint32_t> prevMeshId;
+    /// Optional: how the shading changed since last frame, on last frame's pixel grid (antilagChange of the path
+    /// tracer's temporal gradients): (lambda in [0, 1], luminance ratio now / then); reprojected like the history.
+    ImageView<const glm::vec2> prevChange;
     // This frame's history (moments, length, guides) and the integrated signals (rgb, a = temporal variance).
     ImageView<glm::vec4> integrated0, integrated1, curNormW;
     ImageView<glm::vec2> curMoments0, curMoments1, curLinearZ;  // moments1: split only
@@ -122,6 +135,7 @@ LOOM_HD inline bool reprojectionTapValid(const TemporalViews& v, int px, int py,
 struct Reprojected {
     glm::vec4 illum0{0.f}, illum1{0.f}, moments{0.f};
     float length = 0.f;
+    glm::vec2 change{0.f, 1.f};  ///< TemporalViews::prevChange at the reprojected position ((0, 1) without it)
     bool valid = false;
 };
 
@@ -143,6 +157,7 @@ LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, u
     if (v.prevIllum1.data) r.illum1 += w * v.prevIllum1.at(x, y);
     r.moments += w * momentsAt(v.prevMoments0, v.prevMoments1, x, y);
     r.length += w * v.prevLength.at(x, y);
+    if (v.prevChange.data) r.change += w * v.prevChange.at(x, y);
 }
 
 /// Last frame's history at pixel (x, y) through the motion vector: bilinear over the valid taps of the 2x2
@@ -150,6 +165,7 @@ LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, u
 LOOM_HD inline Reprojected reproject(const TemporalViews& v, uint32_t x, uint32_t y, float z, float dz,
                                      const glm::vec3& n, uint32_t mesh) {
     Reprojected r;
+    if (v.prevChange.data) r.change = glm::vec2(0.f);  // summed over the taps below
     const glm::vec2 mv = v.mvec.at(x, y);
     if (!isFiniteBits(mv.x) || !isFiniteBits(mv.y)) return r;
     // uvPrev = uv + mvec with uv = (x + 0.5) / width: the previous pixel centre coordinate is (uv + mvec) size - 0.5.
@@ -187,8 +203,10 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, uint32_t x, uint32_
     r.illum1 *= inv;
     r.moments *= inv;
     r.length *= inv;
+    if (v.prevChange.data) r.change *= inv;
     // History that is not finite (it never should be) counts as disoccluded, so it cannot persist.
-    r.valid = isFinite4(r.illum0) && isFinite4(r.illum1) && isFinite4(r.moments) && isFiniteBits(r.length);
+    r.valid = isFinite4(r.illum0) && isFinite4(r.illum1) && isFinite4(r.moments) && isFiniteBits(r.length) &&
+              isFiniteBits(r.change.x) && isFiniteBits(r.change.y);
     if (!r.valid) r = Reprojected{};
     return r;
 }
@@ -238,9 +256,20 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         m = r.moments;
         length = r.valid ? r.length : 0.f;
     } else if (r.valid) {
-        length = minf(r.length + 1.f, p.maxHistory);
+        // Anti-lag (Schied et al. 2018, A-SVGF): where the shading changed by a fraction lambda since last frame,
+        // the history counts (1 - lambda) as many frames and the blend factors grow to alpha + lambda (1 - alpha).
+        // Beyond the paper, the history is first rescaled by the measured luminance ratio (moments by its square),
+        // so a light that dims or brightens is followed at once rather than blended towards.
+        const float change = minf(maxf(r.change.x, 0.f), 1.f);
+        const float ratio = r.change.y;
+        r.illum0 = glm::vec4(glm::vec3(r.illum0) * ratio, r.illum0.a);
+        r.illum1 = glm::vec4(glm::vec3(r.illum1) * ratio, r.illum1.a);
+        const float ratio2 = ratio * ratio;
+        r.moments = glm::vec4(r.moments.x * ratio, r.moments.y * ratio2, r.moments.z * ratio, r.moments.w * ratio2);
+        length = minf(r.length * (1.f - change) + 1.f, p.maxHistory);
         // Paper eq. 1 with Falcor's max(alpha, 1 / n): a plain mean until the history is 1 / alpha long.
-        const float a = maxf(p.alpha, 1.f / length), am = maxf(p.momentsAlpha, 1.f / length);
+        const float a = maxf(p.alpha + change * (1.f - p.alpha), 1.f / length);
+        const float am = maxf(p.momentsAlpha + change * (1.f - p.momentsAlpha), 1.f / length);
         i0 = glm::vec4(glm::mix(glm::vec3(r.illum0), l0, a), 0.f);
         i1 = glm::vec4(glm::mix(glm::vec3(r.illum1), l1, a), 0.f);
         m = glm::mix(r.moments, moments, am);
@@ -250,13 +279,43 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         i1 = glm::vec4(l1, 0.f);
         m = moments;
     }
-    i0.a = maxf(0.f, m.y - m.x * m.x);
-    i1.a = maxf(0.f, m.w - m.z * m.z);
+    // The variance of the accumulated mean (TemporalParams::varianceFloor). A rejected sample without history has
+    // length 0: counted as 1.
+    const float meanScale = maxf(1.f / maxf(length, 1.f), p.varianceFloor);
+    i0.a = maxf(0.f, m.y - m.x * m.x) * meanScale;
+    i1.a = maxf(0.f, m.w - m.z * m.z) * meanScale;
     v.integrated0.at(x, y) = i0;
     if (p.split) v.integrated1.at(x, y) = i1;
     storeMoments(v.curMoments0, v.curMoments1, x, y, m);
     v.curLength.at(x, y) = length;
     return !sampleFinite;
+}
+
+/// Temporal gradients (Schied et al. 2018, "Gradient Estimation for Real-Time Adaptive Temporal Filtering"): the
+/// path tracer's `gradient` channel holds, on last frame's pixel grid, for one sample of each 3x3 block (replicated
+/// over the block) the luminance of that sample re-shaded this frame with the same surface point and random numbers,
+/// and its luminance last frame. Where nothing changed the two are equal. The change at a pixel is
+/// lambda = sum |new - old| / sum max(new, old) over the kAntilagRadius window, in [0, 1] (0 where nothing was
+/// sampled or everything is black).
+inline constexpr int kAntilagRadius = 4;  ///< 9x9 pixels: the 3x3 blocks around a pixel's own block
+
+inline constexpr float kAntilagMaxRatio = 16.f;  ///< bound of the history's rescaling (either way)
+
+/// (|new - old|, max(new, old), new, old) of one gradient sample (non-finite, negative or huge samples count as
+/// none).
+LOOM_HD inline glm::vec4 gradientTerms(const glm::vec2& g) {
+    if (!(g.x >= 0.f && g.x < 1e18f) || !(g.y >= 0.f && g.y < 1e18f)) return glm::vec4(0.f);
+    return glm::vec4(fabsf(g.x - g.y), maxf(g.x, g.y), g.x, g.y);
+}
+
+/// (lambda, luminance ratio new / old) from the window sums of gradientTerms: (0, 1) where nothing was lit; the
+/// ratio bounded to [1 / kAntilagMaxRatio, kAntilagMaxRatio] (a light switched on from black: lambda = 1 does the
+/// work), 1 where there was no light before.
+LOOM_HD inline glm::vec2 antilagChange(const glm::vec4& sums) {
+    if (!(sums.y > 1e-12f)) return glm::vec2(0.f, 1.f);
+    const float lambda = minf(sums.x / sums.y, 1.f);
+    const float ratio = sums.w > 1e-12f ? minf(maxf(sums.z / sums.w, 1.f / kAntilagMaxRatio), kAntilagMaxRatio) : 1.f;
+    return glm::vec2(lambda, ratio);
 }
 
 /// The spatial variance estimate's weight, spelt in operations a vector unit performs identically (products and

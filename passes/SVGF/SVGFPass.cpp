@@ -1,5 +1,6 @@
 #include "SVGFPass.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <string>
@@ -18,11 +19,13 @@ const char kColor[] = "color";
 const char kDirect[] = "direct";
 const char kIndirect[] = "indirect";
 const char kAlbedo[] = "albedo";
+const char kSpecAlbedo[] = "specAlbedo";
 const char kEmission[] = "emission";
 const char kLinearZ[] = "linearZ";
 const char kNormW[] = "normW";
 const char kMvec[] = "mvec";
 const char kMeshId[] = "meshId";
+const char kGradient[] = "gradient";
 // Last frame's guides from the G-buffer's @prev edges (optional: without them SVGF keeps its own copies).
 const char kLinearZPrev[] = "linearZPrev";
 const char kNormWPrev[] = "normWPrev";
@@ -45,6 +48,9 @@ const char kIntegrated[] = "integrated";
 const char kIntegratedIndirect[] = "integratedIndirect";
 const char kEstimate[] = "estimate";
 const char kEstimateIndirect[] = "estimateIndirect";
+const char kDemodulationAlbedo[] = "demodulationAlbedo";
+const char kGradientSums[] = "gradientSums";
+const char kChange[] = "shadingChange";
 
 // Frame stats.
 const char kStatNonFinite[] = "nonFinite";
@@ -58,6 +64,7 @@ const char kStatVariance[] = "ms.variance";
 const char kStatAtrousPrepare[] = "ms.atrous.prepare";
 const char kStatAtrous[] = "ms.atrous";
 const char kStatModulate[] = "ms.modulate";
+const char kStatAntilag[] = "ms.antilag";
 
 // Tiles of the streaming stages: wider than the default so each row of a tile is a long contiguous run in each of
 // the ~20 textures the temporal stage touches (hardware prefetch, fewer pages per tile).
@@ -114,11 +121,22 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
         .doc("direct part of color, emission seen by the camera included; with indirect: filtered separately");
     r.input(kIndirect, Format::RGBA32F).optional().doc("indirect part of color (direct + indirect = color)");
     r.input(kAlbedo, Format::RGBA32F).doc("diffuse reflectance at the primary hit, for demodulation");
+    r.input(kSpecAlbedo, Format::RGBA32F)
+        .optional()
+        .doc(
+            "directional albedo of the specular layer at the primary hit: when connected, the signal is demodulated "
+            "by albedo + specAlbedo (metals, whose diffuse albedo is about 0, keep their texture out of the filter)");
     r.input(kEmission, Format::RGBA32F).optional().doc("emitted radiance at the primary hit (not filtered)");
     r.input(kLinearZ, Format::RG32F).doc("view depth (-1 on a miss) and its screen-space derivative");
     r.input(kNormW, Format::RGBA32F).doc("shading normal, world space");
     r.input(kMvec, Format::RG32F).doc("uvPrev - uvCur, for reprojection");
     r.input(kMeshId, Format::R32U).optional().doc("mesh/instance id for the disocclusion test (skipped if absent)");
+    r.input(kGradient, Format::RG32F)
+        .optional()
+        .doc(
+            "temporal gradients on last frame's pixel grid (the path tracer's gradient output): (luminance re-shaded "
+            "now, luminance then) of one sample per 3x3 block; where they differ the history is shortened and the "
+            "blend factors raised (A-SVGF anti-lag)");
     r.input(kLinearZPrev, Format::RG32F)
         .optional()
         .doc(
@@ -159,6 +177,19 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
     r.internal(kEstimate, Format::RGBA32F)
         .doc("input of the a-trous levels: integrated colour with its variance estimate (spatial while short)");
     if (splitFields) r.internal(kEstimateIndirect, Format::RGBA32F).doc("indirect, as estimate (split only)");
+    if (!info.wired || info.isInputConnected(kGradient)) {
+        r.internal(kGradientSums, Format::RGBA32F)
+            .doc(
+                "row sums of the gradient terms (|new - old|, max(new, old), new, old) over the anti-lag window "
+                "(gradient only)");
+        r.internal(kChange, Format::RG32F)
+            .doc(
+                "shading change on last frame's grid, what the anti-lag reprojects: lambda in [0, 1] and the "
+                "luminance ratio now / then (gradient only)");
+    }
+    if (!info.wired || info.isInputConnected(kSpecAlbedo))
+        r.internal(kDemodulationAlbedo, Format::RGBA32F)
+            .doc("albedo + specAlbedo, what the signal is demodulated by and remodulated with (specAlbedo only)");
 }
 
 void SVGFPass::declareParams(ParamList& p) {
@@ -167,19 +198,24 @@ void SVGFPass::declareParams(ParamList& p) {
         .doc(
             "false: no reprojection, variance estimated spatially every frame: a pure edge-avoiding a-trous filter "
             "(Dammertz et al. 2010) as a baseline");
-    p.add("iterations", &mIterations, 4).range(0, 16).doc("a-trous levels (tap spacing 1, 2, 4, ...)");
-    p.add("feedbackTap", &mFeedbackTap, 1)
+    p.add("iterations", &mIterations, 5).range(0, 16).doc("a-trous levels (tap spacing 1, 2, 4, ...)");
+    p.add("feedbackTap", &mFeedbackTap, 0)
         .range(-1, 15)
         .doc("the output of this level (0-based) is next frame's colour history; -1: the unfiltered signal");
-    p.add("alpha", &mAlpha, 0.05f).range(0.0, 1.0).doc("temporal blend factor of colour (at least 1 / history)");
+    p.add("alpha", &mAlpha, 0.2f).range(0.0, 1.0).doc("temporal blend factor of colour (at least 1 / history)");
     p.add("momentsAlpha", &mMomentsAlpha, 0.2f)
         .range(0.0, 1.0)
         .doc("temporal blend factor of the luminance moments (at least 1 / history)");
-    p.add("phiColor", &mPhiColor, 10.f).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
+    p.add("phiColor", &mPhiColor, 4.f).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
     // Bounded: a normal's dot product with itself is 1 only to a few units in the last place, so past about 1e8
     // even a pixel's own weight vanishes, and with it the variance's (sum of weights)^2.
     p.add("phiNormal", &mPhiNormal, 128.f).range(0.0, 1e5).doc("normal edge-stopping exponent (eq. 4)");
     p.add("phiDepth", &mPhiDepth, 1.f).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
+    p.add("meanVariance", &mMeanVariance, true)
+        .doc(
+            "true: the a-trous levels get the variance of the accumulated mean (the per-sample variance times the sum "
+            "of the history's squared weights), so phiColor counts standard deviations of the signal they filter; "
+            "false: the per-sample variance (Falcor)");
     p.add("maxHistory", &mMaxHistory, 32).range(1, 1024).doc("cap of the history length in frames");
     p.add("referenceAtrous", &mReferenceAtrous, false)
         .doc("run the scalar reference a-trous kernel instead of the fast path (validation)");
@@ -207,6 +243,54 @@ void SVGFPass::passThrough(PassContext& ctx) const {
     ctx.historyCur(kLengthHistory).clear();
 }
 
+ImageView<const glm::vec4> SVGFPass::demodulationAlbedo(PassContext& ctx) const {
+    const auto albedo = inputView<glm::vec4>(ctx, kAlbedo);
+    const auto specular = inputView<glm::vec4>(ctx, kSpecAlbedo);
+    if (!specular.data) return albedo;
+    const auto sum = ctx.internal(kDemodulationAlbedo)->view<glm::vec4>();
+    parallelFor2D(
+        sum.width, sum.height,
+        [&](const Tile& t) {
+            for (uint32_t y = t.y0; y < t.y1; ++y)
+                for (uint32_t x = t.x0; x < t.x1; ++x) {
+                    const glm::vec4 a = albedo.at(x, y), s = specular.at(x, y);
+                    sum.at(x, y) = glm::vec4(glm::vec3(a) + glm::vec3(s), a.a);
+                }
+        },
+        kStreamTileSize);
+    return asConst(sum);
+}
+
+ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
+    const auto gradient = inputView<glm::vec2>(ctx, kGradient);
+    if (!gradient.data || !mTemporal) return {};
+    const auto sums = ctx.internal(kGradientSums)->view<glm::vec4>();
+    const auto change = ctx.internal(kChange)->view<glm::vec2>();
+    const int w = int(sums.width), h = int(sums.height);
+    // Separable box of radius kAntilagRadius: rows, then columns, each a fixed-order sum (any thread count gives
+    // the same bits).
+    const auto box = [&](auto term, auto store, bool rows) {
+        parallelFor2D(
+            1, uint32_t(h),
+            [&](const Tile& band) {
+                for (uint32_t y = band.y0; y < band.y1; ++y)
+                    for (int x = 0; x < w; ++x) {
+                        const int c = rows ? x : int(y), n = rows ? w : h;
+                        glm::vec4 sum(0.f);
+                        for (int i = std::max(0, c - kAntilagRadius); i <= std::min(n - 1, c + kAntilagRadius); ++i)
+                            sum += rows ? term(uint32_t(i), y) : term(uint32_t(x), uint32_t(i));
+                        store(uint32_t(x), y, sum);
+                    }
+            },
+            kTemporalBandRows);
+    };
+    box([&](uint32_t x, uint32_t y) { return gradientTerms(gradient.at(x, y)); },
+        [&](uint32_t x, uint32_t y, const glm::vec4& sum) { sums.at(x, y) = sum; }, true);
+    box([&](uint32_t x, uint32_t y) { return sums.at(x, y); },
+        [&](uint32_t x, uint32_t y, const glm::vec4& sum) { change.at(x, y) = antilagChange(sum); }, false);
+    return asConst(change);
+}
+
 void SVGFPass::execute(PassContext& ctx) {
     Stats& stats = ctx.stats();
     if (!mEnabled) {
@@ -232,7 +316,7 @@ void SVGFPass::execute(PassContext& ctx) {
         tv.direct = inputView<glm::vec4>(ctx, kDirect);
         tv.indirect = inputView<glm::vec4>(ctx, kIndirect);
     }
-    tv.albedo = inputView<glm::vec4>(ctx, kAlbedo);
+    tv.albedo = demodulationAlbedo(ctx);
     tv.emission = inputView<glm::vec4>(ctx, kEmission);
     tv.normW = inputView<glm::vec4>(ctx, kNormW);
     tv.linearZ = inputView<glm::vec2>(ctx, kLinearZ);
@@ -243,6 +327,11 @@ void SVGFPass::execute(PassContext& ctx) {
     tv.prevMoments0 = ctx.historyPrev(kMomentsHistory).view<glm::vec2>();
     if (split) tv.prevMoments1 = ctx.historyPrev(kIndirectMomentsHistory).view<glm::vec2>();
     tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
+    {
+        const auto t = Clock::now();
+        tv.prevChange = shadingChange(ctx);
+        stats.set(kStatAntilag, msSince(t));
+    }
     // Last frame's guides: the G-buffer's own previous outputs when the graph feeds them (@prev edges), else the
     // copies this pass keeps.
     const bool sharedGuides = sharedPrevGuides(connected);
@@ -270,6 +359,7 @@ void SVGFPass::execute(PassContext& ctx) {
     tp.alpha = mAlpha;
     tp.momentsAlpha = mMomentsAlpha;
     tp.maxHistory = float(mMaxHistory);
+    tp.varianceFloor = mMeanVariance ? meanVarianceFloor(mAlpha) : 1.f;
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();
     tp.split = split;
@@ -430,7 +520,8 @@ void SVGFPass::execute(PassContext& ctx) {
 LOOM_DEFINE_PLUGIN(registrar) {
     registrar.registerPass<loom::SVGFPass>(
         "SVGFPass",
-        "Spatiotemporal variance-guided filtering (Schied et al. 2017) with Falcor's defaults: demodulation, "
+        "Spatiotemporal variance-guided filtering (Schied et al. 2017) with the paper's parameters: demodulation "
+        "(by albedo, + specAlbedo when connected), "
         "reprojection with disocclusion tests, moments, spatial variance while history is short, a-trous levels "
         "with feedback, remodulation; direct and indirect filtered separately when both are connected. History in "
         "graph fields; last frame's guides from the G-buffer's @prev outputs when the graph connects linearZPrev, "

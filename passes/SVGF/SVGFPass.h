@@ -1,6 +1,6 @@
 #pragma once
 // SVGFPass: spatiotemporal variance-guided filtering (Schied et al. 2017, HPG) of a path-traced signal, with
-// Falcor's defaults. Per frame: demodulation by albedo (emission taken out first), reprojection with
+// the paper's parameters. Per frame: demodulation by albedo (emission taken out first), reprojection with
 // disocclusion tests, temporal accumulation of colour and luminance moments, a spatial variance estimate while
 // history is short, à-trous wavelet levels guided by the variance (AtrousFilter; level `feedbackTap` is next
 // frame's colour history), and remodulation. With `direct` and `indirect` connected, the two are filtered
@@ -36,17 +36,22 @@ public:
 
 private:
     void passThrough(PassContext& ctx) const;
+    /// What the signal is demodulated by: albedo, or albedo + specAlbedo (in an internal image) when connected.
+    ImageView<const glm::vec4> demodulationAlbedo(PassContext& ctx) const;
+    /// The anti-lag's shading change on last frame's grid from the gradient input (empty without it).
+    ImageView<const glm::vec2> shadingChange(PassContext& ctx) const;
 
     // Parameters.
     bool mEnabled = true;
     bool mTemporal = true;
-    int mIterations = 4;
-    int mFeedbackTap = 1;
-    float mAlpha = 0.05f;
+    int mIterations = 5;
+    int mFeedbackTap = 0;
+    float mAlpha = 0.2f;
     float mMomentsAlpha = 0.2f;
-    float mPhiColor = 10.f;
+    float mPhiColor = 4.f;
     float mPhiNormal = 128.f;
     float mPhiDepth = 1.f;
+    bool mMeanVariance = true;
     int mMaxHistory = 32;
     bool mReferenceAtrous = false;
     bool mReferenceStages = false;

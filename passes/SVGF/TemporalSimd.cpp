@@ -207,6 +207,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
     // to the reference.
     M valid = hn::FirstN(d, 0), fallback = valid;
     V rr = zero, rg = zero, rb = zero, rm[4] = {zero, zero, zero, zero}, rl = zero;
+    V rc = zero, rq = one;  // reprojected shading change (anti-lag): lambda and luminance ratio; 0 and 1 without it
+    if (v.prevChange.data) rq = zero;
     V sr = zero, sg = zero, sb = zero;  // signal 1's reprojected rgb
     if (p.temporal && !hn::AllFalse(d, hit)) {
         V mx, my;
@@ -292,6 +294,12 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
             rm[0] = hn::Add(rm[0], hn::IfThenElseZero(m, hn::Mul(w, moments[0])));
             rm[1] = hn::Add(rm[1], hn::IfThenElseZero(m, hn::Mul(w, moments[1])));
             rl = hn::Add(rl, hn::IfThenElseZero(m, hn::Mul(w, prevLength[k])));
+            if (v.prevChange.data) {
+                V change[2];
+                loadTap<2>(d, f, k, v.prevChange, change);
+                rc = hn::Add(rc, hn::IfThenElseZero(m, hn::Mul(w, change[0])));
+                rq = hn::Add(rq, hn::IfThenElseZero(m, hn::Mul(w, change[1])));
+            }
             if (split) {  // unsplit, signal 1's sums stay zero, as the reference's sums of zero fields do
                 loadTap<2>(d, f, k, v.prevMoments1, moments);
                 rm[2] = hn::Add(rm[2], hn::IfThenElseZero(m, hn::Mul(w, moments[0])));
@@ -310,6 +318,10 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         ra = hn::Mul(ra, inv);
         for (V& c : rm) c = hn::Mul(c, inv);
         rl = hn::Mul(rl, inv);
+        if (v.prevChange.data) {
+            rc = hn::Mul(rc, inv);
+            rq = hn::Mul(rq, inv);
+        }
         sr = hn::Mul(sr, inv);
         sg = hn::Mul(sg, inv);
         sb = hn::Mul(sb, inv);
@@ -320,6 +332,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
             finite, hn::And(hn::And(hn::IsFinite(sr), hn::IsFinite(sg)), hn::And(hn::IsFinite(sb), hn::IsFinite(sa))));
         finite = hn::And(finite, hn::And(hn::And(hn::IsFinite(rm[0]), hn::IsFinite(rm[1])),
                                          hn::And(hn::IsFinite(rm[2]), hn::IsFinite(rm[3]))));
+        finite = hn::And(finite, hn::And(hn::IsFinite(rc), hn::IsFinite(rq)));
         valid = hn::And(hn::And(hit, bilinear), hn::And(finite, hn::IsFinite(rl)));
     }
 
@@ -352,22 +365,40 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
     const V moments[4] = {lum, hn::Mul(lum, lum), lum1, hn::Mul(lum1, lum1)};
     const int momentCount = split ? 4 : 2;
 
-    // Temporal accumulation (paper eq. 1 with Falcor's max(alpha, 1 / n)).
-    const V length = hn::IfThenElse(valid, minOf(hn::Add(rl, one), hn::Set(d, p.maxHistory)), one);
+    // Temporal accumulation (paper eq. 1 with Falcor's max(alpha, 1 / n)), with the anti-lag of temporalPixel.
+    const V change = minOf(maxOf(rc, zero), one);
+    // The history rescaled by the luminance ratio (temporalPixel).
+    rr = hn::Mul(rr, rq);
+    rg = hn::Mul(rg, rq);
+    rb = hn::Mul(rb, rq);
+    sr = hn::Mul(sr, rq);
+    sg = hn::Mul(sg, rq);
+    sb = hn::Mul(sb, rq);
+    const V rq2 = hn::Mul(rq, rq);
+    rm[0] = hn::Mul(rm[0], rq);
+    rm[1] = hn::Mul(rm[1], rq2);
+    rm[2] = hn::Mul(rm[2], rq);
+    rm[3] = hn::Mul(rm[3], rq2);
+    const V length =
+        hn::IfThenElse(valid, minOf(hn::Add(hn::Mul(rl, hn::Sub(one, change)), one), hn::Set(d, p.maxHistory)), one);
     const V invLength = hn::Div(one, length);
-    const V a = maxOf(hn::Set(d, p.alpha), invLength), am = maxOf(hn::Set(d, p.momentsAlpha), invLength);
+    const V a = maxOf(hn::Add(hn::Set(d, p.alpha), hn::Mul(change, hn::Set(d, 1.f - p.alpha))), invLength);
+    const V am =
+        maxOf(hn::Add(hn::Set(d, p.momentsAlpha), hn::Mul(change, hn::Set(d, 1.f - p.momentsAlpha))), invLength);
     V ir = hn::IfThenElse(valid, mixOf(d, rr, lr, a), lr);
     V ig = hn::IfThenElse(valid, mixOf(d, rg, lg, a), lg);
     V ib = hn::IfThenElse(valid, mixOf(d, rb, lb, a), lb);
     V m[4] = {zero, zero, zero, zero};
     for (int c = 0; c < momentCount; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], moments[c], am), moments[c]);
-    V ia = maxOf(zero, hn::Sub(m[1], hn::Mul(m[0], m[0])));
+    // The variance of the accumulated mean: max(1 / n, varianceFloor) of the per-sample variance (n >= 1 here).
+    const V meanScale = maxOf(invLength, hn::Set(d, p.varianceFloor));
+    V ia = hn::Mul(maxOf(zero, hn::Sub(m[1], hn::Mul(m[0], m[0]))), meanScale);
     V jr = zero, jg = zero, jb = zero, ja = zero;
     if (split) {
         jr = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sr, kr, a), kr));
         jg = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sg, kg, a), kg));
         jb = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sb, kb, a), kb));
-        ja = hn::IfThenElseZero(hit, maxOf(zero, hn::Sub(m[3], hn::Mul(m[2], m[2]))));
+        ja = hn::IfThenElseZero(hit, hn::Mul(maxOf(zero, hn::Sub(m[3], hn::Mul(m[2], m[2]))), meanScale));
     }
     // Misses: no history, zero signal.
     ir = hn::IfThenElseZero(hit, ir);

@@ -905,3 +905,48 @@ TEST(PathTracer, AlphaTestedEmittersLightAsTheyAreSeen) {
                 mean(opaque));
     EXPECT_NEAR(bsdf, mean(blend), 0.03 * mean(blend));
 }
+
+// Temporal gradients (A-SVGF): last frame's sample of each 3x3 block, re-shaded this frame at the same surface
+// point with the same random numbers, gives the very same luminance when only the camera moved (an orbit with
+// jitter: last frame's rays, pose and jitter, are replayed exactly), for any thread count.
+TEST(PathTracer, TemporalGradientsAreExactlyZeroWhereOnlyTheCameraMoved) {
+    const uint32_t W = 40, H = 32;
+    auto render = [&](unsigned threads) {
+        ThreadLimit limit(threads);
+        auto scene = Scene::load(scenePath("cornell_box.gltf"));
+        scene->camera.jitterPattern = JitterPattern::Halton;
+        scene->cameraPath.kind = CameraPathKind::Orbit;
+        nlohmann::json g = {{"loom_graph", 1},
+                            {"name", "pt"},
+                            {"passes", {{{"name", "PT"}, {"type", "PathTracer"}, {"params", {{"samplesPerPixel", 2}}}}}},
+                            {"outputs", {"PT.color", "PT.gradient"}}};
+        auto graph = test::compiledGraph(g, scene, W, H);
+        std::vector<glm::vec2> last;
+        size_t sampled = 0;
+        for (uint64_t f = 0; f < 4; ++f) {
+            const double time = double(f) / 30.0;
+            scene->update(time);
+            scene->camera.aspect = float(W) / float(H);
+            scene->camera.beginFrame(f);
+            graph->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+            const auto gradient = graph->fieldTexture("PT.gradient")->view<glm::vec2>();
+            last.clear();
+            for (uint32_t y = 0; y < H; ++y)
+                for (uint32_t x = 0; x < W; ++x) {
+                    const glm::vec2 v = gradient.at(x, y);
+                    last.push_back(v);
+                    if (f == 0) {
+                        EXPECT_EQ(v, glm::vec2(0.f)) << "no history on the first frame";
+                        continue;
+                    }
+                    EXPECT_EQ(floatBits(v.x), floatBits(v.y)) << "frame " << f << " pixel " << x << ", " << y;
+                    sampled += v.y > 0.f ? 1 : 0;
+                }
+        }
+        EXPECT_GT(sampled, size_t(3 * W * H) / 2) << "most blocks hold a lit sample";
+        return last;
+    };
+    const auto one = render(1), two = render(2);
+    ASSERT_EQ(one.size(), two.size());
+    for (size_t i = 0; i < one.size(); ++i) EXPECT_EQ(one[i], two[i]);
+}

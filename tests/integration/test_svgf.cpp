@@ -34,13 +34,14 @@ struct GPixel {
     glm::vec4 color{0.f}, direct{0.f}, indirect{0.f}, albedo{1.f}, emission{0.f}, normW{0.f, 0.f, 1.f, 0.f};
     glm::vec2 linearZ{5.f, 0.01f}, mvec{0.f};
     uint32_t meshId = 0;
+    glm::vec2 gradient{0.f};  ///< (luminance re-shaded now, then), emitted by the gradient source only
 };
 using GFn = std::function<GPixel(uint64_t frame, uint32_t x, uint32_t y)>;
 
 /// Emits every SVGF input from a function of (frame, x, y); with `split`, also direct and indirect.
 class SyntheticSource final : public RenderPass {
 public:
-    explicit SyntheticSource(bool split) : mSplit(split) {}
+    explicit SyntheticSource(bool split, bool gradient = false) : mSplit(split), mGradient(gradient) {}
     void reflect(Reflection& r, const CompileInfo&) const override {
         r.output("color", Format::RGBA32F);
         if (mSplit) {
@@ -53,6 +54,7 @@ public:
         r.output("normW", Format::RGBA32F);
         r.output("mvec", Format::RG32F);
         r.output("meshId", Format::R32U);
+        if (mGradient) r.output("gradient", Format::RG32F);
     }
     void execute(PassContext& ctx) override {
         auto color = ctx.output("color")->view<glm::vec4>();
@@ -70,13 +72,14 @@ public:
                 ctx.output("normW")->view<glm::vec4>().at(x, y) = p.normW;
                 ctx.output("mvec")->view<glm::vec2>().at(x, y) = p.mvec;
                 ctx.output("meshId")->view<uint32_t>().at(x, y) = p.meshId;
+                if (mGradient) ctx.output("gradient")->view<glm::vec2>().at(x, y) = p.gradient;
             }
         }
     }
     GFn fn;
 
 private:
-    bool mSplit;
+    bool mSplit, mGradient;
 };
 
 PluginRegistry& registry() {
@@ -85,6 +88,8 @@ PluginRegistry& registry() {
         r.registerPass("SvgfSource", "synthetic SVGF inputs", [] { return std::make_unique<SyntheticSource>(false); });
         r.registerPass("SvgfSplitSource", "synthetic SVGF inputs with direct/indirect",
                        [] { return std::make_unique<SyntheticSource>(true); });
+        r.registerPass("SvgfGradientSource", "synthetic SVGF inputs with temporal gradients",
+                       [] { return std::make_unique<SyntheticSource>(false, true); });
         return true;
     }();
     (void)registered;
@@ -101,8 +106,9 @@ std::vector<std::string> historyFields(const RenderGraph& g) {
 
 /// Source -> SVGF on synthetic inputs, run frame by frame.
 struct Harness {
-    Harness(const nlohmann::json& params, GFn fn, bool split = false, uint32_t w = 32, uint32_t h = 32)
-        : graph(describe(params, split), registry()) {
+    Harness(const nlohmann::json& params, GFn fn, bool split = false, uint32_t w = 32, uint32_t h = 32,
+            const char* source = nullptr)
+        : graph(describe(params, source ? source : split ? "SvgfSplitSource" : "SvgfSource"), registry()) {
         CompileOptions o;
         o.width = w;
         o.height = h;
@@ -111,11 +117,11 @@ struct Harness {
         graph.compile(o);
         dynamic_cast<SyntheticSource*>(graph.pass("Source"))->fn = std::move(fn);
     }
-    static GraphDesc describe(const nlohmann::json& params, bool split) {
+    static GraphDesc describe(const nlohmann::json& params, const char* source) {
         nlohmann::json g = {{"loom_graph", 1},
                             {"name", "svgf"},
                             {"passes",
-                             {{{"name", "Source"}, {"type", split ? "SvgfSplitSource" : "SvgfSource"}},
+                             {{{"name", "Source"}, {"type", source}},
                               {{"name", "SVGF"},
                                {"type", "SVGFPass"},
                                {"params", params.is_null() ? nlohmann::json::object() : params}}}},
@@ -442,10 +448,10 @@ std::unique_ptr<RenderGraph> sceneGraph(const std::shared_ptr<Scene>& scene, uin
                                         const nlohmann::json& svgfParams, bool prevEdges = false,
                                         const CompileOptions& base = {}) {
     auto edge = [](const std::string& a, const std::string& b) { return nlohmann::json::array({a, b}); };
-    // GBufferRT and the path tracer both offer albedo and emission: take the G-buffer's.
+    // GBufferRT and the path tracer both offer albedo, specAlbedo and emission: take the G-buffer's.
     nlohmann::json edges =
-        nlohmann::json::array({edge("GBuffer.albedo", "SVGF.albedo"), edge("GBuffer.emission", "SVGF.emission"),
-                               edge("GBuffer.vbuffer", "PT.vbuffer")});
+        nlohmann::json::array({edge("GBuffer.albedo", "SVGF.albedo"), edge("GBuffer.specAlbedo", "SVGF.specAlbedo"),
+                               edge("GBuffer.emission", "SVGF.emission"), edge("GBuffer.vbuffer", "PT.vbuffer")});
     if (prevEdges)
         for (const std::string c : {"linearZ", "normW", "meshId"})
             edges.push_back(edge("GBuffer." + c + "@prev", "SVGF." + c + "Prev"));
@@ -483,7 +489,7 @@ double relMSE(const Texture& img, const std::vector<glm::dvec3>& ref) {
 
 // Static camera on the Cornell box at 1 spp: SVGF's error against a many-sample reference ends far below the error
 // of the 1 spp input. Without filtered feedback (feedbackTap -1) it keeps falling as history builds up; with the
-// default feedbackTap 1 it falls until the temporal variance takes over (frame 4) and then settles at a higher
+// default feedbackTap 0 it falls until the temporal variance takes over (frame 4) and then settles at a higher
 // level, since each frame re-filters the already filtered history (the over-blurring bias of feedback).
 TEST(SVGF, ConvergesTowardsReferenceOnCornellBox) {
     const uint32_t W = 96, H = 96;
@@ -868,4 +874,48 @@ TEST(SVGF, ExtremeEdgeStoppingParametersStayFinite) {
                     EXPECT_TRUE(allFinite(h.field(hist))) << phi << " " << hist;
             }
         }
+}
+
+// Anti-lag (A-SVGF): a lighting step (the illumination falls to a quarter) that the temporal gradients report is
+// followed within a few frames; without them the history takes tens of frames to forget the old light. Where the
+// gradients report no change, the output is bit for bit that of a graph without them.
+TEST(SVGF, TemporalGradientsFollowALightingStepWithinFourFrames) {
+    const uint64_t step = 40;
+    const auto light = [&](uint64_t frame) { return frame < step ? 1.f : 0.25f; };
+    const GFn fn = [&](uint64_t frame, uint32_t x, uint32_t y) {
+        GPixel p;
+        const float n = 0.5f + hash01(frame, x, y);  // noisy samples of mean 1
+        p.color = glm::vec4(glm::vec3(light(frame) * n), 1.f);
+        p.albedo = glm::vec4(1.f);
+        // Last frame's sample re-shaded now: the same noise, this frame's light.
+        if (frame > 0) {
+            const float m = 0.5f + hash01(frame - 1, x - x % 3, y - y % 3);
+            p.gradient = glm::vec2(light(frame) * m, light(frame - 1) * m);
+        }
+        return p;
+    };
+    Harness with({}, fn, false, 32, 32, "SvgfGradientSource"), without({}, fn);
+    auto meanOf = [](const Harness& h) {
+        double sum = 0.0;
+        for (uint32_t y = 0; y < 32; ++y)
+            for (uint32_t x = 0; x < 32; ++x) sum += h.filtered(x, y).r;
+        return sum / (32.0 * 32.0);
+    };
+    for (uint64_t f = 0; f < step; ++f) {
+        with.run();
+        without.run();
+        ASSERT_EQ(meanOf(with), meanOf(without)) << "frame " << f << ": no change, no difference";
+    }
+    int withFrames = -1, withoutFrames = -1;
+    for (int k = 0; k < 40; ++k) {
+        with.run();
+        without.run();
+        // Within 10 % of the new level (the noise's mean is 1, so the level is 0.25).
+        if (withFrames < 0 && std::abs(meanOf(with) - 0.25) < 0.025) withFrames = k;
+        if (withoutFrames < 0 && std::abs(meanOf(without) - 0.25) < 0.025) withoutFrames = k;
+    }
+    std::printf("frames to within 10 %% after the step: with gradients %d, without %d\n", withFrames, withoutFrames);
+    EXPECT_GE(withFrames, 0);
+    EXPECT_LE(withFrames, 3) << "back within 10 % in at most 4 frames (the step's frame included)";
+    EXPECT_TRUE(withoutFrames < 0 || withoutFrames > 8) << "without gradients the history lags";
 }

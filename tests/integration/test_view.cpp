@@ -63,7 +63,7 @@ TEST_F(View, SwitchingTheShownFieldLeavesTheRenderUnchanged) {
           "# frame verb argument\n"
           "1 view SVGF.variance\n"
           "2 view SVGF.moments\n"
-          "3 set SVGF.phiColor=10\n"
+          "3 set SVGF.phiColor=4\n"
           "4 view TAA.colorHistory\n"
           "5 view GBuffer.meshId\n"
           "6 view TAA.colorOut\n"
