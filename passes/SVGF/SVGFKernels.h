@@ -87,6 +87,10 @@ struct TemporalParams {
     /// of the accumulated mean (the sum of its squared weights: 1 / n while the blend is a plain mean, alpha / (2 -
     /// alpha) in the exponential average's steady state). 1: the per-sample variance itself (Falcor).
     float varianceFloor = 1.f;
+    /// This frame's camera jitter minus last frame's, in pixels: the signal of pixel x was sampled at x + jitter,
+    /// and the history is stored where last frame sampled, so a point that moved by mvec is found at
+    /// x + mvec size + jitterDelta on last frame's grid (mvec is jitter-free).
+    glm::vec2 jitterDelta{0.f};
 };
 
 /// varianceFloor for colour blend factor alpha: the squared weights of an exponential average sum to
@@ -162,15 +166,15 @@ LOOM_HD inline void addTap(const TemporalViews& v, Reprojected& r, uint32_t x, u
 
 /// Last frame's history at pixel (x, y) through the motion vector: bilinear over the valid taps of the 2x2
 /// footprint (weights renormalised), else the mean of the valid taps of the 3x3 around the nearest pixel.
-LOOM_HD inline Reprojected reproject(const TemporalViews& v, uint32_t x, uint32_t y, float z, float dz,
-                                     const glm::vec3& n, uint32_t mesh) {
+LOOM_HD inline Reprojected reproject(const TemporalViews& v, const TemporalParams& p, uint32_t x, uint32_t y, float z,
+                                     float dz, const glm::vec3& n, uint32_t mesh) {
     Reprojected r;
     if (v.prevChange.data) r.change = glm::vec2(0.f);  // summed over the taps below
     const glm::vec2 mv = v.mvec.at(x, y);
     if (!isFiniteBits(mv.x) || !isFiniteBits(mv.y)) return r;
     // uvPrev = uv + mvec with uv = (x + 0.5) / width: the previous pixel centre coordinate is (uv + mvec) size - 0.5.
     const float w = float(v.color.width), h = float(v.color.height);
-    const float px = float(x) + mv.x * w, py = float(y) + mv.y * h;
+    const float px = float(x) + mv.x * w + p.jitterDelta.x, py = float(y) + mv.y * h + p.jitterDelta.y;
     // Far outside (also guards the float to int conversion).
     if (!(px > -2.f && py > -2.f && px < w + 1.f && py < h + 1.f)) return r;
     const float fx0 = floorf(px), fy0 = floorf(py);
@@ -245,7 +249,7 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
     const glm::vec4 moments(lum0, lum0 * lum0, lum1, lum1 * lum1);
 
     Reprojected r;
-    if (p.temporal) r = reproject(v, x, y, z.x, z.y, glm::vec3(normal), mesh);
+    if (p.temporal) r = reproject(v, p, x, y, z.x, z.y, glm::vec3(normal), mesh);
 
     glm::vec4 i0, i1, m;
     float length;

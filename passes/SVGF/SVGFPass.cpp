@@ -5,6 +5,7 @@
 #include <chrono>
 #include <string>
 
+#include "loom/Camera.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 
@@ -360,6 +361,7 @@ void SVGFPass::execute(PassContext& ctx) {
     tp.momentsAlpha = mMomentsAlpha;
     tp.maxHistory = float(mMaxHistory);
     tp.varianceFloor = mMeanVariance ? meanVarianceFloor(mAlpha) : 1.f;
+    if (const Camera* camera = ctx.camera()) tp.jitterDelta = camera->jitter - camera->prevJitter;
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();
     tp.split = split;

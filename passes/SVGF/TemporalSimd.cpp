@@ -216,7 +216,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         if (!hn::AllTrue(d, hn::And(hn::IsFinite(mx), hn::IsFinite(my)))) return kEveryLane;
         const float W = float(v.color.width), H = float(v.color.height);
         const V xf = lanes::HWY_NAMESPACE::firstPlusLane(d, float(x)), yf = hn::Set(d, float(y));
-        const V px = hn::Add(xf, hn::Mul(mx, hn::Set(d, W))), py = hn::Add(yf, hn::Mul(my, hn::Set(d, H)));
+        const V px = hn::Add(hn::Add(xf, hn::Mul(mx, hn::Set(d, W))), hn::Set(d, p.jitterDelta.x));
+        const V py = hn::Add(hn::Add(yf, hn::Mul(my, hn::Set(d, H))), hn::Set(d, p.jitterDelta.y));
         const V fx0 = hn::Floor(px), fy0 = hn::Floor(py);
         const V ox = hn::Sub(fx0, xf), oy = hn::Sub(fy0, yf);
         const float ox0 = hn::GetLane(ox), oy0 = hn::GetLane(oy);

@@ -22,6 +22,7 @@
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
+#include "loom/Camera.h"
 #include "loom/RenderGraph.h"
 #include "loom/Scene.h"
 
@@ -128,10 +129,11 @@ struct Harness {
                             {"outputs", {"SVGF.filtered", "SVGF.variance", "SVGF.historyLength"}}};
         return parseGraph(g.dump());
     }
-    void run(int frames = 1) {
+    void run(int frames = 1, const Camera* camera = nullptr) {
         for (int i = 0; i < frames; ++i) {
             FrameInfo f;
             f.frameIndex = next++;
+            f.camera = camera;
             graph.execute(f);
         }
     }
@@ -918,4 +920,36 @@ TEST(SVGF, TemporalGradientsFollowALightingStepWithinFourFrames) {
     EXPECT_GE(withFrames, 0);
     EXPECT_LE(withFrames, 3) << "back within 10 % in at most 4 frames (the step's frame included)";
     EXPECT_TRUE(withoutFrames < 0 || withoutFrames > 8) << "without gradients the history lags";
+}
+
+// With camera jitter the signal of pixel x is sampled at x + jitter and the history where last frame sampled: the
+// reprojection shifts by the jitter's change. On a linear ramp the reprojected history then equals this frame's
+// sample exactly (bilinear interpolation is exact on a ramp), so the temporal result is the sample itself; the
+// unshifted history of the jitter-free motion vectors would be off by the ramp's slope times the jitter change.
+TEST(SVGF, JitteredHistoryIsRegisteredWithTheSamples) {
+    Camera camera;
+    const float slope = 0.01f;
+    const GFn fn = [&](uint64_t, uint32_t x, uint32_t y) {
+        GPixel p;
+        p.color = glm::vec4(glm::vec3(0.5f + slope * (float(x) + 0.5f + camera.jitter.x) +
+                                      0.3f * slope * (float(y) + 0.5f + camera.jitter.y)),
+                            1.f);
+        return p;
+    };
+    Harness h({{"iterations", 0}}, fn);
+    double worst = 0.0, slopeTimesJitter = 0.0;
+    for (uint64_t f = 0; f < 12; ++f) {
+        camera.prevJitter = camera.jitter;
+        camera.jitter = Camera::jitterSample(JitterPattern::Halton, 8, f);
+        h.run(1, &camera);
+        if (f < 4) continue;
+        slopeTimesJitter = std::max(slopeTimesJitter, double(slope * std::abs(camera.jitter.x - camera.prevJitter.x)));
+        const auto estimate = h.field("estimate").view<glm::vec4>();
+        // Away from the border, whose missing taps bend the history (and spread inward a pixel per frame).
+        for (uint32_t y = 12; y < 20; ++y)
+            for (uint32_t x = 12; x < 20; ++x)
+                worst = std::max(worst, double(std::abs(estimate.at(x, y).r - fn(f, x, y).color.r)));
+    }
+    EXPECT_LT(worst, 2e-5) << "history and sample disagree: misregistered by the jitter";
+    EXPECT_GT(slopeTimesJitter, 100 * 2e-5) << "the jitter moves the samples by far more than the tolerance";
 }
