@@ -292,28 +292,56 @@ ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
     return asConst(change);
 }
 
-void SVGFPass::execute(PassContext& ctx) {
-    Stats& stats = ctx.stats();
-    if (!mEnabled) {
-        passThrough(ctx);
-        stats.set(kStatNonFinite, 0);
-        return;
-    }
-    const auto connected = [&](const char* name) { return ctx.input(name) != nullptr; };
-    const bool split = splitSignals(connected);
-    const uint32_t w = ctx.output(kFiltered)->width(), h = ctx.output(kFiltered)->height();
+/// How a frame runs, decided once (SVGFPass::choosePipeline): the fused fast path or the scalar reference stages,
+/// and within the fast path which stages share work.
+struct SVGFPass::Pipeline {
+    bool fusedTemporal = false;    ///< stage 1 vectorised, writing every estimate (else temporalPixel per pixel)
+    bool packPlanes = false;       ///< stage 1 also packs the à-trous guide and input planes (the fast à-trous)
+    bool vectorVariance = false;   ///< stage 2 vectorised over the packed planes
+    bool fusedModulation = false;  ///< stage 4 inside the last fast à-trous level
+};
 
+/// Everything the stages of one frame share.
+struct SVGFPass::Frame {
+    PassContext& ctx;
+    Pipeline pipe;
+    bool split = false, sharedGuides = false;
+    uint32_t w = 0, h = 0;
     AtrousParams ap;
-    ap.phiColor = mPhiColor;
-    ap.phiNormal = mPhiNormal;
-    ap.phiDepth = mPhiDepth;
-    const VarianceScales scales = varianceScales(ap);
-
-    // Stage 1: demodulation, reprojection, moments (one pass).
-    auto t0 = Clock::now();
+    VarianceScales scales{};
     TemporalViews tv;
+    TemporalParams tp;
+    VarianceViews vv;
+    AtrousFilter::FramePlanes planes{};
+    uint64_t nonFinite = 0, referencePixels = 0;
+};
+
+SVGFPass::Pipeline SVGFPass::choosePipeline(const VarianceScales& scales) const {
+    Pipeline p;
+    if (mReferenceStages) return p;  // temporalPixel, varianceEstimatePixel, the à-trous from images, modulatePixel
+    p.fusedTemporal = true;
+    p.packPlanes = !mReferenceAtrous;
+    p.vectorVariance = p.packPlanes && scales.series;
+    p.fusedModulation = p.packPlanes && mIterations > 0;
+    return p;
+}
+
+void SVGFPass::bindFrame(Frame& f) {
+    PassContext& ctx = f.ctx;
+    const auto connected = [&](const char* name) { return ctx.input(name) != nullptr; };
+    f.split = splitSignals(connected);
+    f.w = ctx.output(kFiltered)->width();
+    f.h = ctx.output(kFiltered)->height();
+    f.ap.phiColor = mPhiColor;
+    f.ap.phiNormal = mPhiNormal;
+    f.ap.phiDepth = mPhiDepth;
+    f.scales = varianceScales(f.ap);
+    f.pipe = choosePipeline(f.scales);
+    f.referencePixels = uint64_t(f.w) * f.h;
+
+    TemporalViews& tv = f.tv;
     tv.color = inputView<glm::vec4>(ctx, kColor);
-    if (split) {
+    if (f.split) {
         tv.direct = inputView<glm::vec4>(ctx, kDirect);
         tv.indirect = inputView<glm::vec4>(ctx, kIndirect);
     }
@@ -324,19 +352,14 @@ void SVGFPass::execute(PassContext& ctx) {
     tv.mvec = inputView<glm::vec2>(ctx, kMvec);
     tv.meshId = inputView<uint32_t>(ctx, kMeshId);
     tv.prevIllum0 = ctx.historyPrev(kIllumHistory).view<glm::vec4>();
-    if (split) tv.prevIllum1 = ctx.historyPrev(kIndirectHistory).view<glm::vec4>();
+    if (f.split) tv.prevIllum1 = ctx.historyPrev(kIndirectHistory).view<glm::vec4>();
     tv.prevMoments0 = ctx.historyPrev(kMomentsHistory).view<glm::vec2>();
-    if (split) tv.prevMoments1 = ctx.historyPrev(kIndirectMomentsHistory).view<glm::vec2>();
+    if (f.split) tv.prevMoments1 = ctx.historyPrev(kIndirectMomentsHistory).view<glm::vec2>();
     tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
-    {
-        const auto t = Clock::now();
-        tv.prevChange = shadingChange(ctx);
-        stats.set(kStatAntilag, msSince(t));
-    }
     // Last frame's guides: the G-buffer's own previous outputs when the graph feeds them (@prev edges), else the
     // copies this pass keeps.
-    const bool sharedGuides = sharedPrevGuides(connected);
-    if (sharedGuides) {
+    f.sharedGuides = sharedPrevGuides(connected);
+    if (f.sharedGuides) {
         tv.prevLinearZ = inputView<glm::vec2>(ctx, kLinearZPrev);
         tv.prevNormW = inputView<glm::vec4>(ctx, kNormWPrev);
         tv.prevMeshId = inputView<uint32_t>(ctx, kMeshIdPrev);
@@ -346,17 +369,17 @@ void SVGFPass::execute(PassContext& ctx) {
         tv.prevMeshId = ctx.historyPrev(kPrevMeshId).view<uint32_t>();
     }
     tv.integrated0 = ctx.internal(kIntegrated)->view<glm::vec4>();
-    if (split) tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
+    if (f.split) tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
     tv.curMoments0 = ctx.historyCur(kMomentsHistory).view<glm::vec2>();
-    if (split) tv.curMoments1 = ctx.historyCur(kIndirectMomentsHistory).view<glm::vec2>();
+    if (f.split) tv.curMoments1 = ctx.historyCur(kIndirectMomentsHistory).view<glm::vec2>();
     tv.curLength = ctx.historyCur(kLengthHistory).view<float>();
-    if (!sharedGuides) {  // else left empty: nothing is copied
+    if (!f.sharedGuides) {  // else left empty: nothing is copied
         tv.curLinearZ = ctx.historyCur(kPrevLinearZ).view<glm::vec2>();
         tv.curNormW = ctx.historyCur(kPrevNormW).view<glm::vec4>();
         tv.curMeshId = ctx.historyCur(kPrevMeshId).view<uint32_t>();
     }
 
-    TemporalParams tp;
+    TemporalParams& tp = f.tp;
     tp.alpha = mAlpha;
     tp.momentsAlpha = mMomentsAlpha;
     tp.maxHistory = float(mMaxHistory);
@@ -364,59 +387,9 @@ void SVGFPass::execute(PassContext& ctx) {
     if (const Camera* camera = ctx.camera()) tp.jitterDelta = camera->jitter - camera->prevJitter;
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();
-    tp.split = split;
-    // The fused fast path: stage 1 (vectorised) also writes every pixel's estimate and stage 2 revisits only the
-    // short histories; with the fast à-trous, stage 1 also packs the à-trous guides and input planes (`fused`).
-    const bool fusedTemporal = !mReferenceStages;
-    const bool fused = fusedTemporal && !mReferenceAtrous;
-    const bool vectorVariance = fused && scales.series;  // stage 2 vectorised over the à-trous planes
-    std::atomic<uint64_t> nonFinite{0};
-    uint64_t referencePixels = uint64_t(w) * h;
-    AtrousFilter::FramePlanes planes{};
-    if (fusedTemporal) {
-        simd::TemporalOutputs to;
-        if (fused) {
-            planes = mAtrous.preparePlanes(tv.linearZ, tv.normW, mIterations, split ? 2 : 1);
-            to.layout = planes.layout;
-            to.guide = planes.guide;
-            to.signal = planes.signal;
-            to.signal1 = planes.signal1;
-        }
-        to.estimate = ctx.internal(kEstimate)->view<glm::vec4>();
-        if (split) to.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
-        to.variance = outputView<float>(ctx, kVariance);
-        mShortRows.resize(h);
-        to.shortRows = mShortRows.data();
-        if (fused) {
-            mRemodulationGroups.resize(size_t(simd::remodulationGroupsPerRow(w)) * h);
-            to.remodulationGroups = mRemodulationGroups.data();
-        }
-        // Only the variance stage's short histories read the estimate images on the fused path (the à-trous input
-        // planes hold every estimate), unless the images are dumped or the levels take the unfiltered signal
-        // itself (no levels, or feedback of the unfiltered signal).
-        to.everyEstimate = !fused || mEstimateObserved || mIterations <= 0 || mFeedbackTap < 0;
-        // The vectorised variance stage reads the integrated images only at short histories and, in its scalar
-        // edge columns, around them; the scalar variance stage reads them around every short history.
-        to.everyIntegrated = !vectorVariance || mIntegratedObserved;
-        const simd::TemporalCounts counts = simd::temporalFused(tv, tp, to, kTemporalBandRows);
-        nonFinite = counts.rejected;
-        referencePixels = counts.reference;
-    } else {
-        parallelFor2D(
-            w, h,
-            [&](const Tile& t) {
-                uint64_t count = 0;
-                for (uint32_t y = t.y0; y < t.y1; ++y)
-                    for (uint32_t x = t.x0; x < t.x1; ++x) count += temporalPixel(tv, x, y, tp) ? 1 : 0;
-                nonFinite += count;
-            },
-            kStreamTileSize);
-    }
-    stats.set(kStatReproject, msSince(t0));
+    tp.split = f.split;
 
-    // Stage 2: variance estimate (spatial where history is short).
-    t0 = Clock::now();
-    VarianceViews vv;
+    VarianceViews& vv = f.vv;
     vv.integrated0 = asConst(tv.integrated0);
     vv.integrated1 = asConst(tv.integrated1);
     vv.moments0 = asConst(tv.curMoments0);
@@ -425,26 +398,83 @@ void SVGFPass::execute(PassContext& ctx) {
     vv.linearZ = tv.linearZ;
     vv.length = asConst(tv.curLength);
     vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
-    if (split) vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
+    if (f.split) vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
     vv.variance = outputView<float>(ctx, kVariance);
+}
+
+void SVGFPass::antilagStage(Frame& f) {
+    f.tv.prevChange = shadingChange(f.ctx);
+}
+
+void SVGFPass::temporalStage(Frame& f) {
+    const uint32_t w = f.w, h = f.h;
+    if (!f.pipe.fusedTemporal) {
+        std::atomic<uint64_t> nonFinite{0};
+        parallelFor2D(
+            w, h,
+            [&](const Tile& t) {
+                uint64_t count = 0;
+                for (uint32_t y = t.y0; y < t.y1; ++y)
+                    for (uint32_t x = t.x0; x < t.x1; ++x) count += temporalPixel(f.tv, x, y, f.tp) ? 1 : 0;
+                nonFinite += count;
+            },
+            kStreamTileSize);
+        f.nonFinite = nonFinite.load();
+        return;
+    }
+    // The fused fast path: stage 1 (vectorised) also writes every pixel's estimate and stage 2 revisits only the
+    // short histories; with the fast à-trous, stage 1 also packs the à-trous guides and input planes.
+    simd::TemporalOutputs to;
+    if (f.pipe.packPlanes) {
+        f.planes = mAtrous.preparePlanes(f.tv.linearZ, f.tv.normW, mIterations, f.split ? 2 : 1);
+        to.layout = f.planes.layout;
+        to.guide = f.planes.guide;
+        to.signal = f.planes.signal;
+        to.signal1 = f.planes.signal1;
+        mRemodulationGroups.resize(size_t(simd::remodulationGroupsPerRow(w)) * h);
+        to.remodulationGroups = mRemodulationGroups.data();
+    }
+    to.estimate = f.vv.estimate0;
+    to.estimate1 = f.vv.estimate1;
+    to.variance = f.vv.variance;
+    mShortRows.resize(h);
+    to.shortRows = mShortRows.data();
+    // Only the variance stage's short histories read the estimate images on the fused path (the à-trous input
+    // planes hold every estimate), unless the images are dumped or the levels take the unfiltered signal itself
+    // (no levels, or feedback of the unfiltered signal).
+    to.everyEstimate = !f.pipe.packPlanes || mEstimateObserved || mIterations <= 0 || mFeedbackTap < 0;
+    // The vectorised variance stage reads the integrated images only at short histories and, in its scalar edge
+    // columns, around them; the scalar variance stage reads them around every short history.
+    to.everyIntegrated = !f.pipe.vectorVariance || mIntegratedObserved;
+    const simd::TemporalCounts counts = simd::temporalFused(f.tv, f.tp, to, kTemporalBandRows);
+    f.nonFinite = counts.rejected;
+    f.referencePixels = counts.reference;
+}
+
+void SVGFPass::varianceStage(Frame& f) {
+    Stats& stats = f.ctx.stats();
+    const VarianceViews& vv = f.vv;
+    const uint32_t w = f.w, h = f.h;
+    const bool split = f.split;
     stats.set(kStatVarianceReference, 1.0);  // the scalar stages; the vector one counts
-    if (vectorVariance) {
+    if (f.pipe.vectorVariance) {
         const simd::VarianceCounts counts =
-            simd::varianceFused(vv, scales, *planes.layout, planes.guide, planes.signal, planes.signal1, split,
-                                kTemporalBandRows, mShortRows.data());
+            simd::varianceFused(vv, f.scales, *f.planes.layout, f.planes.guide, f.planes.signal, f.planes.signal1,
+                                split, kTemporalBandRows, mShortRows.data());
         stats.set(kStatSpatialPixels, double(counts.spatial));
         stats.set(kStatVarianceReference, counts.spatial ? double(counts.reference) / double(counts.spatial) : 0.0);
-    } else if (fusedTemporal) {
+    } else if (f.pipe.fusedTemporal) {
         // Stage 1 wrote every estimate as if history were long; the short ones get the spatial estimate. Bands of
         // whole rows, as stage 1: the scan of the lengths is a plain stream.
+        const AtrousFilter::FramePlanes& planes = f.planes;
         parallelFor2D(
             1, h,
             [&](const Tile& band) {
                 for (uint32_t y = band.y0; y < band.y1; ++y)
                     for (uint32_t x = 0; x < w; ++x) {
                         if (!needsSpatialVariance(vv.linearZ.at(x, y).x, vv.length.at(x, y))) continue;
-                        varianceEstimatePixel(vv, x, y, scales, split);
-                        if (!fused) continue;
+                        varianceEstimatePixel(vv, x, y, f.scales, split);
+                        if (!f.pipe.packPlanes) continue;
                         simd::packSignalPixel(*planes.layout, planes.signal, x, y, vv.estimate0.at(x, y));
                         if (split) simd::packSignalPixel(*planes.layout, planes.signal1, x, y, vv.estimate1.at(x, y));
                     }
@@ -452,69 +482,100 @@ void SVGFPass::execute(PassContext& ctx) {
             kTemporalBandRows);
     } else {
         parallelForPixels(
-            w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, scales, split); }, kStreamTileSize);
+            w, h, [&](uint32_t x, uint32_t y) { varianceEstimatePixel(vv, x, y, f.scales, split); }, kStreamTileSize);
     }
-    stats.set(kStatVariance, msSince(t0));
+}
 
-    // Stage 3: à-trous levels; the integrated fields are free now and take the filtered signals.
-    t0 = Clock::now();
-    if (!fused) mAtrous.setGuide(tv.linearZ, tv.normW);
-    stats.set(kStatAtrousPrepare, msSince(t0));
+ModulateViews SVGFPass::modulateViews(const Frame& f) const {
+    ModulateViews mv;
+    mv.filtered0 = asConst(f.tv.integrated0);
+    mv.filtered1 = asConst(f.tv.integrated1);
+    mv.color = f.tv.color;
+    mv.albedo = f.tv.albedo;
+    mv.emission = f.tv.emission;
+    mv.linearZ = f.tv.linearZ;
+    mv.dst = f.ctx.output(kFiltered)->view<glm::vec4>();
+    return mv;
+}
+
+void SVGFPass::atrousStage(Frame& f) {
+    Stats& stats = f.ctx.stats();
+    // The integrated fields are free now and take the filtered signals.
+    auto t0 = Clock::now();
+    if (!f.pipe.packPlanes) mAtrous.setGuide(f.tv.linearZ, f.tv.normW);
+    double prepareMs = msSince(t0);
     const int levels = mIterations;
     double levelMs[16] = {};
-    double prepareMs = 0.0;
-    // The remodulation is fused into the last fast level's output (split: the second signal's, adding the first's).
-    ModulateViews mv;
-    mv.filtered0 = asConst(tv.integrated0);
-    mv.filtered1 = asConst(tv.integrated1);
-    mv.color = tv.color;
-    mv.albedo = tv.albedo;
-    mv.emission = tv.emission;
-    mv.linearZ = tv.linearZ;
-    mv.dst = ctx.output(kFiltered)->view<glm::vec4>();
-    const bool fusedModulation = fused && levels > 0;
-    // split: signal 0's result is in integrated0 by then. The groups say which images each group of pixels reads.
-    const simd::Remodulation remodulation{mv, split, fusedModulation ? mRemodulationGroups.data() : nullptr,
-                                          simd::remodulationGroupsPerRow(w)};
+    // The remodulation is fused into the last fast level's output (split: the second signal's, adding the first's;
+    // signal 0's result is in integrated0 by then). The groups say which images each group of pixels reads.
+    const simd::Remodulation remodulation{modulateViews(f), f.split,
+                                          f.pipe.fusedModulation ? mRemodulationGroups.data() : nullptr,
+                                          simd::remodulationGroupsPerRow(f.w)};
     auto filter = [&](ImageView<glm::vec4> src, ImageView<glm::vec4> dst, ImageView<glm::vec4> feedback,
                       const simd::Remodulation* modulate, int slot) {
         AtrousTimings timings;
-        mAtrous.run(asConst(src), dst, levels, ap, mFeedbackTap, feedback, mReferenceAtrous, &timings, modulate, slot);
+        mAtrous.run(asConst(src), dst, levels, f.ap, mFeedbackTap, feedback, mReferenceAtrous, &timings, modulate,
+                    slot);
         prepareMs += timings.prepareMs;
         for (int level = 0; level < levels && level < 16; ++level) levelMs[level] += timings.levelMs[level];
     };
-    const simd::Remodulation* modulate = fusedModulation ? &remodulation : nullptr;
-    filter(vv.estimate0, tv.integrated0, ctx.historyCur(kIllumHistory).view<glm::vec4>(), split ? nullptr : modulate,
-           0);
-    if (split) filter(vv.estimate1, tv.integrated1, ctx.historyCur(kIndirectHistory).view<glm::vec4>(), modulate, 1);
-    stats.set(kStatAtrousPrepare, stats.values().at(kStatAtrousPrepare) + prepareMs);
+    const simd::Remodulation* modulate = f.pipe.fusedModulation ? &remodulation : nullptr;
+    filter(f.vv.estimate0, f.tv.integrated0, f.ctx.historyCur(kIllumHistory).view<glm::vec4>(),
+           f.split ? nullptr : modulate, 0);
+    if (f.split)
+        filter(f.vv.estimate1, f.tv.integrated1, f.ctx.historyCur(kIndirectHistory).view<glm::vec4>(), modulate, 1);
+    stats.set(kStatAtrousPrepare, prepareMs);
     double atrousMs = 0.0;
     for (int level = 0; level < levels && level < 16; ++level) {
         stats.set(std::string(kStatAtrous) + std::to_string(level), levelMs[level]);
         atrousMs += levelMs[level];
     }
     stats.set(kStatAtrous, atrousMs);
+}
 
-    // Stage 4: remodulation unless fused above (and the debug history length).
-    t0 = Clock::now();
-    const auto lengthOut = outputView<float>(ctx, kHistoryLength);
-    if (!fusedModulation || lengthOut.data) {
-        parallelFor2D(
-            w, h,
-            [&](const Tile& t) {
-                for (uint32_t y = t.y0; y < t.y1; ++y)
-                    for (uint32_t x = t.x0; x < t.x1; ++x) {
-                        if (!fusedModulation) modulatePixel(mv, x, y, split);
-                        if (lengthOut.data) lengthOut.at(x, y) = tv.curLength.at(x, y);
-                    }
-            },
-            kStreamTileSize);
+void SVGFPass::modulateStage(Frame& f) {
+    // Remodulation unless fused into the à-trous, and the debug history length.
+    const auto lengthOut = outputView<float>(f.ctx, kHistoryLength);
+    const bool modulate = !f.pipe.fusedModulation;
+    if (!modulate && !lengthOut.data) return;
+    const ModulateViews mv = modulateViews(f);
+    parallelFor2D(
+        f.w, f.h,
+        [&](const Tile& t) {
+            for (uint32_t y = t.y0; y < t.y1; ++y)
+                for (uint32_t x = t.x0; x < t.x1; ++x) {
+                    if (modulate) modulatePixel(mv, x, y, f.split);
+                    if (lengthOut.data) lengthOut.at(x, y) = f.tv.curLength.at(x, y);
+                }
+        },
+        kStreamTileSize);
+}
+
+void SVGFPass::execute(PassContext& ctx) {
+    Stats& stats = ctx.stats();
+    if (!mEnabled) {
+        passThrough(ctx);
+        stats.set(kStatNonFinite, 0);
+        return;
     }
-    stats.set(kStatModulate, msSince(t0));
-    stats.set(kStatNonFinite, double(nonFinite.load()));
-    stats.set(kStatReferencePixels, double(referencePixels) / (double(w) * h));
-    stats.set(kStatSplit, split ? 1 : 0);
-    stats.set(kStatSharedGuides, sharedGuides ? 1 : 0);
+    Frame f{ctx};
+    bindFrame(f);
+    // The stages, each timed under its stat.
+    using Stage = void (SVGFPass::*)(Frame&);
+    const std::pair<const char*, Stage> stages[] = {{kStatAntilag, &SVGFPass::antilagStage},
+                                                    {kStatReproject, &SVGFPass::temporalStage},
+                                                    {kStatVariance, &SVGFPass::varianceStage},
+                                                    {nullptr, &SVGFPass::atrousStage},  // times its levels itself
+                                                    {kStatModulate, &SVGFPass::modulateStage}};
+    for (const auto& [stat, stage] : stages) {
+        const auto t0 = Clock::now();
+        (this->*stage)(f);
+        if (stat) stats.set(stat, msSince(t0));
+    }
+    stats.set(kStatNonFinite, double(f.nonFinite));
+    stats.set(kStatReferencePixels, double(f.referencePixels) / (double(f.w) * f.h));
+    stats.set(kStatSplit, f.split ? 1 : 0);
+    stats.set(kStatSharedGuides, f.sharedGuides ? 1 : 0);
 }
 
 }  // namespace loom

@@ -35,6 +35,18 @@ public:
     void execute(PassContext& ctx) override;
 
 private:
+    struct Pipeline;
+    struct Frame;
+    Pipeline choosePipeline(const svgf::VarianceScales& scales) const;
+    // The stages of a frame, in order (execute).
+    void bindFrame(Frame& f);
+    void antilagStage(Frame& f);
+    void temporalStage(Frame& f);
+    void varianceStage(Frame& f);
+    void atrousStage(Frame& f);
+    void modulateStage(Frame& f);
+    svgf::ModulateViews modulateViews(const Frame& f) const;
+
     void passThrough(PassContext& ctx) const;
     /// What the signal is demodulated by: albedo, or albedo + specAlbedo (in an internal image) when connected.
     ImageView<const glm::vec4> demodulationAlbedo(PassContext& ctx) const;
