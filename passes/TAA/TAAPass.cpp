@@ -53,12 +53,12 @@ void TAAPass::declareParams(ParamList& p) {
     p.add("antiFlicker", &mParams.antiFlicker, false)
         .doc(
             "weight current and history by 1 / (1 + luma) (Karis 2014) so bright outliers do not flicker; biased: it "
-            "darkens a light's jittered edges (a static Cornell box lamp loses about 15 %)");
+            "darkens a light's jittered edges (the Cornell box lamp loses about 10 %)");
     p.add("hdrCompress", &mHdrCompress, false)
         .doc(
             "resolve in c / (1 + luma) and expand after (Karis 2014), so a bright light bleeds less into dark "
             "neighbours through the bicubic history; biased like antiFlicker: averages in that space darken a "
-            "light's edges");
+            "light's edges (the Cornell box lamp loses about 12 %)");
     p.add("reference", &mReference, false)
         .doc("run the plain per-pixel reference kernel instead of the tiled CPU path (agrees to 1e-4, slower)");
 }
