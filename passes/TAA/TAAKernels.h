@@ -23,7 +23,9 @@
 //   4. Clipping: the history in YCoCg + alpha is moved towards the box centre
 //      along the line to it until it lies in the box (Salvi 2016; clipping
 //      rather than per-channel clamping keeps the hue). History inside the box
-//      is kept untouched.
+//      is kept untouched. Each channel's half extent counts as at least 1e-4
+//      of the box's luma scale (kMinRelativeExtent), so a channel flat but for
+//      rounding does not decide the clip.
 //   5. Blend: out = c + (1 - alpha) (h - c), an exponential moving average in
 //      linear colour. Its expectation is the mean of the inputs it has seen,
 //      so a static jittered image converges to the box-filtered mean of the

@@ -823,3 +823,23 @@ TEST(TAAKernels, AntiFlickerWeightsByInverseLuminance) {
         EXPECT_NEAR(-w.x + w.z + 2.f * w.w, t, 1e-6) << "reproduces linear functions";
     }
 }
+
+// A box whose chroma channel is flat but for rounding (a few ulp wide) must not decide the clip: history that matches
+// in luma and is a few ulp off in that channel stays as it is; history really outside is still clipped into the box.
+TEST(TAAKernels, ARoundingWideChannelDoesNotDecideTheClip) {
+    taa::ClipBox box;
+    box.lo = glm::vec4(10.f, 2.f, -1e-6f, 1.f);
+    box.hi = glm::vec4(50.f, 10.f, 1e-6f, 1.f);
+    glm::vec4 inside(30.f, 6.f, 4e-6f, 1.f);
+    const glm::vec4 kept = inside;
+    EXPECT_FALSE(taa::clipToBox(box, inside));
+    EXPECT_EQ(inside, kept);
+    glm::vec4 outside(80.f, 6.f, 0.f, 1.f);
+    EXPECT_TRUE(taa::clipToBox(box, outside));
+    EXPECT_NEAR(outside.x, 50.f, 1e-3f);
+    // A black box keeps flat channels flat: any difference there pulls the point onto the centre.
+    taa::ClipBox black;
+    glm::vec4 off(0.f, 1e-6f, 0.f, 0.f);
+    EXPECT_TRUE(taa::clipToBox(black, off));
+    EXPECT_EQ(off, glm::vec4(0.f));
+}
