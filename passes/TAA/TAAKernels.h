@@ -23,15 +23,27 @@
 //   4. Clipping: the history in YCoCg + alpha is moved towards the box centre
 //      along the line to it until it lies in the box (Salvi 2016; clipping
 //      rather than per-channel clamping keeps the hue). History inside the box
-//      is kept untouched.
-//   5. Blend with anti-flicker (Karis 2014, after T. Lottes): weights
+//      is kept untouched. Each channel's half extent counts as at least 1e-4
+//      of the box's luma scale (kMinRelativeExtent), so a channel flat but for
+//      rounding does not decide the clip.
+//   5. Blend: out = c + (1 - alpha) (h - c), an exponential moving average in
+//      linear colour. Its expectation is the mean of the inputs it has seen,
+//      so a static jittered image converges to the box-filtered mean of the
+//      jitter positions (the supersampled image) and keeps its energy: TAA may
+//      only move light as the reference's own pixel filter does. Written as
+//      c + k (h - c) so that h == c gives exactly c.
+//      Optional anti-flicker (antiFlicker, Karis 2014 after T. Lottes):
 //        wc = alpha / (1 + Yc),  wh = (1 - alpha) / (1 + Yh),
-//      Yc and Yh the (non-negative) YCoCg luma of current and clipped history;
-//      out = c + wh / (wc + wh) (h - c), computed as (1 - alpha)(1 + Yc) /
-//      (alpha (1 + Yh) + (1 - alpha)(1 + Yc)). Luminance weighting stops a bright
-//      sample (a firefly, a jittered specular) from dominating the average,
-//      which is what makes plain alpha blending of HDR colour flicker.
-//      Written as c + k (h - c) so that h == c gives exactly c.
+//      Yc and Yh the (non-negative) YCoCg luma of current and clipped history,
+//      k = wh / (wc + wh), computed as (1 - alpha)(1 + Yc) / (alpha (1 + Yh) +
+//      (1 - alpha)(1 + Yc)). It stops a bright sample (a firefly) from
+//      dominating the average, but a weighted mean whose weights fall with the
+//      sample's own value is biased towards the dark samples: a pixel on a
+//      light's edge that sees the light in some jitter positions converges far
+//      below its mean (samples 100 and 0.1 in turn: 1.2 instead of 50). No
+//      luminance weighting of the samples can avoid that (weights correlated
+//      with the values always bias a weighted mean), so it is off by default;
+//      tests/integration/test_taa.cpp measures what it costs.
 // Non-finite current pixels are replaced by the mean of the finite
 // neighbours (0 when there are none) and are left out of the statistics; a
 // non-finite result (overflow of huge inputs) falls back to the current
@@ -46,7 +58,7 @@ namespace loom::taa {
 struct TaaParams {
     float alpha = 0.1f;  ///< weight of the current frame
     float sigma = 1.f;   ///< box half-size in standard deviations
-    bool antiFlicker = true;
+    bool antiFlicker = false;  ///< luminance-weighted blend (biased: see step 5)
 };
 
 /// A read-only image of T with row pitch in bytes; reads clamp to the edges.
@@ -90,11 +102,14 @@ LOOM_HD inline glm::vec4 fromYCoCg(const glm::vec4& v) {
     return glm::vec4(v.x + v.y - v.z, v.x + v.z, v.x - v.y - v.z, v.w);
 }
 
-/// The HDR compression TAAPass resolves in (hdrCompress): c / (1 + Y), Y = max(0, YCoCg luma of c), alpha kept
-/// (Karis 2014, "High Quality Temporal Supersampling": the reversible tone map). Every colour with Y >= 0 lands at a
-/// luma below 1, so a light next to a dark surface differs from it by a bounded amount and the bicubic history and
-/// the blend cannot carry a large fraction of the light into the dark side. expandColor() is its inverse, exact up to
-/// rounding: Y(c') = Y / (1 + Y), hence c = c' / (1 - Y(c')).
+/// The HDR compression TAAPass can resolve in (hdrCompress, off by default): c / (1 + Y), Y = max(0, YCoCg luma of
+/// c), alpha kept (Karis 2014, "High Quality Temporal Supersampling": the reversible tone map). Every colour with
+/// Y >= 0 lands at a luma below 1, so a light next to a dark surface differs from it by a bounded amount and the
+/// bicubic history and the blend cannot carry a large fraction of the light into the dark side. expandColor() is its
+/// inverse, exact up to rounding: Y(c') = Y / (1 + Y), hence c = c' / (1 - Y(c')). The pair is exact for one colour,
+/// but an average taken between them is not the average of the colours (the map is concave): averaging in the
+/// compressed space weights each colour by about 1 / (1 + Y), the same bias as antiFlicker, and it acts on every
+/// blend, every bicubic resample and every clip, so a light's edges lose energy (see the blend, step 5).
 LOOM_HD inline float nonNegativeLuma(const glm::vec4& c) {
     return glm::max(0.25f * (c.x + c.z) + 0.5f * c.y, 0.f);  // toYCoCg(c).x, clamped
 }
@@ -227,16 +242,31 @@ LOOM_HD inline glm::vec4 sampleHistory(const ClampedImage<glm::vec4>& history, c
     return ref + (even + odd);
 }
 
+/// The smallest half extent a channel of the clip box counts as, relative to the box's luma scale |centre| +
+/// half extent. A channel whose values differ only by rounding (the chroma of colours of one hue: Cg of (v, 0.8 v,
+/// 0.6 v) is 0 up to a few ulp) has an extent of a few ulp; history a few ulp off in that channel would give a huge
+/// ratio and pull the whole colour onto the box centre, however well it matches in luma: a bias of several percent
+/// on a jittered light's edges. 1e-4 is some 1000 rounding errors and far below anything visible.
+inline constexpr float kMinRelativeExtent = 1e-4f;
+
+/// The half extent of each channel of a box with centre `center` and half extent `extent`, floored at
+/// kMinRelativeExtent of its luma scale (0 for a black box, whose flat channels stay flat).
+LOOM_HD inline glm::vec4 flooredExtent(const glm::vec4& center, const glm::vec4& extent) {
+    const float minExtent = kMinRelativeExtent * (glm::abs(center.x) + extent.x);
+    return glm::max(extent, glm::vec4(minExtent));
+}
+
 /// The history point moved along the line to the box centre into the box
 /// (unchanged when already inside).
 LOOM_HD inline bool clipToBox(const ClipBox& b, glm::vec4& v) {
-    const glm::vec4 center = 0.5f * (b.lo + b.hi), extent = 0.5f * (b.hi - b.lo);
+    const glm::vec4 center = 0.5f * (b.lo + b.hi);
+    const glm::vec4 extent = flooredExtent(center, 0.5f * (b.hi - b.lo));
     const glm::vec4 d = v - center;
     float unit = 0.f;
     for (int c = 0; c < 4; ++c) {
         const float a = glm::abs(d[c]);
-        // Only channels outside the box count (then a > 0). A flat channel (extent 0) gives an infinite unit,
-        // which pulls the point exactly onto the centre (d / inf = 0).
+        // Only channels outside the box count (then a > 0). A flat channel of a black box (extent 0) gives an
+        // infinite unit, which pulls the point exactly onto the centre (d / inf = 0).
         if (a > extent[c]) unit = glm::max(unit, a / extent[c]);
     }
     if (unit <= 0.f) return false;

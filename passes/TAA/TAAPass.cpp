@@ -50,12 +50,15 @@ void TAAPass::declareParams(ParamList& p) {
     p.add("sigma", &mParams.sigma, 1.f)
         .range(0.0, 10.0)
         .doc("clipping box half-size in standard deviations of the 3x3 neighbourhood (YCoCg)");
-    p.add("antiFlicker", &mParams.antiFlicker, true)
-        .doc("weight current and history by 1 / (1 + luma) (Karis 2014) so bright outliers do not flicker");
-    p.add("hdrCompress", &mHdrCompress, true)
+    p.add("antiFlicker", &mParams.antiFlicker, false)
         .doc(
-            "resolve in c / (1 + luma) and expand after (Karis 2014), so a bright light does not bleed into dark "
-            "neighbours through the bicubic history under motion");
+            "weight current and history by 1 / (1 + luma) (Karis 2014) so bright outliers do not flicker; biased: it "
+            "darkens a light's jittered edges (the Cornell box lamp loses about 10 %)");
+    p.add("hdrCompress", &mHdrCompress, false)
+        .doc(
+            "resolve in c / (1 + luma) and expand after (Karis 2014), so a bright light bleeds less into dark "
+            "neighbours through the bicubic history; biased like antiFlicker: averages in that space darken a "
+            "light's edges (the Cornell box lamp loses about 12 %)");
     p.add("reference", &mReference, false)
         .doc("run the plain per-pixel reference kernel instead of the tiled CPU path (agrees to 1e-4, slower)");
 }
@@ -100,7 +103,9 @@ LOOM_DEFINE_PLUGIN(registrar) {
     registrar.registerPass<loom::TAAPass>(
         "TAAPass",
         "Temporal anti-aliasing: 3x3 YCoCg variance clipping, motion dilation (longest vector of the 3x3), "
-        "Catmull-Rom history, luminance-weighted blend against flicker; history in a graph field. Non-finite input "
+        "Catmull-Rom history, blend in linear colour that keeps energy (optional luminance-weighted anti-flicker and "
+        "HDR "
+        "compression, both biased); history in a graph field. Non-finite input "
         "pixels are replaced by the neighbourhood mean; a neighbourhood of one colour (a black sky) resolves to it "
         "without reading the history. Stats: nonFinite (input pixels replaced), noHistory (pixels without usable "
         "history), clipped (pixels whose history was clipped; not those of one-colour neighbourhoods), vectorLanes "

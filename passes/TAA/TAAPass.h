@@ -3,7 +3,9 @@
 // Halton or stratified camera jitter): the current frame's 3x3 neighbourhood
 // in YCoCg bounds the reprojected history (variance clipping), motion vectors
 // are dilated to the longest of the 3x3, history is sampled with Catmull-Rom,
-// and the blend is luminance-weighted against flicker. TAAKernels.h holds the
+// and the blend is an exponential moving average in linear colour, which keeps
+// a light's energy (luminance-weighted anti-flicker and HDR compression are
+// optional: both bias a jittered edge towards dark). TAAKernels.h holds the
 // per-pixel reference and the formulas with their sources.
 //
 // Fields (declared whatever the parameters):
@@ -33,7 +35,7 @@ public:
 private:
     taa::TaaParams mParams;
     bool mReference = false;
-    bool mHdrCompress = true;
+    bool mHdrCompress = false;
 };
 
 }  // namespace loom

@@ -575,18 +575,15 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
     const FloatVec infinity = hn::Set(d, std::numeric_limits<float>::infinity());
     const FloatVec sigma = hn::Set(d, p.sigma), ninth = hn::Set(d, 1.f / 9.f);
     // The box of channel ch for the row's vector at x, from its bounds (makeClipBox with n = 9), as centre and half
-    // extent (clipToBox); the inverse extent for the ratio is the refined reciprocal, infinite for a flat channel,
-    // which pulls the point exactly onto the centre.
-    const auto storeBox = [&](int ch, uint32_t x, FloatVec lo, FloatVec hi) {
-        const FloatVec extent = hn::Mul(half, hn::Sub(hi, lo));
+    // extent floored at minExtent (flooredExtent; clipToBox); the inverse extent for the ratio is the refined
+    // reciprocal, infinite for a flat channel of a black box, which pulls the point exactly onto the centre.
+    const FloatVec minRelativeExtent = hn::Set(d, kMinRelativeExtent);
+    const auto storeBox = [&](int ch, uint32_t x, FloatVec lo, FloatVec hi, FloatVec minExtent) {
+        const FloatVec extent = hn::Max(hn::Mul(half, hn::Sub(hi, lo)), minExtent);
         hn::Store(hn::Mul(half, hn::Add(lo, hi)), d, &s.center[ch][x]);
         hn::Store(extent, d, &s.extent[ch][x]);
         hn::Store(hn::IfThenElse(hn::Gt(extent, zero), reciprocal(d, extent), infinity), d, &s.invExtent[ch][x]);
     };
-    // A constant alpha's box, [alpha0, alpha0], is the same for every pixel of the tile: stored once here, and the box
-    // phase below leaves channel 3 alone.
-    if (alphaConstant)
-        for (uint32_t x = 0; x < wv; x += N) storeBox(3, x, hn::Set(d, alpha0), hn::Set(d, alpha0));
     alignas(64) glm::vec4 current[kLanes];
     // Each output row runs in three phases over its vectors, their results passed through the row scratch: the
     // box and the motion, the history, the clip and blend. One vector's chain from its loads to its stores is long
@@ -638,7 +635,9 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
             hn::Store(hn::VecFromMask(d, hn::AndNot(flat, useHistory)), d, &s.resolveHistory[x]);
             hn::Store(px, d, &s.px[x]);
             hn::Store(pyv, d, &s.py[x]);
-            // The box channel by channel (storeBox); a constant alpha's is stored once for the tile.
+            // The box channel by channel (storeBox), luma first: its centre and extent give the floor of the
+            // extents. A constant alpha's box is [alpha0, alpha0].
+            FloatVec minExtent = zero;
             for (int ch = 0; ch < (alphaConstant ? 3 : 4); ++ch) {
                 FloatVec sum = hn::LoadU(d, &s.rowSum[ch][y][x]), sumSq = hn::LoadU(d, &s.rowSumSq[ch][y][x]);
                 for (uint32_t r = y + 1; r < y + 3; ++r) {
@@ -651,8 +650,12 @@ void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, c
                 const FloatVec dev = hn::Mul(sigma, squareRoot(d, var));
                 const FloatVec lo = hn::Min(hn::Max(hn::Sub(mean, dev), mn), mx);
                 const FloatVec hi = hn::Min(hn::Max(hn::Add(mean, dev), mn), mx);
-                storeBox(ch, x, lo, hi);
+                if (ch == 0)  // flooredExtent(): the same operations, so the clipping decision is the reference's
+                    minExtent = hn::Mul(minRelativeExtent, hn::Add(hn::Abs(hn::Mul(half, hn::Add(lo, hi))),
+                                                                   hn::Mul(half, hn::Sub(hi, lo))));
+                storeBox(ch, x, lo, hi, minExtent);
             }
+            if (alphaConstant) storeBox(3, x, hn::Set(d, alpha0), hn::Set(d, alpha0), minExtent);
         }
         // Phase 2: the history (compressed when the resolve is) where a lane resolves against it.
         for (uint32_t x = 0; x < wv; x += N) {

@@ -190,6 +190,46 @@ BENCHMARK(BM_TAATargets)
     ->UseManualTime()
     ->Unit(benchmark::kMillisecond);
 
+/// TAA's defaults (the blend in linear colour, which keeps energy) against the luminance-weighted resolve they replaced
+/// (antiFlicker and hdrCompress on, the code path of the previous defaults), two graphs whose frames alternate in one
+/// process (the order swapping every iteration), so both see the same load.
+void BM_TAASettings(benchmark::State& state) {
+    const bool moving = state.range(0) != 0;
+    ThreadLimit limit(unsigned(state.range(1)));
+    const char* source = moving ? "BenchSourceMoving" : "BenchSourceStatic";
+    std::unique_ptr<RenderGraph> graphs[2] = {
+        makeGraph(source, "TAAPass", nlohmann::json::object(), "colorIn", {"Pass.colorOut"}),
+        makeGraph(source, "TAAPass", {{"antiFlicker", true}, {"hdrCompress", true}}, "colorIn", {"Pass.colorOut"})};
+    uint64_t frames[2] = {0, 0};
+    for (int k = 0; k < 2; ++k)
+        for (int i = 0; i < 3; ++i) runFrame(*graphs[k], frames[k]);
+    double totalMs[2] = {0.0, 0.0};
+    bool defaultsFirst = true;
+    for (auto _ : state) {
+        double ms = 0.0;
+        for (int k = 0; k < 2; ++k) {
+            const int side = defaultsFirst ? k : 1 - k;  // 0: defaults, 1: weighted
+            const double t = runFrame(*graphs[side], frames[side]);
+            totalMs[side] += t;
+            ms += t;
+        }
+        defaultsFirst = !defaultsFirst;
+        state.SetIterationTime(ms / 1000.0);
+    }
+    const double n = double(state.iterations());
+    state.counters["linear_ms"] = totalMs[0] / n;
+    state.counters["weighted_ms"] = totalMs[1] / n;
+    state.counters["linear_over_weighted"] = totalMs[0] / totalMs[1];
+}
+// Args: moving (0/1), threads (0 = all). One iteration is two frames, one of each graph.
+BENCHMARK(BM_TAASettings)
+    ->Args({1, 0})
+    ->Args({0, 0})
+    ->Args({1, 1})
+    ->Args({0, 1})
+    ->UseManualTime()
+    ->Unit(benchmark::kMillisecond);
+
 /// TAA on a moving frame whose top 45 % is one colour (a black sky, as about half of the default scene's frame): the
 /// one-colour tiles take their short path. Arg: threads (0 = all).
 void BM_TAASky(benchmark::State& state) {
