@@ -199,8 +199,8 @@ void SVGFPass::declareParams(ParamList& p) {
         .doc(
             "false: no reprojection, variance estimated spatially every frame: a pure edge-avoiding a-trous filter "
             "(Dammertz et al. 2010) as a baseline");
-    p.add("iterations", &mIterations, 5).range(0, 16).doc("a-trous levels (tap spacing 1, 2, 4, ...)");
-    p.add("feedbackTap", &mFeedbackTap, 0)
+    p.add("iterations", &mIterations, 4).range(0, 16).doc("a-trous levels (tap spacing 1, 2, 4, ...)");
+    p.add("feedbackTap", &mFeedbackTap, -1)
         .range(-1, 15)
         .doc("the output of this level (0-based) is next frame's colour history; -1: the unfiltered signal");
     p.add("alpha", &mAlpha, 0.2f).range(0.0, 1.0).doc("temporal blend factor of colour (at least 1 / history)");

@@ -56,8 +56,8 @@ private:
     // Parameters.
     bool mEnabled = true;
     bool mTemporal = true;
-    int mIterations = 5;
-    int mFeedbackTap = 0;
+    int mIterations = 4;
+    int mFeedbackTap = -1;
     float mAlpha = 0.2f;
     float mMomentsAlpha = 0.2f;
     float mPhiColor = 4.f;

@@ -490,9 +490,9 @@ double relMSE(const Texture& img, const std::vector<glm::dvec3>& ref) {
 }  // namespace
 
 // Static camera on the Cornell box at 1 spp: SVGF's error against a many-sample reference ends far below the error
-// of the 1 spp input. Without filtered feedback (feedbackTap -1) it keeps falling as history builds up; with the
-// default feedbackTap 0 it falls until the temporal variance takes over (frame 4) and then settles at a higher
-// level, since each frame re-filters the already filtered history (the over-blurring bias of feedback).
+// of the 1 spp input. Without filtered feedback (the default feedbackTap -1) it keeps falling as history builds up;
+// with feedbackTap 0 it falls until the temporal variance takes over (frame 4) and then settles at a higher level,
+// since each frame re-filters the already filtered history (the over-blurring bias of feedback).
 TEST(SVGF, ConvergesTowardsReferenceOnCornellBox) {
     const uint32_t W = 96, H = 96;
     auto scene = Scene::load(test::dataScene("cornell_box.gltf"));
@@ -519,8 +519,8 @@ TEST(SVGF, ConvergesTowardsReferenceOnCornellBox) {
                     ref[size_t(y) * W + x] += glm::dvec3(glm::vec3(c.at(x, y))) / double(frames);
         }
     }
-    auto defaults = sceneGraph(scene, W, H, nlohmann::json::object());
-    auto noFeedback = sceneGraph(scene, W, H, {{"feedbackTap", -1}});
+    auto defaults = sceneGraph(scene, W, H, {{"feedbackTap", 0}});
+    auto noFeedback = sceneGraph(scene, W, H, nlohmann::json::object());
     const int frames = 24;
     std::vector<double> errDefault, errNoFeedback;
     double inputError = 0.0;
@@ -532,7 +532,7 @@ TEST(SVGF, ConvergesTowardsReferenceOnCornellBox) {
         errNoFeedback.push_back(relMSE(*noFeedback->fieldTexture("SVGF.filtered"), ref));
     }
     std::printf(
-        "relMSE: 1 spp input %.4f; SVGF frame 1 / 4 / 8 / 24: defaults %.4f %.4f %.4f %.4f, feedbackTap -1 "
+        "relMSE: 1 spp input %.4f; SVGF frame 1 / 4 / 8 / 24: feedbackTap 0 %.4f %.4f %.4f %.4f, -1 (default) "
         "%.4f %.4f %.4f %.4f\n",
         inputError, errDefault[0], errDefault[3], errDefault[7], errDefault[23], errNoFeedback[0], errNoFeedback[3],
         errNoFeedback[7], errNoFeedback[23]);
@@ -709,8 +709,10 @@ TEST(SVGF, ScratchImagesAreWrittenInFullOnlyWhenObserved) {
     poisoned.poisonTransients = true;
     CompileOptions observed = poisoned;
     observed.observe = {"SVGF.estimate*", "SVGF.integrated*"};
-    auto skipping = sceneGraph(sceneA, W, H, nlohmann::json::object(), true, poisoned);
-    auto full = sceneGraph(sceneB, W, H, nlohmann::json::object(), true, observed);
+    // Filtered feedback (feedbackTap 0): with the unfiltered signal as history (-1) the estimate is read in full.
+    const nlohmann::json params = {{"feedbackTap", 0}};
+    auto skipping = sceneGraph(sceneA, W, H, params, true, poisoned);
+    auto full = sceneGraph(sceneB, W, H, params, true, observed);
     // The graph filters direct and indirect separately: the indirect signal's integrated image keeps what the
     // temporal stage wrote (the direct one's receives its filtered result later in the frame).
     Texture estimate, integrated;
