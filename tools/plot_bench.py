@@ -21,6 +21,7 @@ try:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 except ImportError:
     sys.stderr.write("plot_bench.py: matplotlib is missing (apt-get install python3-matplotlib)\n")
     sys.exit(2)
@@ -52,6 +53,7 @@ def plot_frames(data, title, output):
         style = dict(color="0.55", linewidth=0.8, linestyle="-") if r in data["brute_force"] else dict(linewidth=1.5)
         ax.plot(xs, ys, label="{}{}".format(label(r), lag), zorder=2, **style)
     ax.set_yscale("log")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("frame")
     ax.set_ylabel("RelMSE")
     ax.set_title("RelMSE per frame (every run starts from empty history at its first frame)")

@@ -48,14 +48,14 @@ Recovery recoverAfter(const std::vector<double>& errors, size_t event, size_t en
     r.settled =
         halfLength < 2 || std::abs(meanOf(errors, lastHalf, mid) - meanOf(errors, mid, end)) <= tolerance * r.steady;
     if (!r.settled) return r;
+    // Back for good: one past the last frame before the last half whose smoothed error is above the bound (the last
+    // half itself is flat, so a settled segment always recovers, at most at its last half's start).
     const size_t w = std::max<size_t>(1, std::min(window, halfLength));
     const double bound = (1.0 + tolerance) * r.steady;
-    for (size_t t = event; t + w <= end; ++t) {
-        if (meanOf(errors, t, t + w) <= bound) {
-            r.frames = t - event;
-            break;
-        }
-    }
+    size_t back = event;
+    for (size_t t = event; t < lastHalf; ++t)
+        if (meanOf(errors, t, t + w) > bound) back = t + 1;
+    r.frames = back - event;
     return r;
 }
 
@@ -248,7 +248,7 @@ nlohmann::json lagJson(const Lag& lag) {
 std::string lagMarkdown(const std::vector<std::pair<std::string, const Lag*>>& runs) {
     std::ostringstream s;
     s << fmt::format(
-        "Lag: frames until the RelMSE is back within {:.0f} % of its steady state (mean of {}-frame windows; "
+        "Lag: frames until the RelMSE is back, for good, within {:.0f} % of its steady state (mean of {}-frame windows; "
         "docs/BENCHMARKS.md, \"Lag\"). Disocclusion: the smallest age (frames since a pixel became visible) from "
         "which the RelMSE of pixels of that age stays within {:.0f} % of the {}+ pixels'.\n\n",
         100 * kLagTolerance, kLagWindow, 100 * kLagTolerance, kAgeCap);
@@ -263,7 +263,7 @@ std::string lagMarkdown(const std::vector<std::pair<std::string, const Lag*>>& r
                 steps += (steps.empty() ? "" : ", ") + fmt::format("{}: {}", r.frame, framesText(r));
         }
         const std::string ages =
-            !lag->ages ? "—" : (lag->agesToRecover ? std::to_string(*lag->agesToRecover) : std::string("n/a"));
+            !lag->ages ? "—" : (lag->agesToRecover ? ageLabel(*lag->agesToRecover) : std::string("n/a"));
         anyAges = anyAges || lag->ages.has_value();
         s << fmt::format("{} | {} | {} | {} |\n", label, cut, steps.empty() ? "—" : steps, ages);
     }

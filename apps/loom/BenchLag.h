@@ -32,8 +32,8 @@ inline constexpr float kAgeDepthTolerance = 0.05f;
 struct Recovery {
     uint64_t frame = 0;  ///< the event's frame
     std::string kind;    ///< "cut" or "light"
-    /// Frames after the event until the smoothed error is back within the tolerance of the steady state; empty when
-    /// the segment never settles (its last half is not flat).
+    /// Frames after the event until the smoothed error is back, for good, within the tolerance of the steady state;
+    /// empty when the segment never settles (its last half is not flat).
     std::optional<uint64_t> frames;
     double steady = 0;  ///< the steady state: mean error over the last half of the segment
     bool settled = false;
@@ -44,9 +44,10 @@ struct Recovery {
 /// `end` (the next event, or errors.size()). Steady state S = mean of errors over the segment's last half,
 /// [event + L/2, end) with L = end - event (L/2 rounded down). The segment is settled when the means of the two
 /// halves of that last half differ by at most tolerance * S. The smoothed error at t is the mean of errors over
-/// [t, t + w), w = min(window, length of the last half); frames to recover = the smallest k >= 0 with smoothed
-/// error at event + k <= (1 + tolerance) * S (being below the steady state is no lag). `frame`, `kind` are left
-/// for the caller. Requires event < end <= errors.size().
+/// [t, t + w), w = min(window, length of the last half); frames to recover = the smallest k >= 0 such that the
+/// smoothed error is <= (1 + tolerance) * S at every t in [event + k, event + L/2) (being below the steady state is
+/// no lag; a settled segment recovers by the start of its last half). `frame`, `kind` are left for the caller.
+/// Requires event < end <= errors.size().
 Recovery recoverAfter(const std::vector<double>& errors, size_t event, size_t end, double tolerance = kLagTolerance,
                       size_t window = kLagWindow);
 
@@ -87,7 +88,8 @@ void addAgeErrors(ImageView<const uint32_t> ages, ImageView<const glm::vec2> lin
                   ImageView<const glm::vec4> test, ImageView<const glm::vec4> ref, AgeBuckets& buckets);
 
 /// The smallest age a such that every non-empty bucket from a to kAgeCap - 1 has a mean error <= (1 + tolerance)
-/// times the kAgeCap+ bucket's; empty when that bucket is empty.
+/// times the kAgeCap+ bucket's (kAgeCap: not before the last bucket, "16+" in summary.md); empty when that bucket is
+/// empty.
 std::optional<uint32_t> agesToRecover(const AgeBuckets& buckets, double tolerance = kLagTolerance);
 
 /// Tracks ages over a run and collects the age buckets of its measured frames.

@@ -71,8 +71,9 @@ TEST(BenchLag, StepRecoversWhereItEnds) {
 }
 
 TEST(BenchLag, PureNoiseIsNoLagOnceSmoothed) {
-    // 1.3, 0.7, 1.3, ...: the steady state is 1; every 4-frame mean is exactly 1, so no lag. Unsmoothed, the first
-    // frame (1.3 > 1.1) counts as one frame of lag; being below the steady state (0.7) never does.
+    // 1.3, 0.7, 1.3, ...: the steady state is 1; every 4-frame mean is exactly 1, so no lag. Unsmoothed, every other
+    // frame is above the bound (1.3 > 1.1), the last of them before the last half (from frame 16 on) at frame 14: the
+    // noise would read as 15 frames of lag.
     std::vector<double> e(32);
     for (size_t t = 0; t < e.size(); ++t) e[t] = t % 2 ? 0.7 : 1.3;
     const bench::Recovery w4 = bench::recoverAfter(e, 0, e.size(), 0.1, 4);
@@ -82,11 +83,25 @@ TEST(BenchLag, PureNoiseIsNoLagOnceSmoothed) {
     EXPECT_EQ(*w4.frames, 0u);
     const bench::Recovery w1 = bench::recoverAfter(e, 0, e.size(), 0.1, 1);
     ASSERT_TRUE(w1.frames);
-    EXPECT_EQ(*w1.frames, 1u);
+    EXPECT_EQ(*w1.frames, 15u);
     // A constant curve (what a graph without history gives, noise aside) recovers at once.
     const bench::Recovery flat = bench::recoverAfter(std::vector<double>(10, 0.25), 0, 10);
     ASSERT_TRUE(flat.frames);
     EXPECT_EQ(*flat.frames, 0u);
+}
+
+TEST(BenchLag, RecoveryIsForGoodNotTheFirstLowFrame) {
+    // Low at the cut, a spike after it (a filter without history, then a short one): the lag ends after the spike.
+    std::vector<double> e(32, 1.0);
+    e[0] = 0.5;
+    e[1] = 3.0;
+    const bench::Recovery w1 = bench::recoverAfter(e, 0, e.size(), 0.1, 1);
+    ASSERT_TRUE(w1.frames);
+    EXPECT_EQ(*w1.frames, 2u);
+    // Window 4: the windows from 0 and 1 hold the spike (means 1.375 and 1.5), the one from 2 does not.
+    const bench::Recovery w4 = bench::recoverAfter(e, 0, e.size(), 0.1, 4);
+    ASSERT_TRUE(w4.frames);
+    EXPECT_EQ(*w4.frames, 2u);
 }
 
 TEST(BenchLag, CurvesThatNeverSettleHaveNoRecovery) {
