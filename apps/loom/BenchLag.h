@@ -21,8 +21,8 @@ namespace loom::cli::bench {
 
 /// "Back": within this fraction above the steady state.
 inline constexpr double kLagTolerance = 0.1;
-/// Frames of the forward moving mean that smooths the per-frame error before it is compared with the steady state.
-inline constexpr size_t kLagWindow = 4;
+/// Frames of the forward window that smooths the per-frame error before it is compared with the steady state.
+inline constexpr size_t kLagWindow = 5;
 /// Age buckets 0, 1, ..., kAgeCap - 1 and kAgeCap+ (the last bucket).
 inline constexpr uint32_t kAgeCap = 16;
 /// Relative depth tolerance of the age tracker's reprojection test (on top of one pixel's depth slope).
@@ -43,8 +43,9 @@ struct Recovery {
 /// Recovery after the event at index `event` of `errors` (per frame, consecutive), its segment ending before index
 /// `end` (the next event, or errors.size()). Steady state S = mean of errors over the segment's last half,
 /// [event + L/2, end) with L = end - event (L/2 rounded down). The segment is settled when the means of the two
-/// halves of that last half differ by at most tolerance * S. The smoothed error at t is the mean of errors over
-/// [t, t + w), w = min(window, length of the last half); frames to recover = the smallest k >= 0 such that the
+/// halves of that last half differ by at most 2 * tolerance * S. The smoothed error at t is the mean of errors over
+/// [t, t + w), w = min(window, length of the last half), without the largest of them when w >= 3 (one outlying
+/// frame, a firefly, is no lag); frames to recover = the smallest k >= 0 such that the
 /// smoothed error is <= (1 + tolerance) * S at every t in [event + k, event + L/2) (being below the steady state is
 /// no lag; a settled segment recovers by the start of its last half). `frame`, `kind` are left for the caller.
 /// Requires event < end <= errors.size().

@@ -45,11 +45,11 @@ TEST(BenchLag, ExponentialDecayRecoversWhenTheExcessFallsBelowTheTolerance) {
     EXPECT_EQ(w1.segmentFrames, 64u);
     ASSERT_TRUE(w1.frames);
     EXPECT_EQ(*w1.frames, 13u);
-    // Window 4: the mean excess over [t, t + 4) is 8 * 2^(-t/2) * (1 + 2^-0.5 + 2^-1 + 2^-1.5) / 4
-    // = 5.12 * 2^(-t/2): 0.113 at t = 11, 0.080 at t = 12.
-    const bench::Recovery w4 = bench::recoverAfter(e, 0, e.size(), 0.1, 4);
-    ASSERT_TRUE(w4.frames);
-    EXPECT_EQ(*w4.frames, 12u);
+    // Window 5: the largest frame of [t, t + 5) is t, so the excess is the mean over t + 1 .. t + 4:
+    // 8 * 2^(-t/2) * (2^-0.5 + 2^-1 + 2^-1.5 + 2^-2) / 4 = 3.62 * 2^(-t/2): 0.113 at t = 10, 0.080 at t = 11.
+    const bench::Recovery w5 = bench::recoverAfter(e, 0, e.size(), 0.1, 5);
+    ASSERT_TRUE(w5.frames);
+    EXPECT_EQ(*w5.frames, 11u);
     // Twice the half-life: 4 log2(80) = 25.3, so 26 (0.105 at 25, 0.088 at 26).
     const std::vector<double> slow = decay(128, 8.0, 4.0);
     const bench::Recovery s = bench::recoverAfter(slow, 0, slow.size(), 0.1, 1);
@@ -58,32 +58,39 @@ TEST(BenchLag, ExponentialDecayRecoversWhenTheExcessFallsBelowTheTolerance) {
 }
 
 TEST(BenchLag, StepRecoversWhereItEnds) {
-    // 5 for 6 frames, then 1: any window holding a 5 has a mean of at least (5 + 3) / 4 = 2 > 1.1.
+    // 5 for 6 frames, then 1. Unsmoothed: 6. Window 5: the window from 4 holds two 5s, (5 + 3) / 4 = 2 > 1.1 without
+    // its largest; the one from 5 holds one, dropped as an outlier: 5.
     std::vector<double> e(32, 1.0);
     for (size_t t = 0; t < 6; ++t) e[t] = 5.0;
-    for (size_t w : {size_t(1), size_t(4)}) {
-        const bench::Recovery r = bench::recoverAfter(e, 0, e.size(), 0.1, w);
-        EXPECT_TRUE(r.settled);
-        EXPECT_DOUBLE_EQ(r.steady, 1.0);
-        ASSERT_TRUE(r.frames) << "window " << w;
-        EXPECT_EQ(*r.frames, 6u) << "window " << w;
-    }
+    const bench::Recovery w1 = bench::recoverAfter(e, 0, e.size(), 0.1, 1);
+    EXPECT_TRUE(w1.settled);
+    EXPECT_DOUBLE_EQ(w1.steady, 1.0);
+    ASSERT_TRUE(w1.frames);
+    EXPECT_EQ(*w1.frames, 6u);
+    const bench::Recovery w5 = bench::recoverAfter(e, 0, e.size());
+    ASSERT_TRUE(w5.frames);
+    EXPECT_EQ(*w5.frames, 5u);
 }
 
 TEST(BenchLag, PureNoiseIsNoLagOnceSmoothed) {
-    // 1.3, 0.7, 1.3, ...: the steady state is 1; every 4-frame mean is exactly 1, so no lag. Unsmoothed, every other
-    // frame is above the bound (1.3 > 1.1), the last of them before the last half (from frame 16 on) at frame 14: the
-    // noise would read as 15 frames of lag.
+    // 1.3, 0.7, 1.3, ...: the steady state is 1; a 5-frame window without its largest is (2 * 1.3 + 2 * 0.7) / 4 = 1
+    // or (1.3 + 3 * 0.7) / 4 = 0.85, so no lag. Unsmoothed, every other frame is above the bound (1.3 > 1.1), the
+    // last of them before the last half (from frame 16 on) at frame 14: the noise would read as 15 frames of lag.
     std::vector<double> e(32);
     for (size_t t = 0; t < e.size(); ++t) e[t] = t % 2 ? 0.7 : 1.3;
-    const bench::Recovery w4 = bench::recoverAfter(e, 0, e.size(), 0.1, 4);
-    EXPECT_TRUE(w4.settled);
-    EXPECT_DOUBLE_EQ(w4.steady, 1.0);
-    ASSERT_TRUE(w4.frames);
-    EXPECT_EQ(*w4.frames, 0u);
+    const bench::Recovery w5 = bench::recoverAfter(e, 0, e.size());
+    EXPECT_TRUE(w5.settled);
+    EXPECT_DOUBLE_EQ(w5.steady, 1.0);
+    ASSERT_TRUE(w5.frames);
+    EXPECT_EQ(*w5.frames, 0u);
     const bench::Recovery w1 = bench::recoverAfter(e, 0, e.size(), 0.1, 1);
     ASSERT_TRUE(w1.frames);
     EXPECT_EQ(*w1.frames, 15u);
+    // One outlying frame (a firefly at frame 12) is no lag once smoothed; unsmoothed it would be 13 frames.
+    std::vector<double> firefly(32, 1.0);
+    firefly[12] = 10.0;
+    EXPECT_EQ(bench::recoverAfter(firefly, 0, firefly.size()).frames.value_or(99), 0u);
+    EXPECT_EQ(bench::recoverAfter(firefly, 0, firefly.size(), 0.1, 1).frames.value_or(99), 13u);
     // A constant curve (what a graph without history gives, noise aside) recovers at once.
     const bench::Recovery flat = bench::recoverAfter(std::vector<double>(10, 0.25), 0, 10);
     ASSERT_TRUE(flat.frames);
@@ -91,28 +98,29 @@ TEST(BenchLag, PureNoiseIsNoLagOnceSmoothed) {
 }
 
 TEST(BenchLag, RecoveryIsForGoodNotTheFirstLowFrame) {
-    // Low at the cut, a spike after it (a filter without history, then a short one): the lag ends after the spike.
+    // Low at the cut, two high frames after it (a filter without history, then a short one): the lag ends after them.
     std::vector<double> e(32, 1.0);
     e[0] = 0.5;
-    e[1] = 3.0;
+    e[1] = e[2] = 3.0;
     const bench::Recovery w1 = bench::recoverAfter(e, 0, e.size(), 0.1, 1);
     ASSERT_TRUE(w1.frames);
-    EXPECT_EQ(*w1.frames, 2u);
-    // Window 4: the windows from 0 and 1 hold the spike (means 1.375 and 1.5), the one from 2 does not.
-    const bench::Recovery w4 = bench::recoverAfter(e, 0, e.size(), 0.1, 4);
-    ASSERT_TRUE(w4.frames);
-    EXPECT_EQ(*w4.frames, 2u);
+    EXPECT_EQ(*w1.frames, 3u);
+    // Window 5 without its largest: 5.5 / 4 from 0 and 6 / 4 from 1 (one 3 left in each), 1 from 2 on.
+    const bench::Recovery w5 = bench::recoverAfter(e, 0, e.size());
+    ASSERT_TRUE(w5.frames);
+    EXPECT_EQ(*w5.frames, 2u);
 }
 
 TEST(BenchLag, CurvesThatNeverSettleHaveNoRecovery) {
-    // Growing error: the last half's halves have means 20.5 and 28.5, far more than 10 % of 24.5 apart.
+    // Growing error: the last half's halves have means 20.5 and 28.5, more than 20 % of 24.5 apart.
     std::vector<double> grow(32);
     for (size_t t = 0; t < grow.size(); ++t) grow[t] = 1.0 + double(t);
     const bench::Recovery g = bench::recoverAfter(grow, 0, grow.size());
     EXPECT_FALSE(g.settled);
     EXPECT_FALSE(g.frames);
-    // A decay too slow for the run (half-life 32 frames over 32 frames): still falling at the end.
-    const std::vector<double> slow = decay(32, 100.0, 32.0);
+    // A decay too slow for the run (half-life 16 frames over 32 frames): still falling at the end; the last half's
+    // halves have means of about 44 and 31, more than 20 % of their mean (38) apart.
+    const std::vector<double> slow = decay(32, 100.0, 16.0);
     const bench::Recovery s = bench::recoverAfter(slow, 0, slow.size());
     EXPECT_FALSE(s.settled);
     EXPECT_FALSE(s.frames);
@@ -120,23 +128,25 @@ TEST(BenchLag, CurvesThatNeverSettleHaveNoRecovery) {
 
 TEST(BenchLag, EventsSplitTheRunIntoSegmentsWithTheirOwnSteadyState) {
     // Frames 10..73: after the cut 5 for 6 frames then 1; a lighting step at frame 42 gives 3 for 4 frames, then 2.
+    // Window 5 without its largest: the cut recovers at 5 (StepRecoversWhereItEnds); after the step the window from
+    // 34 holds two 3s, (3 + 6) / 4 = 2.25 > 2.2, the one from 35 one: 3.
     std::vector<double> e(64, 1.0);
     for (size_t t = 0; t < 6; ++t) e[t] = 5.0;
     for (size_t t = 32; t < 64; ++t) e[t] = t < 36 ? 3.0 : 2.0;
     // Duplicates are merged; frames outside the run (before its first frame, after its end) are ignored.
-    const std::vector<bench::Recovery> r = bench::frameRecoveries(e, 10, {42, 5, 42, 200, 10}, 0.1, 4);
+    const std::vector<bench::Recovery> r = bench::frameRecoveries(e, 10, {42, 5, 42, 200, 10});
     ASSERT_EQ(r.size(), 2u);
     EXPECT_EQ(r[0].kind, "cut");
     EXPECT_EQ(r[0].frame, 10u);
     EXPECT_EQ(r[0].segmentFrames, 32u);
     EXPECT_DOUBLE_EQ(r[0].steady, 1.0);
     ASSERT_TRUE(r[0].frames);
-    EXPECT_EQ(*r[0].frames, 6u);
+    EXPECT_EQ(*r[0].frames, 5u);
     EXPECT_EQ(r[1].kind, "light");
     EXPECT_EQ(r[1].frame, 42u);
     EXPECT_DOUBLE_EQ(r[1].steady, 2.0);
     ASSERT_TRUE(r[1].frames);
-    EXPECT_EQ(*r[1].frames, 4u);
+    EXPECT_EQ(*r[1].frames, 3u);
     EXPECT_TRUE(bench::frameRecoveries({}, 0, {}).empty());
 }
 
