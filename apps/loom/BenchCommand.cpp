@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "BenchLag.h"
 #include "BenchReport.h"
 #include "CliUtil.h"
 #include "SceneSetup.h"
@@ -74,6 +75,7 @@ struct BenchOptions {
     std::string plotScript;
     std::string python = "/usr/bin/python3";
     unsigned threads = 0;
+    std::vector<uint32_t> eventFrames;  ///< --event-frame: lighting steps the lag figures measure the recovery after
 };
 
 /// One parameter sweep: Pass.param over values.
@@ -191,6 +193,7 @@ ChannelRef measuredField(const RenderGraph& graph, const std::string& measure, c
 struct PreparedGraph {
     std::unique_ptr<RenderGraph> graph;
     ChannelRef measured;
+    std::vector<std::string> ageFields;  ///< the G-buffer fields of the disocclusion lag (none without a G-buffer)
 };
 
 PreparedGraph prepareGraph(const GraphDesc& desc, const std::string& file, PluginRegistry& registry,
@@ -212,6 +215,8 @@ PreparedGraph prepareGraph(const GraphDesc& desc, const std::string& file, Plugi
                       "a Pass.field of every benchmarked graph", "", file);
     // Observing keeps the field allocated and readable after the frame; it never changes a rendered value.
     copts.observe = {p.measured.pass + "." + p.measured.channel};
+    p.ageFields = bench::ageGBufferFields(*p.graph);
+    copts.observe.insert(copts.observe.end(), p.ageFields.begin(), p.ageFields.end());
     p.graph->compile(copts);
     const Texture* tex = p.graph->fieldTexture(p.measured.str());
     if (!tex)
@@ -391,11 +396,13 @@ FrameMetrics measure(const Texture& test, const Texture& ref, const Texture* tes
 }
 
 /// Runs a prepared graph over frames [first, frames) from the start of its history, measuring every frame. With
-/// `flicker`, the frames from `warmup` on also go into a FlickerAccumulator whose value lands there.
+/// `flicker`, the frames from `warmup` on also go into a FlickerAccumulator whose value lands there. With `ages`, every
+/// frame's G-buffer goes to the age tracker of the disocclusion lag.
 std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::vector<Texture>& refs, uint64_t first,
                                      uint64_t frames, double fps, uint32_t width, uint32_t height,
                                      const std::string& label, uint64_t warmup = 0,
-                                     std::optional<double>* flicker = nullptr) {
+                                     std::optional<double>* flicker = nullptr,
+                                     bench::DisocclusionTracker* ages = nullptr) {
     std::vector<FrameResult> out;
     Texture prev;
     FlickerAccumulator flickerAcc;
@@ -415,6 +422,9 @@ std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::
         const bool hasPrev = i > first;
         r.metrics = measure(test, refs[i], hasPrev ? &prev : nullptr, hasPrev ? &refs[i - 1] : nullptr);
         if (flicker && i >= warmup) flickerAcc.add(test);
+        if (ages)
+            if (const auto g = bench::ageGBuffer(*p.graph, p.ageFields))
+                ages->addFrame(*g, test, refs[i], i == first, i >= warmup);
         if (prev.empty()) prev = Texture(test.width(), test.height(), test.format());
         prev.copyFrom(test);
         out.push_back(std::move(r));
@@ -423,6 +433,14 @@ std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::
     spdlog::info("{}: {} frame(s) in {:.1f} s", label, frames - first,
                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     return out;
+}
+
+/// The lag figures of a run (BenchLag.h) from its frames' RelMSE.
+bench::Lag runLag(const std::vector<FrameResult>& frames, const std::vector<uint32_t>& events,
+                  const bench::DisocclusionTracker* ages) {
+    std::vector<double> relMSE;
+    for (const FrameResult& f : frames) relMSE.push_back(f.metrics.relMSE);
+    return bench::runLag(relMSE, frames.empty() ? 0 : frames.front().frame, events, ages);
 }
 
 /// --brute-force-spp, or powers of two up to --brute-force-max (and at most a quarter of the reference's spp, so
@@ -510,14 +528,15 @@ std::string checkPlotter(const BenchOptions& o) {
 void runPlot(const BenchOptions& o, const std::string& script, const fs::path& out) {
     const std::string cmd = shellQuoted(o.python) + " " + shellQuoted(script) + " " +
                             shellQuoted((out / "results.json").string()) + " " +
-                            shellQuoted((out / "plot.png").string());
+                            shellQuoted((out / "plot.png").string()) + " --frames-output " +
+                            shellQuoted((out / "plot_frames.png").string());
     const int status = std::system(cmd.c_str());
     if (status != 0)
         throw Error(
             {ErrorKind::Runtime, script, "--plot",
              fmt::format("the plot script failed (exit status {})", WIFEXITED(status) ? WEXITSTATUS(status) : -1), "",
              "run it by hand: " + cmd});
-    spdlog::info("plot written to {}", (out / "plot.png").string());
+    spdlog::info("plots written to {} and {}", (out / "plot.png").string(), (out / "plot_frames.png").string());
 }
 
 void runBench(BenchOptions o) {
@@ -532,6 +551,10 @@ void runBench(BenchOptions o) {
                       fmt::format("{} frame(s) leave nothing to measure after {} warm-up frame(s)", o.frames, o.warmup),
                       "more frames than --warmup", fmt::format("use --frames {} or lower --warmup", o.warmup + 16));
     checkFpsAndThreads(o.fps, o.threads);
+    for (uint32_t e : o.eventFrames)
+        if (e == 0 || e >= o.frames)
+            throwBadInput("--event-frame", fmt::format("frame {} is not inside the sequence", e),
+                          fmt::format("a frame in 1..{} (frame 0 is the camera cut, always measured)", o.frames - 1));
     if (o.referenceSpp == 0 || o.referenceSpp > (1u << 20))
         throwBadInput("--reference-spp", "reference sample count out of range", "1 to 1048576");
     if (o.graphs.empty()) throwBadInput("--graph", "no graph to benchmark", "one or more --graph options");
@@ -553,7 +576,8 @@ void runBench(BenchOptions o) {
     checkInputsNotOverwritten(
         o.out, inputs,
         [](const std::string& name) {
-            return name == "results.csv" || name == "results.json" || name == "summary.md" || name == "plot.png";
+            return name == "results.csv" || name == "results.json" || name == "summary.md" || name == "plot.png" ||
+                   name == "plot_frames.png";
         },
         "--out");
     const std::string plotScript = o.plot ? checkPlotter(o) : std::string();
@@ -573,6 +597,9 @@ void runBench(BenchOptions o) {
     info.frames = o.frames;
     info.warmup = o.warmup;
     info.fps = o.fps;
+    info.eventFrames = o.eventFrames;
+    std::sort(info.eventFrames.begin(), info.eventFrames.end());
+    info.eventFrames.erase(std::unique(info.eventFrames.begin(), info.eventFrames.end()), info.eventFrames.end());
     info.set = o.set;
     info.referenceGraph = fs::path(o.referenceGraph).filename().string();
     info.referenceSpp = o.referenceSpp;
@@ -612,9 +639,12 @@ void runBench(BenchOptions o) {
         r.params = v.label();
         r.measured = p.measured.str();
         std::optional<double> flicker;
+        bench::DisocclusionTracker ages;
+        bench::DisocclusionTracker* tracked = p.ageFields.empty() ? nullptr : &ages;
         r.frames = runSequence(p, *scene, refs, 0, o.frames, o.fps, width, height,
                                r.graph + (r.params.empty() ? "" : " " + r.params), o.warmup,
-                               info.referenceShared ? &flicker : nullptr);
+                               info.referenceShared ? &flicker : nullptr, tracked);
+        r.lag = runLag(r.frames, info.eventFrames, tracked);
         r.summary = bench::summarize(r.frames, o.warmup);
         r.summary.flicker = flicker;
         results.push_back(std::move(r));
@@ -637,6 +667,7 @@ void runBench(BenchOptions o) {
         r.frames =
             runSequence(brute, *scene, refs, bruteFirst, o.frames, o.fps, width, height,
                         fmt::format("brute force {} spp", n), o.warmup, info.referenceShared ? &flicker : nullptr);
+        r.lag = runLag(r.frames, info.eventFrames, nullptr);
         r.summary = bench::summarize(r.frames, o.warmup);
         r.summary.flicker = flicker;
         curve.push_back(std::move(r));
@@ -682,7 +713,11 @@ void addBenchCommand(CLI::App& app) {
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_option("--cache", o->cache, "reference cache folder (default $LOOM_CACHE, else ~/.cache/loom/references)");
     cmd->add_option("--out,-o", o->out, "output folder")->capture_default_str();
-    cmd->add_flag("--plot", o->plot, "also write plot.png (error against time) with tools/plot_bench.py");
+    cmd->add_option("--event-frame", o->eventFrames,
+                    "a lighting step at this frame: the lag figures measure the recovery after it (repeatable)");
+    cmd->add_flag("--plot", o->plot,
+                  "also write plot.png (error against time) and plot_frames.png (error per frame) with "
+                  "tools/plot_bench.py");
     cmd->add_option("--plot-script", o->plotScript, "plot script (default tools/plot_bench.py of the source tree)");
     cmd->add_option("--python", o->python, "Python interpreter for --plot")->capture_default_str();
     cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();

@@ -97,6 +97,7 @@ nlohmann::json runJson(const Run& r, bool withSpeedup) {
                           {"non_finite", s.nonFinite}}},
                         {"frames", std::move(frames)}};
     if (r.bruteForce) j["spp"] = r.spp;
+    j["lag"] = lagJson(r.lag);
     if (withSpeedup) {
         j["speedup_relmse"] = speedupJson(r.speedupRelMSE);
         j["speedup_flip"] = speedupJson(r.speedupFlip);
@@ -104,10 +105,16 @@ nlohmann::json runJson(const Run& r, bool withSpeedup) {
     return j;
 }
 
-std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& curve, uint64_t warmup) {
+std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& curve, uint64_t warmup,
+                    const std::vector<uint32_t>& events) {
     std::ostringstream s;
     s << "kind,graph,params,measured,frame,time,warmup,total_ms,relmse,smape,psnr,ssim,flip,temporal,non_finite,"
-         "pass_ms\n";
+         "event,pass_ms\n";
+    // "cut" at a run's first frame, "light" at a lighting step.
+    auto eventName = [&](const Run& r, uint64_t frame) {
+        if (frame == r.frames.front().frame) return "cut";
+        return std::find(events.begin(), events.end(), frame) != events.end() ? "light" : "";
+    };
     auto rows = [&](const std::vector<Run>& runs) {
         for (const Run& r : runs) {
             for (const FrameResult& f : r.frames) {
@@ -117,7 +124,7 @@ std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& cu
                   << (f.frame < warmup ? 1 : 0) << ',' << number(f.totalMs) << ',' << number(m.relMSE) << ','
                   << number(m.smape) << ',' << number(m.psnr) << ',' << number(m.ssim) << ',' << number(m.flip) << ','
                   << (m.temporal ? number(*m.temporal) : std::string()) << ',' << m.nonFinite << ','
-                  << csvField(passList(f.passMs, ";", 4)) << '\n';
+                  << eventName(r, f.frame) << ',' << csvField(passList(f.passMs, ";", 4)) << '\n';
             }
         }
     };
@@ -160,6 +167,11 @@ std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& varia
     for (const Run& r : variants) row(r, true);
     for (const Run& r : curve) row(r, false);
     s << "\n";
+    std::vector<std::pair<std::string, const Lag*>> lags;
+    for (const auto* runs : {&variants, &curve})
+        for (const Run& r : *runs)
+            lags.emplace_back(fmt::format("| {} | {}", r.graph, r.params.empty() ? "—" : r.params), &r.lag);
+    s << lagMarkdown(lags);
     return s.str();
 }
 
@@ -264,7 +276,7 @@ Speedup equalErrorSpeedup(const std::vector<Run>& curve, double error, double ms
 
 void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const std::vector<Run>& variants,
                   const std::vector<Run>& curve) {
-    writeFileAtomic(dir / "results.csv", csvText(variants, curve, info.warmup));
+    writeFileAtomic(dir / "results.csv", csvText(variants, curve, info.warmup, info.eventFrames));
 
     nlohmann::json j;
     j["loom_bench"] = 1;
@@ -278,6 +290,7 @@ void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const
     j["frames"] = info.frames;
     j["warmup"] = info.warmup;
     j["fps"] = info.fps;
+    j["event_frames"] = info.eventFrames;
     j["set"] = info.set;
     j["threads"] = info.threads;
     j["load_before"] = info.loadBefore;

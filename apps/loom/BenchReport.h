@@ -8,6 +8,8 @@
 #include <utility>
 #include <vector>
 
+#include "BenchLag.h"
+
 namespace loom::cli::bench {
 
 /// The metrics of one frame against its reference (docs/METRICS.md). `temporal` is empty on the first frame of a
@@ -62,6 +64,7 @@ struct Run {
     std::vector<FrameResult> frames;
     Summary summary;
     Speedup speedupRelMSE, speedupFlip;
+    Lag lag;  ///< frames to recover after the cut, lighting steps and disocclusion (BenchLag.h)
 };
 
 /// Everything about the run that is not a result: written at the top of every output.
@@ -74,6 +77,9 @@ struct BenchInfo {
     uint32_t width = 0, height = 0;
     uint64_t frames = 0, warmup = 0;
     double fps = 0;
+    /// Frames of lighting steps (--event-frame, and any the scene defines): the lag figures measure the recovery
+    /// after each, and the per-frame plot marks them.
+    std::vector<uint32_t> eventFrames;
     std::vector<std::string> set;  ///< --set assignments applied to every graph
     std::string referenceGraph;
     uint32_t referenceSpp = 0;
