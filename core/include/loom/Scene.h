@@ -155,9 +155,9 @@ struct AnimationSampler {
 
 struct AnimationChannel {
     uint32_t sampler = 0;
-    int node = -1;    ///< the node of a TRS path
-    int target = -1;  ///< light paths: the material (Emissive*) or the file's KHR_lights_punctual light (Light*)
+    int node = -1;  ///< the node of a TRS path
     AnimPath path = AnimPath::Translation;
+    int target = -1;  ///< light paths: the material (Emissive*) or the file's KHR_lights_punctual light (Light*)
 };
 
 struct Animation {
