@@ -17,6 +17,8 @@ One bufferView per accessor, tightly packed (no byteStride), 4-byte aligned.
 Scenes:
   cornell_box.gltf      classic Cornell box, two boxes, emissive ceiling light
   cornell_dynamic.gltf  same room, animated sphere / box / camera
+  cornell_lightstep.gltf  the Cornell box whose ceiling light steps between full
+                        and a quarter intensity (KHR_animation_pointer)
   materials.gltf        textures, normal maps (with and without TANGENT),
                         roughness/metallic sweep, punctual lights, emissive
 """
@@ -43,6 +45,7 @@ LINEAR_FILTER, REPEAT = 9729, 10497
 
 EXT_EMISSIVE = "KHR_materials_emissive_strength"
 EXT_LIGHTS = "KHR_lights_punctual"
+EXT_POINTER = "KHR_animation_pointer"
 
 
 # ----------------------------------------------------------------------------
@@ -528,6 +531,20 @@ class Gltf:
             anim["channels"].append({"sampler": len(anim["samplers"]) - 1, "target": {"node": node, "path": path}})
         return self._list("animations", anim)
 
+    def pointer_animation(self, name, channels):
+        """KHR_animation_pointer channels: list of (pointer, output type, times, values, interpolation)."""
+        self.use_extension(EXT_POINTER)
+        anim = {"name": name, "channels": [], "samplers": []}
+        for pointer, out_type, times, values, interp in channels:
+            assert len(values) == (3 if interp == "CUBICSPLINE" else 1) * len(times)
+            assert all(b > a for a, b in zip(times, times[1:]))
+            inp = self.accessor(times, FLOAT, "SCALAR", minmax=True)
+            out = self.accessor(values, FLOAT, out_type)
+            anim["samplers"].append({"input": inp, "output": out, "interpolation": interp})
+            anim["channels"].append({"sampler": len(anim["samplers"]) - 1, "target": {
+                "path": "pointer", "extensions": {EXT_POINTER: {"pointer": pointer}}}})
+        return self._list("animations", anim)
+
     def serialize(self):
         d = dict(self.d)
         d["buffers"] = [{"name": "embedded", "byteLength": len(self.bin),
@@ -708,6 +725,25 @@ def make_cornell_dynamic():
     return g
 
 
+# The light steps between frames (k + 0.5) / 60 and (k + 1) / 60 at 60 fps, so no frame time lands on a key: the first
+# frame with the new intensity is frame k + 1 for a step at (k + 0.5) / 60 s (21, 41, 61, 81).
+LIGHTSTEP_FPS = 60.0
+LIGHTSTEP_FRAMES = (20.5, 40.5, 60.5, 80.5)
+LIGHTSTEP_LOW = 0.25  # the dim state, as a fraction of the full strength
+
+
+def make_cornell_lightstep():
+    g = make_cornell_box()
+    g.d["scenes"][0]["name"] = "CornellLightStep"
+    light = [m["name"] for m in g.d["materials"]].index("CeilingLightEmitter")
+    full = CORNELL_LIGHT_STRENGTH
+    times = [0.0] + [f / LIGHTSTEP_FPS for f in LIGHTSTEP_FRAMES]
+    values = [full if k % 2 == 0 else LIGHTSTEP_LOW * full for k in range(len(times))]
+    pointer = "/materials/%d/extensions/%s/emissiveStrength" % (light, EXT_EMISSIVE)
+    g.pointer_animation("LightStep", [(pointer, "SCALAR", times, values, "STEP")])
+    return g
+
+
 GOLD = (1.0, 0.766, 0.336)
 BLUE_PLASTIC = (0.1, 0.25, 0.8)
 SPHERE_ROUGHNESS = (0.05, 0.25, 0.5, 0.75, 1.0)
@@ -800,6 +836,7 @@ def make_materials():
 SCENES = (
     ("cornell_box.gltf", make_cornell_box),
     ("cornell_dynamic.gltf", make_cornell_dynamic),
+    ("cornell_lightstep.gltf", make_cornell_lightstep),
     ("materials.gltf", make_materials),
 )
 
@@ -975,8 +1012,17 @@ def validate(path):
             where = "animation %d channel %d" % (ai, ci)
             s = anim["samplers"][ch["sampler"]]
             tgt = ch["target"]
-            check(0 <= tgt["node"] < len(nodes) and tgt["path"] in ("translation", "rotation", "scale"), where + ": target")
             ia, oa = d["accessors"][s["input"]], d["accessors"][s["output"]]
+            if tgt["path"] == "pointer":
+                check("node" not in tgt and EXT_POINTER in used, where + ": pointer target")
+                pointer = tgt["extensions"][EXT_POINTER]["pointer"]
+                m = re.fullmatch(r"/materials/(\d+)/extensions/%s/emissiveStrength" % EXT_EMISSIVE, pointer)
+                check(m is not None and int(m.group(1)) < len(d.get("materials", [])), where + ": pointer " + pointer)
+                check(oa["type"] == "SCALAR" and oa["componentType"] == FLOAT, where + ": output type")
+                check(s["interpolation"] == "STEP" and oa["count"] == ia["count"], where + ": output count")
+                check(all(v > 0 for v in read(s["output"])), where + ": the light must emit at all times")
+                continue
+            check(0 <= tgt["node"] < len(nodes) and tgt["path"] in ("translation", "rotation", "scale"), where + ": target")
             check("min" in ia and "max" in ia and ia["type"] == "SCALAR" and ia["componentType"] == FLOAT, where + ": input accessor")
             times = read(s["input"])
             check(times[0] >= 0 and all(b > a for a, b in zip(times, times[1:])), where + ": times not increasing")

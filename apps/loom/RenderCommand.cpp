@@ -113,7 +113,8 @@ void runRender(const RenderOptions& o) {
     if (o.hold) statsJson["heldFrame"] = {{"frame", o.startFrame}, {"time", heldTime}, {"iterations", o.frames}};
     uint64_t written = 0;
     // Frames after the first on which a pass restarted an accumulation (a pass's "reset" counter: AccumulatePass
-    // restarts when the scene or the camera moves), so a reference that cannot converge does not pass silently.
+    // restarts when the scene or the camera moves or an animated light changes), so a reference that cannot converge
+    // does not pass silently.
     uint64_t restarts = 0;
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames; ++i) {
@@ -151,10 +152,11 @@ void runRender(const RenderOptions& o) {
     }
     if (!o.statsFile.empty()) writeFileAtomic(o.statsFile, statsJson.dump(2) + "\n");
     if (restarts > 0)
-        spdlog::warn("an accumulation restarted on {} of the {} frames after the first, because the scene or the "
-                     "camera moved: the images do not converge. To converge one frame K of a moving scene, hold it: "
-                     "--start-frame K --frames N --hold",
-                     restarts, o.frames - 1);
+        spdlog::warn(
+            "an accumulation restarted on {} of the {} frames after the first, because the scene or the "
+            "camera moved or an animated light changed: the images do not converge. To converge one frame "
+            "K of a moving scene, hold it: --start-frame K --frames N --hold",
+            restarts, o.frames - 1);
 
     if (!o.quiet) {
         if (o.hold)

@@ -63,6 +63,8 @@ void runSceneInfo(const SceneInfoOptions& o) {
                      glm::degrees(cam.fovY)));
     line("animations", fmt::format("{}, length {:.3f} s{}", scene->animations.size(), scene->animationLength(),
                                    scene->hasMotion() ? "" : " (static scene)"));
+    if (const std::vector<float> steps = scene->lightStepTimes(); !steps.empty())
+        line("light steps", fmt::format("at {:.4g} s", fmt::join(steps, ", ")));
     if (b.valid())
         line(fmt::format("bounds at t={:.3g}", o.time),
              fmt::format("{} to {}, size {}", vec(b.lo), vec(b.hi), vec(b.extent())));

@@ -47,7 +47,7 @@ glm::vec4 neutralValue(AnimPath path) {
             return glm::vec4(0.f, 0.f, 0.f, 1.f);
         case AnimPath::Scale:
             return glm::vec4(1.f, 1.f, 1.f, 0.f);
-        case AnimPath::Translation:
+        default:
             break;
     }
     return glm::vec4(0.f);
@@ -113,12 +113,37 @@ float Animation::duration() const {
 
 namespace {
 
-/// Writes every animation's value at time t into the targeted nodes' TRS. All
-/// animations play together, each clamped to its own key range.
-void applyAnimations(std::vector<Animation>& animations, std::vector<Node>& nodes, float t) {
+/// Writes every animation's value at time t into its target: the nodes' TRS, the materials' emission and the
+/// punctual lights' intensity and colour. All animations play together, each clamped to its own key range.
+void applyAnimations(const std::vector<Animation>& animations, std::vector<Node>& nodes,
+                     std::vector<Material>& materials, std::vector<Light>& lights, float t) {
+    bool emissionAnimated = false;
     for (const Animation& anim : animations) {
         for (const AnimationChannel& ch : anim.channels) {
-            if (ch.node < 0 || size_t(ch.node) >= nodes.size() || ch.sampler >= anim.samplers.size()) continue;
+            if (ch.sampler >= anim.samplers.size()) continue;
+            if (animatesLight(ch.path)) {
+                // A cubic spline may overshoot below 0 between keys the loader checked; light is never negative.
+                const glm::vec4 v = glm::max(anim.samplers[ch.sampler].sample(t, ch.path), glm::vec4(0.f));
+                const bool material = ch.path == AnimPath::EmissiveColor || ch.path == AnimPath::EmissiveStrength;
+                if (material && ch.target >= 0 && size_t(ch.target) < materials.size()) {
+                    Material& m = materials[size_t(ch.target)];
+                    if (ch.path == AnimPath::EmissiveColor)
+                        m.emissiveColor = glm::vec3(v);
+                    else
+                        m.emissiveStrength = v.x;
+                    emissionAnimated = true;
+                }
+                // Every node that places the file's light shows the same light.
+                for (Light& light : lights) {
+                    if (material || light.source != ch.target) continue;
+                    if (ch.path == AnimPath::LightIntensity)
+                        light.intensity = v.x;
+                    else
+                        light.color = glm::vec3(v);
+                }
+                continue;
+            }
+            if (ch.node < 0 || size_t(ch.node) >= nodes.size()) continue;
             Node& node = nodes[size_t(ch.node)];
             if (node.hasMatrix) continue;  // glTF forbids animating matrix nodes; the loader warned
             const glm::vec4 v = anim.samplers[ch.sampler].sample(t, ch.path);
@@ -132,9 +157,30 @@ void applyAnimations(std::vector<Animation>& animations, std::vector<Node>& node
                 case AnimPath::Scale:
                     node.scale = glm::vec3(v);
                     break;
+                default:
+                    break;
             }
         }
     }
+    if (!emissionAnimated) return;
+    // Only materials an animation targets are recomputed: the others keep emissiveFactor as loaded or set in code.
+    for (const Animation& anim : animations)
+        for (const AnimationChannel& ch : anim.channels)
+            if ((ch.path == AnimPath::EmissiveColor || ch.path == AnimPath::EmissiveStrength) && ch.target >= 0 &&
+                size_t(ch.target) < materials.size()) {
+                Material& m = materials[size_t(ch.target)];
+                m.emissiveFactor = m.emissiveColor * m.emissiveStrength;
+            }
+}
+
+/// Whether an animation channel drives material `index`'s emission.
+bool emissionAnimated(const std::vector<Animation>& animations, size_t index) {
+    for (const Animation& anim : animations)
+        for (const AnimationChannel& ch : anim.channels)
+            if ((ch.path == AnimPath::EmissiveColor || ch.path == AnimPath::EmissiveStrength) &&
+                ch.target == int(index))
+                return true;
+    return false;
 }
 
 /// The first node that carries camera `cam`, or -1.
@@ -301,7 +347,7 @@ void Scene::finalize() {
     }
 
     // The rest pose is the pose at time 0, so bounds and the default camera see the first frame.
-    applyAnimations(animations, nodes, 0.f);
+    applyAnimations(animations, nodes, materials, lights, 0.f);
     updateWorldTransforms();
     for (Instance& inst : instances) inst.world = inst.prevWorld = mNodeWorld[inst.node];
     for (size_t i = 0; i < nodes.size(); ++i) {
@@ -314,7 +360,7 @@ void Scene::finalize() {
     emissiveTriangles.clear();
     for (size_t i = 0; i < instances.size(); ++i) {
         const Mesh& mesh = meshes[instances[i].mesh];
-        if (!materials[mesh.material].isEmissive()) continue;
+        if (!materials[mesh.material].isEmissive() && !emissionAnimated(animations, mesh.material)) continue;
         for (uint32_t t = 0; t < mesh.triangleCount(); ++t) emissiveTriangles.push_back({uint32_t(i), t});
     }
 
@@ -352,12 +398,17 @@ void Scene::finalize() {
 
     mRayScene = std::make_unique<RayScene>(*this);
     mUpdated = false;
+    mLightingChanged = false;
+    mLightState = lightState();
     rebuildView();
 }
 
 void Scene::update(double time) {
-    applyAnimations(animations, nodes, float(time));
+    applyAnimations(animations, nodes, materials, lights, float(time));
     updateWorldTransforms();
+    std::vector<float> light = lightState();
+    mLightingChanged = mUpdated && light != mLightState;
+    mLightState = std::move(light);
 
     for (Instance& inst : instances) {
         const glm::mat4& world = mNodeWorld[inst.node];
@@ -410,6 +461,7 @@ void Scene::update(double time) {
 }
 
 void Scene::cutMotion() {
+    mLightingChanged = false;
     for (Instance& inst : instances) inst.prevWorld = inst.world;
     for (Camera& cam : cameras) cam.prevWorld = cam.world;
     camera.cut();
@@ -452,6 +504,39 @@ bool Scene::hasMotion() const {
     for (const Animation& a : animations)
         if (!a.channels.empty()) return true;
     return false;
+}
+
+std::vector<float> Scene::lightState() const {
+    std::vector<float> state;
+    const bool animated = std::any_of(animations.begin(), animations.end(), [](const Animation& a) {
+        return std::any_of(a.channels.begin(), a.channels.end(),
+                           [](const AnimationChannel& ch) { return animatesLight(ch.path); });
+    });
+    if (!animated) return state;
+    for (const Material& m : materials)
+        state.insert(state.end(), {m.emissiveFactor.x, m.emissiveFactor.y, m.emissiveFactor.z});
+    for (const Light& l : lights) state.insert(state.end(), {l.color.x, l.color.y, l.color.z, l.intensity});
+    return state;
+}
+
+std::vector<float> Scene::lightStepTimes() const {
+    std::vector<float> steps;
+    for (const Animation& anim : animations) {
+        for (const AnimationChannel& ch : anim.channels) {
+            if (!animatesLight(ch.path) || ch.sampler >= anim.samplers.size()) continue;
+            const AnimationSampler& s = anim.samplers[ch.sampler];
+            const bool cubic = s.interpolation == Interpolation::CubicSpline;
+            if (s.values.size() < s.times.size() * (cubic ? 3 : 1)) continue;
+            const auto value = [&](size_t k) { return cubic ? s.values[3 * k + 1] : s.values[k]; };
+            for (size_t k = 1; k < s.times.size(); ++k) {
+                const bool jumps = s.interpolation == Interpolation::Step || s.times[k] == s.times[k - 1];
+                if (jumps && value(k) != value(k - 1)) steps.push_back(s.times[k]);
+            }
+        }
+    }
+    std::sort(steps.begin(), steps.end());
+    steps.erase(std::unique(steps.begin(), steps.end()), steps.end());
+    return steps;
 }
 
 bool Scene::emitsLight() const {

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
+#include <set>
 #include <type_traits>
 
 #include "loom/Error.h"
@@ -31,9 +32,15 @@ namespace fs = std::filesystem;
 
 /// Required extensions Loom implements. KHR_mesh_quantization only widens the
 /// accessor types allowed for attributes, which the accessor reader handles.
-const std::vector<std::string> kSupportedRequired = {
-    "KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_mesh_quantization",
-    "KHR_texture_transform",           "KHR_materials_ior",   "KHR_materials_specular"};
+const std::vector<std::string> kSupportedRequired = {"KHR_materials_emissive_strength",
+                                                     "KHR_lights_punctual",
+                                                     "KHR_mesh_quantization",
+                                                     "KHR_texture_transform",
+                                                     "KHR_materials_ior",
+                                                     "KHR_materials_specular",
+                                                     "KHR_animation_pointer"};
+
+constexpr const char* kAnimationPointer = "KHR_animation_pointer";
 
 std::string labelOf(const char* kind, size_t index, const std::string& name) {
     std::string s = std::string(kind) + "[" + std::to_string(index) + "]";
@@ -50,6 +57,108 @@ void checkRequiredExtensions(const std::vector<std::string>& required, const std
         throwBadInput("extensionsRequired", "the file requires extension '" + ext + "', which Loom does not support",
                       "only these required extensions: " + join(kSupportedRequired), hint, file);
     }
+}
+
+// ---------------------------------------------------------------------------
+// KHR_animation_pointer
+
+/// An animation channel whose target path is "pointer", as the JSON gives it. tinygltf 2.7 drops channels without a
+/// target node (and later versions keep them without their pointer's meaning), so Loom reads these from the JSON.
+struct PointerChannel {
+    size_t animation = 0, channel = 0;
+    int64_t sampler = -1;                // -1: absent or not an integer
+    std::optional<std::string> pointer;  // absent or not a string: nullopt
+};
+
+/// The pointer channels of a glTF JSON text (one already checked to parse). The text is parsed again only when it
+/// names a pointer at all.
+std::vector<PointerChannel> readPointerChannels(std::string_view text) {
+    std::vector<PointerChannel> out;
+    if (text.find("\"pointer\"") == std::string_view::npos) return out;
+    const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+    if (!j.is_object() || !j.contains("animations") || !j["animations"].is_array()) return out;
+    const auto& animations = j["animations"];
+    for (size_t a = 0; a < animations.size(); ++a) {
+        if (!animations[a].is_object() || !animations[a].contains("channels") || !animations[a]["channels"].is_array())
+            continue;
+        const auto& channels = animations[a]["channels"];
+        for (size_t c = 0; c < channels.size(); ++c) {
+            const auto& ch = channels[c];
+            if (!ch.is_object() || !ch.contains("target") || !ch["target"].is_object()) continue;
+            const auto& target = ch["target"];
+            if (!target.contains("path") || target["path"] != "pointer") continue;
+            PointerChannel pc;
+            pc.animation = a;
+            pc.channel = c;
+            if (ch.contains("sampler") && ch["sampler"].is_number_integer()) pc.sampler = ch["sampler"].get<int64_t>();
+            const nlohmann::json* ext = nullptr;
+            if (target.contains("extensions") && target["extensions"].is_object() &&
+                target["extensions"].contains(kAnimationPointer))
+                ext = &target["extensions"][kAnimationPointer];
+            if (ext && ext->is_object() && ext->contains("pointer") && (*ext)["pointer"].is_string())
+                pc.pointer = (*ext)["pointer"].get<std::string>();
+            out.push_back(std::move(pc));
+        }
+    }
+    return out;
+}
+
+/// What a supported JSON pointer animates: the path, the kind of object and the object's index token.
+struct PointerTarget {
+    AnimPath path = AnimPath::Translation;
+    const char* kind = "";  // "nodes", "materials" or "KHR_lights_punctual lights"
+    std::string index;      // the reference token that names the object (checked by the caller)
+};
+
+/// The pointer's target when Loom animates it: node TRS, a material's emissiveFactor or emissiveStrength, a punctual
+/// light's intensity or color. JSON pointers are RFC 6901: "/"-separated tokens with ~1 for "/" and ~0 for "~".
+std::optional<PointerTarget> supportedPointer(const std::string& pointer) {
+    if (pointer.empty() || pointer[0] != '/') return std::nullopt;
+    std::vector<std::string> tokens;
+    for (size_t at = 1;;) {
+        const size_t end = pointer.find('/', at);
+        std::string token = pointer.substr(at, end == std::string::npos ? std::string::npos : end - at);
+        for (size_t k = 0; (k = token.find('~', k)) != std::string::npos; ++k)
+            if (k + 1 < token.size() && (token[k + 1] == '0' || token[k + 1] == '1'))
+                token.replace(k, 2, token[k + 1] == '0' ? "~" : "/");
+        tokens.push_back(std::move(token));
+        if (end == std::string::npos) break;
+        at = end + 1;
+    }
+    const auto is = [&](std::initializer_list<const char*> pattern) {
+        if (tokens.size() != pattern.size()) return false;
+        size_t k = 0;
+        for (const char* p : pattern) {
+            if (p && tokens[k] != p) return false;
+            ++k;
+        }
+        return true;
+    };
+    PointerTarget t;
+    if (is({"nodes", nullptr, "translation"}) || is({"nodes", nullptr, "rotation"}) ||
+        is({"nodes", nullptr, "scale"})) {
+        t.kind = "nodes";
+        t.path = tokens[2] == "translation" ? AnimPath::Translation
+                 : tokens[2] == "rotation"  ? AnimPath::Rotation
+                                            : AnimPath::Scale;
+        t.index = tokens[1];
+    } else if (is({"materials", nullptr, "emissiveFactor"})) {
+        t.kind = "materials";
+        t.path = AnimPath::EmissiveColor;
+        t.index = tokens[1];
+    } else if (is({"materials", nullptr, "extensions", "KHR_materials_emissive_strength", "emissiveStrength"})) {
+        t.kind = "materials";
+        t.path = AnimPath::EmissiveStrength;
+        t.index = tokens[1];
+    } else if (is({"extensions", "KHR_lights_punctual", "lights", nullptr, "intensity"}) ||
+               is({"extensions", "KHR_lights_punctual", "lights", nullptr, "color"})) {
+        t.kind = "KHR_lights_punctual lights";
+        t.path = tokens[4] == "intensity" ? AnimPath::LightIntensity : AnimPath::LightColor;
+        t.index = tokens[3];
+    } else {
+        return std::nullopt;
+    }
+    return t;
 }
 
 // ---------------------------------------------------------------------------
@@ -458,8 +567,13 @@ const char* typeName(int type) {
 class Importer {
 public:
     Importer(const tinygltf::Model& model, const ImageLoadContext& images, Scene& scene,
-             const SceneLoadOptions& options)
-        : m(model), mImageCtx(images), s(scene), mOptions(options), mFile(scene.file.string()) {}
+             const SceneLoadOptions& options, std::vector<PointerChannel> pointers)
+        : m(model),
+          mImageCtx(images),
+          s(scene),
+          mOptions(options),
+          mFile(scene.file.string()),
+          mPointers(std::move(pointers)) {}
 
     void run();
 
@@ -477,6 +591,9 @@ private:
     void convertCameras();
     void convertNodes(const std::vector<int>& roots);
     void convertAnimations();
+    void readSamplerValues(AnimationSampler& sampler, int output, int type, const std::string& where);
+    void convertPointerChannel(const PointerChannel& pc, const tinygltf::Animation& src, Animation& anim,
+                               const std::string& where);
 
     TextureRef textureRef(const tinygltf::TextureInfo& info, const std::string& material, const char* slot);
     TextureRef textureRef(int textureIndex, int texCoord, const tinygltf::ExtensionMap& extensions,
@@ -505,6 +622,8 @@ private:
     std::vector<int> mImageMap;                   // glTF image -> Scene::images index, -1 when not decoded
     std::vector<std::vector<uint32_t>> mMeshMap;  // glTF mesh -> Scene::meshes of its primitives
     int mDefaultMaterial = -1;
+    std::vector<PointerChannel> mPointers;  // KHR_animation_pointer channels, read from the JSON
+    std::set<std::string> mWarnedPointers;  // unsupported pointers already warned about
 };
 
 template <class T>
@@ -795,10 +914,14 @@ void Importer::convertMaterials() {
         if (src.emissiveFactor.size() == 3)
             mat.emissiveFactor =
                 glm::vec3(float(src.emissiveFactor[0]), float(src.emissiveFactor[1]), float(src.emissiveFactor[2]));
+        mat.emissiveColor = mat.emissiveFactor;
         auto strength = src.extensions.find("KHR_materials_emissive_strength");
         if (strength != src.extensions.end() && strength->second.IsObject()) {
             const tinygltf::Value& v = strength->second.Get("emissiveStrength");
-            if (v.IsNumber()) mat.emissiveFactor *= float(v.GetNumberAsDouble());
+            if (v.IsNumber()) {
+                mat.emissiveStrength = float(v.GetNumberAsDouble());
+                mat.emissiveFactor *= mat.emissiveStrength;
+            }
         }
         readIorAndSpecular(src, label, mat);
         const bool finite = std::isfinite(mat.metallicFactor) && std::isfinite(mat.roughnessFactor) &&
@@ -813,6 +936,9 @@ void Importer::convertMaterials() {
             factor = glm::max(factor, glm::vec3(0.f));
         };
         nonNegative(mat.emissiveFactor, "emissive factor");
+        // The factors an animation of either starts from (its product is checked and clamped above).
+        mat.emissiveColor = glm::max(mat.emissiveColor, glm::vec3(0.f));
+        mat.emissiveStrength = std::isfinite(mat.emissiveStrength) ? std::max(mat.emissiveStrength, 0.f) : 0.f;
         // KHR_materials_specular's colour is an F0 tint with no upper bound (the product with F0 is capped at 1).
         nonNegative(mat.specularColorFactor, "specularColorFactor");
         // KHR_materials_ior: >= 1, or exactly 0 (the extension's special value: a Fresnel term of 1).
@@ -1207,6 +1333,7 @@ void Importer::convertNodes(const std::vector<int>& roots) {
             fail(labelOf("KHR_lights_punctual lights", li, gl.name), "NaN or infinite light parameters",
                  "finite color, intensity and range");
         light.node = n;
+        light.source = int(li);
         s.nodes[size_t(n)].light = int(s.lights.size());
         s.lights.push_back(std::move(light));
     }
@@ -1245,28 +1372,14 @@ void Importer::convertAnimations() {
                 anim.samplers.push_back(std::move(sampler));  // e.g. morph weights: unused, kept for indices
                 continue;
             }
-            const std::vector<float> out = readAccessor<float>(ss.output, where + "/output", type);
-            const size_t comps = type == TINYGLTF_TYPE_VEC3 ? 3 : 4;
-            const size_t expected =
-                sampler.times.size() * (sampler.interpolation == Interpolation::CubicSpline ? 3 : 1);
-            if (out.size() / comps != expected)
-                fail(where + "/output",
-                     "has " + std::to_string(out.size() / comps) + " values for " +
-                         std::to_string(sampler.times.size()) + " keys",
-                     std::to_string(expected) + " values" +
-                         (sampler.interpolation == Interpolation::CubicSpline
-                              ? " (in-tangent, value, out-tangent per key)"
-                              : ""));
-            sampler.values.resize(expected);
-            for (size_t v = 0; v < expected; ++v)
-                sampler.values[v] =
-                    comps == 3 ? glm::vec4(glm::make_vec3(&out[3 * v]), 0.f) : glm::make_vec4(&out[4 * v]);
+            readSamplerValues(sampler, ss.output, type, where);
             anim.samplers.push_back(std::move(sampler));
         }
         bool weightsWarned = false;
         for (size_t c = 0; c < src.channels.size(); ++c) {
             const tinygltf::AnimationChannel& ch = src.channels[c];
             const std::string where = label + "/channels[" + std::to_string(c) + "]";
+            if (ch.target_path == "pointer") continue;  // read from the JSON (mPointers) below
             if (ch.target_path == "weights") {
                 if (!weightsWarned) warn(where + ": morph-target weight animation is not supported; ignored");
                 weightsWarned = true;
@@ -1306,8 +1419,111 @@ void Importer::convertAnimations() {
             out.sampler = uint32_t(ch.sampler);
             anim.channels.push_back(out);
         }
+        for (const PointerChannel& pc : mPointers)
+            if (pc.animation == a)
+                convertPointerChannel(pc, src, anim, label + "/channels[" + std::to_string(pc.channel) + "]");
         s.animations.push_back(std::move(anim));
     }
+}
+
+/// The output accessor's values (SCALAR, VEC3 or VEC4; as vec4, unused components 0), checked against the key count.
+void Importer::readSamplerValues(AnimationSampler& sampler, int output, int type, const std::string& where) {
+    const std::vector<float> out = readAccessor<float>(output, where + "/output", type);
+    const size_t comps = type == TINYGLTF_TYPE_SCALAR ? 1 : type == TINYGLTF_TYPE_VEC3 ? 3 : 4;
+    const size_t expected = sampler.times.size() * (sampler.interpolation == Interpolation::CubicSpline ? 3 : 1);
+    if (out.size() / comps != expected)
+        fail(where + "/output",
+             "has " + std::to_string(out.size() / comps) + " values for " + std::to_string(sampler.times.size()) +
+                 " keys",
+             std::to_string(expected) + " values" +
+                 (sampler.interpolation == Interpolation::CubicSpline ? " (in-tangent, value, out-tangent per key)"
+                                                                      : ""));
+    sampler.values.resize(expected);
+    for (size_t v = 0; v < expected; ++v)
+        sampler.values[v] = comps == 1   ? glm::vec4(out[v], 0.f, 0.f, 0.f)
+                            : comps == 3 ? glm::vec4(glm::make_vec3(&out[3 * v]), 0.f)
+                                         : glm::make_vec4(&out[4 * v]);
+}
+
+/// A KHR_animation_pointer channel: node TRS, a material's emission, a punctual light's intensity or colour. An
+/// unsupported pointer is ignored with one warning per pointer, or is an error when the file requires the
+/// extension; a malformed pointer, an index out of range, a wrong output type and a negative light value are errors.
+void Importer::convertPointerChannel(const PointerChannel& pc, const tinygltf::Animation& src, Animation& anim,
+                                     const std::string& where) {
+    if (!pc.pointer)
+        fail(where, "the target path is \"pointer\" but target/extensions/KHR_animation_pointer/pointer is missing",
+             "a JSON pointer string such as \"/materials/0/emissiveFactor\"");
+    const std::string& pointer = *pc.pointer;
+    const std::string at = where + " (pointer '" + pointer + "')";
+    const std::optional<PointerTarget> target = supportedPointer(pointer);
+    if (!target) {
+        const std::string supported =
+            "/nodes/{i}/translation|rotation|scale, /materials/{i}/emissiveFactor, "
+            "/materials/{i}/extensions/KHR_materials_emissive_strength/emissiveStrength, "
+            "/extensions/KHR_lights_punctual/lights/{i}/intensity|color";
+        if (std::find(m.extensionsRequired.begin(), m.extensionsRequired.end(), kAnimationPointer) !=
+            m.extensionsRequired.end())
+            fail(at, "the file requires KHR_animation_pointer and Loom cannot animate this property",
+                 "one of " + supported, "remove the channel or KHR_animation_pointer from extensionsRequired");
+        if (mWarnedPointers.insert(pointer).second)
+            warn(at + ": KHR_animation_pointer target not supported (Loom animates " + supported +
+                 "); the channel is ignored");
+        return;
+    }
+    // The object's index: an RFC 6901 array index (no sign, no leading zero) below the object count.
+    const size_t count = target->kind == std::string("nodes")       ? m.nodes.size()
+                         : target->kind == std::string("materials") ? s.materials.size()
+                                                                    : m.lights.size();
+    const std::string& token = target->index;
+    const bool digits = !token.empty() && token.size() <= 9 &&
+                        std::all_of(token.begin(), token.end(), [](char c) { return c >= '0' && c <= '9'; }) &&
+                        (token == "0" || token[0] != '0');
+    if (!digits) fail(at, "'" + token + "' is not an index into " + target->kind, "a decimal index");
+    const size_t index = size_t(std::stoul(token));
+    if (index >= count)
+        fail(at, std::string(target->kind) + " " + token + " does not exist",
+             "an index below " + std::to_string(count));
+    if (pc.sampler < 0 || size_t(pc.sampler) >= anim.samplers.size())
+        fail(at, "sampler " + std::to_string(pc.sampler) + " does not exist",
+             "a sampler index below " + std::to_string(anim.samplers.size()));
+    const int expectedType = target->path == AnimPath::Rotation ? TINYGLTF_TYPE_VEC4
+                             : target->path == AnimPath::EmissiveStrength || target->path == AnimPath::LightIntensity
+                                 ? TINYGLTF_TYPE_SCALAR
+                                 : TINYGLTF_TYPE_VEC3;
+    const tinygltf::AnimationSampler& ss = src.samplers[size_t(pc.sampler)];
+    const int type = m.accessors[size_t(ss.output)].type;  // the index was checked with the sampler
+    if (type != expectedType)
+        fail(at, std::string("the sampler's output is ") + typeName(type), typeName(expectedType));
+    AnimationSampler& sampler = anim.samplers[size_t(pc.sampler)];
+    if (sampler.values.empty())
+        readSamplerValues(sampler, ss.output, type, where + "/samplers[" + std::to_string(pc.sampler) + "]");
+
+    AnimationChannel out;
+    out.path = target->path;
+    out.sampler = uint32_t(pc.sampler);
+    if (!animatesLight(target->path)) {
+        if (s.nodes[index].hasMatrix) {
+            warn(at + ": targets " + labelOf("nodes", index, m.nodes[index].name) +
+                 ", which has a matrix (glTF forbids animating it); ignored");
+            return;
+        }
+        out.node = int(index);
+        anim.channels.push_back(out);
+        return;
+    }
+    // Emitted light is never negative (the values are finite: readAccessor checked them). Cubic-spline tangents may
+    // be negative; the sampled value is clamped at 0 when it overshoots.
+    const bool cubic = sampler.interpolation == Interpolation::CubicSpline;
+    const size_t comps = type == TINYGLTF_TYPE_SCALAR ? 1 : 3;
+    for (size_t k = 0; k < sampler.times.size(); ++k) {
+        const glm::vec4 v = sampler.values[cubic ? 3 * k + 1 : k];
+        for (size_t c = 0; c < comps; ++c)
+            if (v[int(c)] < 0.f)
+                fail(at, "key " + std::to_string(k) + " has the negative value " + std::to_string(v[int(c)]),
+                     "values >= 0 (emitted light)");
+    }
+    out.target = int(index);
+    anim.channels.push_back(out);
 }
 
 void Importer::run() {
@@ -1399,14 +1615,18 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     auto scene = std::make_shared<Scene>();
     scene->file = file;
 
+    std::string_view jsonText;
     if (!binary) {
         checkJsonText(bytes, name);
+        jsonText = bytes;
     } else if (bytes.size() >= 20) {
         uint32_t length, type;
         std::memcpy(&length, bytes.data() + 12, 4);
         std::memcpy(&type, bytes.data() + 16, 4);
-        if (type == 0x4E4F534Au && length <= bytes.size() - 20)
-            checkJsonText(std::string_view(bytes).substr(20, length), name);
+        if (type == 0x4E4F534Au && length <= bytes.size() - 20) {
+            jsonText = std::string_view(bytes).substr(20, length);
+            checkJsonText(jsonText, name);
+        }
     }
 
     tinygltf::Model model;
@@ -1431,7 +1651,7 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     if (!warn.empty()) spdlog::debug("{}: tinygltf: {}", name, cleanTinyMessage(warn));
     if (!ok) failLoad(file, bytes, binary, err.empty() ? warn : err);
 
-    Importer(model, images, *scene, options).run();
+    Importer(model, images, *scene, options, readPointerChannels(jsonText)).run();
     return scene;
 }
 

@@ -118,7 +118,8 @@ void AccumulatePass::declareParams(ParamList& p) {
             "already accumulated restarts");
     p.add("autoReset", &mAutoReset, true)
         .doc(
-            "restart when the camera or a scene instance moved in this frame (jitter alone does not restart); "
+            "restart when the camera or a scene instance moved, or an animated light changed, in this frame (jitter "
+            "alone does not restart); "
             "`loom render --hold` keeps an animated scene at one frame's time, to converge that frame");
     p.add("enabled", &mEnabled, true).doc("false: dst is a copy of src and the accumulated state is cleared");
 }
@@ -128,6 +129,7 @@ bool AccumulatePass::sceneMoved(const PassContext& ctx) {
     if (const Scene* scene = ctx.scene()) {
         for (const Instance& instance : scene->instances)
             if (instance.world != instance.prevWorld) return true;
+        if (scene->lightingChanged()) return true;  // an animated light changed: a new image, as after a move
     }
     return false;
 }

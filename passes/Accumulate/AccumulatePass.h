@@ -18,7 +18,8 @@
 // A new mean starts when the graph resets history (ctx.historyValid() false:
 // first frame, resetHistory(), resize, new scene), when `precision` changes,
 // when the pass is enabled again, when maxFrames is lowered below `frames`, and,
-// with autoReset, when the camera or a scene instance moved in this frame.
+// with autoReset, when the camera or a scene instance moved, or an animated light
+// (emission, punctual light) changed, in this frame.
 #include "AccumulateKernels.h"
 #include "loom/RenderPass.h"
 
@@ -33,7 +34,7 @@ public:
     void execute(PassContext& ctx) override;
 
 private:
-    /// Has the camera or any scene instance moved in this frame?
+    /// Has the camera or any scene instance moved, or the scene's lighting changed, in this frame?
     static bool sceneMoved(const PassContext& ctx);
     /// Zeroes this frame's side of the history fields the current precision does not use.
     void clearUnusedState(PassContext& ctx) const;

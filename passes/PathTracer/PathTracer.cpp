@@ -344,14 +344,17 @@ constexpr float kUnresolvedEmissionWeight = 1e-3f;
 const std::vector<float>& PathTracer::triangleEmission(const Scene& scene, uint32_t instance) {
     if (mEmissionSource != &scene) {
         mTriEmission.assign(scene.meshes.size(), {});
+        mTriEmissionFactor.assign(scene.meshes.size(), glm::vec3(0.f));
         mEmissionSource = &scene;
     }
     const uint32_t meshIndex = scene.instances[instance].mesh;
     std::vector<float>& means = mTriEmission[meshIndex];
     const Mesh& mesh = scene.meshes[meshIndex];
     const uint32_t n = mesh.triangleCount();
-    if (means.size() == n) return means;
     const Material& mat = scene.materials[mesh.material];
+    // The means include the emissive factor, which an animation may change: measured again when it did.
+    if (means.size() == n && mTriEmissionFactor[meshIndex] == mat.emissiveFactor) return means;
+    mTriEmissionFactor[meshIndex] = mat.emissiveFactor;
     const SceneImage& image = scene.images[size_t(mat.emissiveTexture.image)];
     // Subdivision each triangle needs for its texel footprint (its longest uv edge in texels), and what the caps allow.
     const glm::dvec2 size(image.width, image.height);

@@ -46,7 +46,8 @@ private:
     bool mAlphaTest = true;
     EmissionWeights mEmissionWeights = EmissionWeights::Texture;
 
-    // Light data, rebuilt per frame (triangles) or per scene (environment).
+    // Light data, rebuilt per frame (triangles, punctual lights: animated emission is followed) or per scene
+    // (environment).
     std::vector<pt::EmissiveTri> mTris;
     std::vector<float> mTriCdf;
     std::vector<uint32_t> mInstanceTriBase;
@@ -56,6 +57,7 @@ private:
     // Per mesh of an emissive-textured material: the mean emitted luminance over each triangle (empty until an
     // instance of the mesh is first lit), for the scene mEmissionSource.
     std::vector<std::vector<float>> mTriEmission;
+    std::vector<glm::vec3> mTriEmissionFactor;  // per mesh: the emissive factor its means were measured with
     const void* mEmissionSource = nullptr;
     pt::LightsView mLights;
 };

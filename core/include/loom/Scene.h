@@ -44,6 +44,11 @@ struct Material {
     float metallicFactor = 1.f;   ///< glTF default is 1 (fully metallic) when absent
     float roughnessFactor = 1.f;
     glm::vec3 emissiveFactor{0.f};  ///< already multiplied by KHR_materials_emissive_strength
+    /// The two factors emissiveFactor is the product of: the file's emissiveFactor and KHR_materials_emissive_strength.
+    /// Kept apart for animations (KHR_animation_pointer): Scene::update sets either and recomputes emissiveFactor =
+    /// emissiveColor * emissiveStrength for the materials an animation targets (only for those).
+    glm::vec3 emissiveColor{0.f};
+    float emissiveStrength = 1.f;
     TextureRef baseColorTexture;
     TextureRef metallicRoughnessTexture;  ///< G = roughness, B = metallic
     TextureRef normalTexture;
@@ -115,16 +120,31 @@ struct Light {
     float range = 0.f;      ///< 0 = infinite
     float innerConeAngle = 0.f, outerConeAngle = 0.7853982f;
     int node = -1;
+    int source = -1;  ///< the file's KHR_lights_punctual light this one places (animations target it)
     glm::vec3 position{0.f};
     glm::vec3 direction{0.f, 0.f, -1.f};  ///< direction the light points to
 };
 
 enum class Interpolation : uint8_t { Linear, Step, CubicSpline };
-enum class AnimPath : uint8_t { Translation, Rotation, Scale };
+/// What a channel animates: a node's TRS (glTF's own targets), or, through KHR_animation_pointer, a material's
+/// emission (emissiveFactor, KHR_materials_emissive_strength) or a punctual light's intensity or colour.
+enum class AnimPath : uint8_t {
+    Translation,
+    Rotation,
+    Scale,
+    EmissiveColor,     ///< /materials/{i}/emissiveFactor (VEC3)
+    EmissiveStrength,  ///< /materials/{i}/extensions/KHR_materials_emissive_strength/emissiveStrength (SCALAR)
+    LightIntensity,    ///< /extensions/KHR_lights_punctual/lights/{i}/intensity (SCALAR)
+    LightColor,        ///< /extensions/KHR_lights_punctual/lights/{i}/color (VEC3)
+};
+/// Whether the path animates emitted light (a material's emission or a punctual light) rather than a node.
+inline bool animatesLight(AnimPath path) {
+    return path != AnimPath::Translation && path != AnimPath::Rotation && path != AnimPath::Scale;
+}
 
 struct AnimationSampler {
     std::vector<float> times;
-    /// Values as vec4 (translation/scale use xyz; rotation is quaternion x, y, z, w).
+    /// Values as vec4 (translation/scale and colours use xyz; rotation is quaternion x, y, z, w; scalars use x).
     /// CubicSpline stores (inTangent, value, outTangent) per key, as glTF.
     std::vector<glm::vec4> values;
     Interpolation interpolation = Interpolation::Linear;
@@ -135,8 +155,9 @@ struct AnimationSampler {
 
 struct AnimationChannel {
     uint32_t sampler = 0;
-    int node = -1;
+    int node = -1;  ///< the node of a TRS path
     AnimPath path = AnimPath::Translation;
+    int target = -1;  ///< light paths: the material (Emissive*) or the file's KHR_lights_punctual light (Light*)
 };
 
 struct Animation {
@@ -146,7 +167,7 @@ struct Animation {
     float duration() const;
 };
 
-/// A triangle with emission, for light sampling.
+/// A triangle with emission (now, or at some time of an animation of its material's emission).
 struct EmissiveTriangle {
     uint32_t instance = 0;
     uint32_t primitive = 0;
@@ -234,9 +255,17 @@ public:
     Bounds bounds() const;  ///< world bounds at the last update
     float animationLength() const;  ///< longest animation, seconds
     size_t triangleCount() const;  ///< over instances
-    bool hasMotion() const;  ///< animations or a camera path
-    /// Whether anything lights the scene: an instance of an emissive material (with a texel that is not black when
-    /// the emission is textured), a punctual light of nonzero intensity, or an environment that is not black.
+    bool hasMotion() const;        ///< animations (of nodes or of light) or a camera path
+    /// Whether the last update() changed emitted light: a material's emission or a punctual light's colour or
+    /// intensity, driven by an animation. Like a moved instance, it ends an accumulation; false after cutMotion().
+    bool lightingChanged() const { return mLightingChanged; }
+    /// Times (seconds, ascending, each once) at which an animation of emitted light jumps: a STEP key whose value
+    /// differs from the key before it, or a LINEAR or CUBICSPLINE key at the same time as the key before it with
+    /// another value. The value after the jump holds from that time on. Empty when the light only changes smoothly.
+    std::vector<float> lightStepTimes() const;
+    /// Whether anything lights the scene at the last update (animated emission included): an instance of an emissive
+    /// material (with a texel that is not black when the emission is textured), a punctual light of nonzero intensity,
+    /// or an environment that is not black.
     bool emitsLight() const;
     bool cameraAnimated() const { return mCameraAnimated; }  ///< the glTF camera is animated (setCameraPose ignored)
 
@@ -249,6 +278,7 @@ public:
 private:
     void updateWorldTransforms();
     void rebuildView();
+    std::vector<float> lightState() const;
     SceneView mView;
     std::vector<MeshView> mMeshViews;
     std::vector<MaterialData> mMaterialData;
@@ -260,6 +290,8 @@ private:
     glm::mat4 mCameraBase{1.f};  // camera pose before the procedural path
     Bounds mRestBounds;           // world bounds at time 0: the pivot of camera paths
     bool mCameraAnimated = false;
+    bool mLightingChanged = false;
+    std::vector<float> mLightState;  // emission and punctual light values the last update left, when animated
 };
 
 }  // namespace loom
