@@ -598,6 +598,11 @@ void runBench(BenchOptions o) {
     info.warmup = o.warmup;
     info.fps = o.fps;
     info.eventFrames = o.eventFrames;
+    // The scene's own lighting steps (animated lights): the first frame at or after each.
+    for (const float t : scene->lightStepTimes()) {
+        const double frame = std::ceil(double(t) * o.fps);
+        if (frame >= 1.0 && frame < double(o.frames)) info.eventFrames.push_back(uint32_t(frame));
+    }
     std::sort(info.eventFrames.begin(), info.eventFrames.end());
     info.eventFrames.erase(std::unique(info.eventFrames.begin(), info.eventFrames.end()), info.eventFrames.end());
     info.set = o.set;

@@ -950,3 +950,34 @@ TEST(PathTracer, TemporalGradientsAreExactlyZeroWhereOnlyTheCameraMoved) {
     ASSERT_EQ(one.size(), two.size());
     for (size_t i = 0; i < one.size(); ++i) EXPECT_EQ(one[i], two[i]);
 }
+
+// Where the lighting changes, the gradient says by how much: cornell_lightstep dims its only light to a quarter at
+// frame 21 (60 fps); the samples re-shaded then are a quarter of what they were (light is linear in emission, and
+// with one light its selection is unchanged), while the frames around the step have equal pairs.
+TEST(PathTracer, TemporalGradientsMeasureALightingStep) {
+    const uint32_t W = 30, H = 30;
+    auto scene = Scene::load(scenePath("cornell_lightstep.gltf"));
+    nlohmann::json g = {{"loom_graph", 1},
+                        {"name", "pt"},
+                        {"passes", {{{"name", "PT"}, {"type", "PathTracer"}}}},
+                        {"outputs", {"PT.color", "PT.gradient"}}};
+    auto graph = test::compiledGraph(g, scene, W, H);
+    for (uint64_t f = 19; f <= 22; ++f) {
+        const double time = double(f) / 60.0;
+        scene->update(time);
+        scene->camera.aspect = float(W) / float(H);
+        scene->camera.beginFrame(f);
+        graph->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+        if (f == 19) continue;
+        const auto gradient = graph->fieldTexture("PT.gradient")->view<glm::vec2>();
+        size_t lit = 0;
+        for (uint32_t y = 0; y < H; ++y)
+            for (uint32_t x = 0; x < W; ++x) {
+                const glm::vec2 v = gradient.at(x, y);
+                const float expected = f == 21 ? 0.25f * v.y : v.y;
+                EXPECT_NEAR(v.x, expected, 1e-5f * (1.f + v.y)) << "frame " << f << " pixel " << x << ", " << y;
+                lit += v.y > 0.f ? 1 : 0;
+            }
+        EXPECT_GT(lit, size_t(W * H) / 2) << "frame " << f;
+    }
+}
