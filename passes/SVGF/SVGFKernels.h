@@ -298,10 +298,10 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 /// Temporal gradients (Schied et al. 2018, "Gradient Estimation for Real-Time Adaptive Temporal Filtering"): the
 /// path tracer's `gradient` channel holds, on last frame's pixel grid, for one sample of each 3x3 block (replicated
 /// over the block) the luminance of that sample re-shaded this frame with the same surface point and random numbers,
-/// and its luminance last frame. Where nothing changed the two are equal. The change at a pixel is
-/// lambda = sum |new - old| / sum max(new, old) over the kAntilagRadius window, in [0, 1] (0 where nothing was
+/// and its luminance last frame. Where nothing changed the two are equal. The change of a block is
+/// lambda = sum |new - old| / sum max(new, old) over the 3x3 blocks around it, in [0, 1] (0 where nothing was
 /// sampled or everything is black).
-inline constexpr int kAntilagRadius = 4;  ///< 9x9 pixels: the 3x3 blocks around a pixel's own block
+inline constexpr uint32_t kGradientBlock = 3;  ///< side of the blocks of the gradient channel (its contract)
 
 inline constexpr float kAntilagMaxRatio = 16.f;  ///< bound of the history's rescaling (either way)
 

@@ -181,7 +181,7 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
     if (!info.wired || info.isInputConnected(kGradient)) {
         r.internal(kGradientSums, Format::RGBA32F)
             .doc(
-                "row sums of the gradient terms (|new - old|, max(new, old), new, old) over the anti-lag window "
+                "gradient terms (|new - old|, max(new, old), new, old) of each 3x3 block's sample, on the block grid "
                 "(gradient only)");
         r.internal(kChange, Format::RG32F)
             .doc(
@@ -265,30 +265,39 @@ ImageView<const glm::vec4> SVGFPass::demodulationAlbedo(PassContext& ctx) const 
 ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
     const auto gradient = inputView<glm::vec2>(ctx, kGradient);
     if (!gradient.data || !mTemporal) return {};
-    const auto sums = ctx.internal(kGradientSums)->view<glm::vec4>();
+    const auto terms = ctx.internal(kGradientSums)->view<glm::vec4>();
     const auto change = ctx.internal(kChange)->view<glm::vec2>();
-    const int w = int(sums.width), h = int(sums.height);
-    // Separable box of radius kAntilagRadius: rows, then columns, each a fixed-order sum (any thread count gives
-    // the same bits).
-    const auto box = [&](auto term, auto store, bool rows) {
-        parallelFor2D(
-            1, uint32_t(h),
-            [&](const Tile& band) {
-                for (uint32_t y = band.y0; y < band.y1; ++y)
-                    for (int x = 0; x < w; ++x) {
-                        const int c = rows ? x : int(y), n = rows ? w : h;
-                        glm::vec4 sum(0.f);
-                        for (int i = std::max(0, c - kAntilagRadius); i <= std::min(n - 1, c + kAntilagRadius); ++i)
-                            sum += rows ? term(uint32_t(i), y) : term(uint32_t(x), uint32_t(i));
-                        store(uint32_t(x), y, sum);
-                    }
-            },
-            kTemporalBandRows);
-    };
-    box([&](uint32_t x, uint32_t y) { return gradientTerms(gradient.at(x, y)); },
-        [&](uint32_t x, uint32_t y, const glm::vec4& sum) { sums.at(x, y) = sum; }, true);
-    box([&](uint32_t x, uint32_t y) { return sums.at(x, y); },
-        [&](uint32_t x, uint32_t y, const glm::vec4& sum) { change.at(x, y) = antilagChange(sum); }, false);
+    const uint32_t w = change.width, h = change.height;
+    // One sample per block (the channel replicates it over the block): its terms on the block grid, then for each
+    // block the sums over the 3x3 blocks around it, written to the block's pixels. Fixed-order sums: any thread
+    // count gives the same bits.
+    const int bw = int((w + kGradientBlock - 1) / kGradientBlock), bh = int((h + kGradientBlock - 1) / kGradientBlock);
+    parallelFor2D(
+        1, uint32_t(bh),
+        [&](const Tile& band) {
+            for (uint32_t by = band.y0; by < band.y1; ++by)
+                for (int bx = 0; bx < bw; ++bx)
+                    terms.at(uint32_t(bx), by) =
+                        gradientTerms(gradient.at(uint32_t(bx) * kGradientBlock, by * kGradientBlock));
+        },
+        kTemporalBandRows);
+    parallelFor2D(
+        1, uint32_t(bh),
+        [&](const Tile& band) {
+            for (uint32_t by = band.y0; by < band.y1; ++by)
+                for (int bx = 0; bx < bw; ++bx) {
+                    glm::vec4 sum(0.f);
+                    for (int j = std::max(0, int(by) - 1); j <= std::min(bh - 1, int(by) + 1); ++j)
+                        for (int i = std::max(0, bx - 1); i <= std::min(bw - 1, bx + 1); ++i)
+                            sum += terms.at(uint32_t(i), uint32_t(j));
+                    const glm::vec2 c = antilagChange(sum);
+                    for (uint32_t y = by * kGradientBlock; y < std::min(h, (by + 1) * kGradientBlock); ++y)
+                        for (uint32_t x = uint32_t(bx) * kGradientBlock; x < std::min(w, uint32_t(bx + 1) * kGradientBlock);
+                             ++x)
+                            change.at(x, y) = c;
+                }
+        },
+        kTemporalBandRows);
     return asConst(change);
 }
 
