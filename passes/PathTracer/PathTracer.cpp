@@ -33,6 +33,9 @@ bool finite(glm::vec3 v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+/// Mixed into a path's key for its point in the pixel under pixelFilter "box".
+constexpr uint64_t kPixelSampleKey = 0x5851F42D4C957F2Dull;
+
 /// Paths of one tile kept in flight together (see execute()).
 constexpr uint32_t kPathBatch = 256;
 
@@ -166,6 +169,12 @@ void PathTracer::declareParams(ParamList& p) {
         .doc(
             "camera rays skip back faces of single-sided materials, as the G-buffers' cullMode (bounce and shadow "
             "rays never cull)");
+    p.addEnum("pixelFilter", &mPixelFilter, PixelFilter::Center, {"center", "box"})
+        .doc(
+            "where camera paths start in the pixel: center = every sample at the (jittered) pixel centre, as the "
+            "G-buffers see it; box = each sample uniformly in the pixel, camera jitter ignored (an anti-aliased "
+            "image, for references of jittered sequences; its own camera rays, so a vbuffer feeds only albedo, "
+            "specAlbedo and emission)");
     p.add("alphaTest", &mAlphaTest, true)
         .doc(
             "every ray: alphaMode MASK passes where alpha < alphaCutoff, BLEND is stochastic transparency (there "
@@ -391,6 +400,7 @@ void PathTracer::execute(PassContext& ctx) {
     set.lambertOnly = mLambertOnly;
     set.multiScatter = mEnergyCompensation;
     set.indirectClamp = mIndirectClamp;
+    const bool boxFilter = mPixelFilter == PixelFilter::Box;
     const uint32_t spp = uint32_t(mSamplesPerPixel);
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
     const pt::LightsView lights = mLights;
@@ -477,8 +487,21 @@ void PathTracer::execute(PassContext& ctx) {
                 const uint64_t item = first + k;
                 const uint32_t i = uint32_t(item / spp), s = uint32_t(item % spp);
                 const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
-                pt::beginPath(ts.paths[k], cam.origin, ts.dir[i], pt::PathRng(y * w + x, frame, s));
-                ts.hits[k] = ts.primary[i];
+                const pt::PathRng rng(y * w + x, frame, s);
+                if (boxFilter) {
+                    // A point uniform in the pixel from the path's own key (not one of its dimensions, so the
+                    // path's random numbers are those of the centre filter).
+                    pt::PathRng pixelRng = rng;
+                    pixelRng.key ^= kPixelSampleKey;
+                    const glm::vec2 u = pixelRng.next2();
+                    const glm::vec3 dir = cameraRayDir(cam, float(x) + u.x, float(y) + u.y);
+                    pt::beginPath(ts.paths[k], cam.origin, dir, rng);
+                    ts.hits[k] = rayScene.intersect(cam.origin, dir, 0.f, 1e30f, cameraRules);  // culls as camera
+                    ++rays;
+                } else {
+                    pt::beginPath(ts.paths[k], cam.origin, ts.dir[i], rng);
+                    ts.hits[k] = ts.primary[i];
+                }
                 ts.live[k] = k;
             }
             while (live > 0) {
