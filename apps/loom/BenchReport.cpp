@@ -182,8 +182,9 @@ std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& varia
     s << "\n";
     if (info.bias)
         s << fmt::format(
-            "The {} row is the matched reference against the reference graph's own {} bounces (its noise {}), not an "
-            "error of any graph: every graph and brute-force point carries it in addition to the error above.\n\n",
+            "The {} row is the matched reference against the reference graph's own {} bounces (same seeds, so the "
+            "difference is the longer paths' light; the full-length reference's own noise is {}), not an error of any "
+            "graph: every graph and brute-force point carries it in addition to the error above.\n\n",
             info.bias->label(), info.bias->fullBounces,
             info.bias->fullNoise ? fmt::format("{:.3g}", *info.bias->fullNoise) : std::string("n/a"));
     return s.str();

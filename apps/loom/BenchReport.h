@@ -66,7 +66,7 @@ struct Run {
 };
 
 /// The bias of the matched reference's path length: its metrics against the reference graph's own (longer) paths,
-/// averaged over the measured frames. Both references' noise is in it; their noise figures are beside it.
+/// averaged over the measured frames. The references share seeds, so it holds the noise of the longer paths only.
 struct BiasRow {
     int graphBounces = 0, fullBounces = 0;
     double relMSE = 0, trimmedRelMSE = 0, flip = 0;

@@ -10,6 +10,7 @@
 #include <random>
 #include <vector>
 
+#include "loom/Error.h"
 #include "loom/Metrics.h"
 #include "loom/Parallel.h"
 
