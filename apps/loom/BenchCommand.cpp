@@ -51,8 +51,18 @@ const char kSeedParam[] = "seed";
 /// Reference batches use PathTracer seeds from here on, so their samples are independent of every graph's and of
 /// the brute-force runs (which use seed 0 unless --set says otherwise).
 constexpr uint32_t kReferenceSeedBase = 1u << 24;
+/// Brute-force batches after the first use PathTracer seeds from here on (batch k: seed + k), so each batch is new.
+constexpr uint32_t kBruteForceSeedBase = 1u << 25;
 /// Bumped when the reference rendering protocol changes, so old cache entries are not reused.
-constexpr int kCacheFormat = 1;
+constexpr int kCacheFormat = 2;
+/// Brute-force times: the median of this many frames rendered directly at each spp (the first measured ones).
+constexpr uint64_t kBruteForceTimingFrames = 3;
+/// The reference noise should be this far below the smallest measured error.
+constexpr double kNoiseMargin = 10.0;
+const char kMaxBouncesParam[] = "maxBounces";
+const char kRrStartParam[] = "rrStartBounce";
+const char kPixelFilterParam[] = "pixelFilter";
+const char kColorField[] = "color";
 
 struct BenchOptions {
     SceneOptions scene;
@@ -66,7 +76,8 @@ struct BenchOptions {
     uint32_t referenceSpp = 256;
     std::string bruteForceGraph;
     std::string bruteForceSpp;
-    uint32_t bruteForceMax = 64;
+    uint32_t bruteForceMax = 1024;
+    std::string referenceBounces = "graph";
     uint64_t warmup = 16;
     double fps = 60.0;
     std::string cache;
@@ -263,36 +274,92 @@ uint64_t sceneHash(const fs::path& scene) {
     return fnv1a(bytes);
 }
 
-/// What a reference depends on, as text: hashed into the cache entry's name and stored in it (key.txt).
-std::string referenceKeyText(const BenchOptions& o, uint32_t width, uint32_t height, bool shared) {
+/// What the sequence depends on, as text (shared by the reference and brute-force cache keys).
+std::string sequenceKeyText(const BenchOptions& o, uint32_t width, uint32_t height) {
     std::string env = o.scene.env;
     std::error_code ec;
     if (!env.empty() && fs::is_regular_file(env, ec)) env += " bytes " + fmt::format("{:016x}", fnv1a(readBytes(env)));
     return fmt::format(
-        "loom reference cache format {}\nloom version {}\nscene {} bytes {:016x}\nreference graph {} bytes {:016x}\n"
-        "reference spp {}\nsize {}x{}\ncamera path {} speed {}\njitter {} count {}\nenvironment {}\n{}\n",
-        kCacheFormat, loom::version(), fs::path(o.scene.scene).filename().string(), sceneHash(o.scene.scene),
-        fs::path(o.referenceGraph).filename().string(), fnv1a(readBytes(o.referenceGraph)), o.referenceSpp, width,
-        height, o.scene.cameraPath, o.scene.cameraSpeed, o.scene.jitter, o.scene.jitterCount, env,
-        shared ? std::string("frames: one image for every time (nothing moves)")
-               : fmt::format("frames: frame index i at time i / {} s", o.fps));
+        "loom reference cache format {}\nloom version {}\nscene {} bytes {:016x}\nsize {}x{}\ncamera path {} speed "
+        "{}\njitter {} count {}\nenvironment {}\n",
+        kCacheFormat, loom::version(), fs::path(o.scene.scene).filename().string(), sceneHash(o.scene.scene), width,
+        height, o.scene.cameraPath, o.scene.cameraSpeed, o.scene.jitter, o.scene.jitterCount, env);
+}
+
+/// How a reference is rendered: the reference graph, its path tracer set to these values.
+struct ReferenceSpec {
+    std::optional<int> maxBounces;       ///< overrides the reference graph's when set
+    std::string pixelFilter = "center";  ///< PathTracer.pixelFilter
+    uint64_t firstFrame = 0;             ///< frames before it are not needed (left empty)
+    std::string label = "reference";
+};
+
+/// A reference sequence: one image per frame (empty before the spec's first frame), the per-frame noise estimate
+/// (RelMSE term; empty with a single batch), and where it came from.
+struct ReferenceSet {
+    std::vector<Texture> frames;
+    std::vector<std::optional<double>> noise;
+    bool shared = false;
+    int maxBounces = 0, rrStartBounce = 0;
+    std::string cache;
+    uint64_t cached = 0, rendered = 0;
+
+    /// Mean noise over frames [first, end); empty when any is unknown.
+    std::optional<double> meanNoise(uint64_t first) const {
+        double sum = 0;
+        size_t n = 0;
+        for (size_t i = first; i < noise.size(); ++i) {
+            if (!noise[i]) return std::nullopt;
+            sum += *noise[i];
+            ++n;
+        }
+        return n ? std::optional<double>(sum / double(n)) : std::nullopt;
+    }
+};
+
+/// The reference's own noise as a RelMSE term: the mean over pixels and channels of the variance of its mean
+/// (`variance`, per channel) over ref^2 + eps. It adds about this much to any error measured against it.
+double noiseRelMSE(const Texture& ref, const Texture& variance) {
+    const auto r = ref.view<glm::vec4>();
+    const auto v = variance.view<glm::vec4>();
+    double sum = 0;
+    uint64_t n = 0;
+    for (uint32_t y = 0; y < ref.height(); ++y)
+        for (uint32_t x = 0; x < ref.width(); ++x)
+            for (int c = 0; c < 3; ++c) {
+                const double rv = r.at(x, y)[c], vv = v.at(x, y)[c];
+                if (!std::isfinite(rv) || !std::isfinite(vv)) continue;
+                sum += vv / (rv * rv + kRelMseEpsilon);
+                ++n;
+            }
+    return n ? sum / double(n) : 0.0;
+}
+
+/// The path tracer of a graph description (the last pass of type PathTracer or CUDAPathTracer), or "".
+std::string tracerOf(const GraphDesc& desc) {
+    std::string tracer;
+    for (const PassDesc& p : desc.passes)
+        if (p.type == "PathTracer" || p.type == "CUDAPathTracer") tracer = p.name;
+    return tracer;
+}
+
+/// A parameter's current value (defaults included) of a pass of a built graph.
+int intParam(const RenderGraph& graph, const std::string& pass, const char* param) {
+    const nlohmann::json j = graph.pass(pass)->params().toJson(false);
+    return j.contains(param) && j[param].is_number_integer() ? j[param].get<int>() : 0;
 }
 
 /// Renders or loads the reference of every frame. Per frame: the reference graph's history is reset, the scene is
 /// set to the frame's time with no motion, and the graph runs spp / batchSpp times with different PathTracer
-/// seeds while its AccumulatePass averages them. Each image is written to the cache atomically.
-std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry, const std::shared_ptr<Scene>& scene,
-                                uint32_t width, uint32_t height, bench::BenchInfo& info) {
-    const bool shared = !scene->hasMotion() && o.scene.jitter == "none";
-    info.referenceShared = shared;
+/// seeds while its AccumulatePass averages them; the spread of the batches gives the variance of their mean. Each
+/// image (and its variance) is written to the cache atomically.
+ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const std::shared_ptr<Scene>& scene,
+                        uint32_t width, uint32_t height, const ReferenceSpec& spec) {
+    ReferenceSet out;
+    // With a box filter the image does not depend on the camera jitter.
+    const bool shared = !scene->hasMotion() && (o.scene.jitter == "none" || spec.pixelFilter == "box");
+    out.shared = shared;
     const GraphDesc desc = loadGraph(o.referenceGraph);  // checked before its bytes are hashed
-    const std::string key = referenceKeyText(o, width, height, shared);
-    const fs::path cacheRoot = o.cache.empty() ? defaultCacheDir() : fs::path(o.cache);
-    const fs::path entry = cacheRoot / fmt::format("{}_{}x{}_{}spp_{:016x}", fs::path(o.scene.scene).stem().string(),
-                                                   width, height, o.referenceSpp, fnv1a(key));
-    ensureWritableDir(entry.string(), "--cache");
-    writeFileAtomic(entry / "key.txt", key);
-    info.referenceCache = entry.string();
 
     std::string tracer, accumulate;
     uint32_t batchSpp = 1;
@@ -313,24 +380,62 @@ std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry,
             "--reference-spp",
             fmt::format("{} is not a multiple of the reference graph's {} spp per frame", o.referenceSpp, batchSpp),
             fmt::format("a multiple of {} (or at most {})", batchSpp, batchSpp));
-    const uint32_t batches = o.referenceSpp / batchSpp;
+    uint32_t batches = o.referenceSpp / batchSpp;
+    // At least 4 batches where the count allows: their spread gives the reference's noise.
+    while (batches < 4 && batchSpp % 2 == 0) {
+        batchSpp /= 2;
+        batches *= 2;
+    }
 
-    std::unique_ptr<RenderGraph> graph;
-    auto render = [&](uint64_t frame) {
-        if (!graph) {
-            graph = std::make_unique<RenderGraph>(desc, registry);
-            graph->setScene(scene);
-            graph->setParam(tracer, kSppParam, batchSpp, "--reference-spp");
-            CompileOptions copts;
-            copts.width = width;
-            copts.height = height;
-            graph->compile(copts);
-        }
+    auto graph = std::make_unique<RenderGraph>(desc, registry);
+    graph->setScene(scene);
+    graph->setParam(tracer, kSppParam, batchSpp, "--reference-spp");
+    if (spec.maxBounces) graph->setParam(tracer, kMaxBouncesParam, *spec.maxBounces, "--reference-bounces");
+    graph->setParam(tracer, kPixelFilterParam, spec.pixelFilter, "reference pixel filter");
+    CompileOptions copts;
+    copts.width = width;
+    copts.height = height;
+    copts.observe = {tracer + "." + kColorField};  // each batch's mean, for the noise estimate
+    graph->compile(copts);
+    out.maxBounces = intParam(*graph, tracer, kMaxBouncesParam);
+    out.rrStartBounce = intParam(*graph, tracer, kRrStartParam);
+
+    const std::string key =
+        sequenceKeyText(o, width, height) +
+        fmt::format(
+            "reference graph {} bytes {:016x}\nreference spp {}\npath tracer maxBounces {} rrStartBounce {} "
+            "pixelFilter {}\n{}\n",
+            fs::path(o.referenceGraph).filename().string(), fnv1a(readBytes(o.referenceGraph)), o.referenceSpp,
+            out.maxBounces, out.rrStartBounce, spec.pixelFilter,
+            shared ? std::string("frames: one image for every time (nothing moves)")
+                   : fmt::format("frames: frame index i at time i / {} s", o.fps));
+    const fs::path cacheRoot = o.cache.empty() ? defaultCacheDir() : fs::path(o.cache);
+    const fs::path entry =
+        cacheRoot / fmt::format("{}_{}x{}_{}spp_{}b_{:016x}", fs::path(o.scene.scene).stem().string(), width, height,
+                                o.referenceSpp, out.maxBounces, fnv1a(key));
+    ensureWritableDir(entry.string(), "--cache");
+    writeFileAtomic(entry / "key.txt", key);
+    out.cache = entry.string();
+
+    // Renders frame `frame`: its mean, and the variance of that mean per channel (none with one batch).
+    auto render = [&](uint64_t frame, Texture& variance) {
         graph->resetHistory();
         const FrameInfo f = sceneFrame(*scene, frame, o.fps, width, height, true);
+        const size_t n = size_t(width) * height * 3;
+        std::vector<double> mean(n, 0.0), m2(n, 0.0);
         for (uint32_t b = 0; b < batches; ++b) {
             graph->setParam(tracer, kSeedParam, kReferenceSeedBase + b, "reference");
             graph->execute(f);
+            // Welford over the batch means, per pixel and channel.
+            const auto c = graph->fieldTexture(tracer + "." + kColorField)->view<glm::vec4>();
+            for (uint32_t y = 0; y < height; ++y)
+                for (uint32_t x = 0; x < width; ++x)
+                    for (int ch = 0; ch < 3; ++ch) {
+                        const size_t i = (size_t(y) * width + x) * 3 + size_t(ch);
+                        const double v = c.at(x, y)[ch], d = v - mean[i];
+                        mean[i] += d / double(b + 1);
+                        m2[i] += d * (v - mean[i]);
+                    }
         }
         const auto stats = graph->lastStats();
         const auto acc = stats.find(accumulate);
@@ -340,38 +445,66 @@ std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry,
                          fmt::format("the reference accumulated {} of {} batches (it restarted)",
                                      acc->second.at(kAccumulateFramesStat), batches),
                          "", "set autoReset false on the reference graph's AccumulatePass"});
+        if (batches >= 2) {
+            variance = Texture(width, height, Format::RGBA32F);
+            auto v = variance.view<glm::vec4>();
+            for (uint32_t y = 0; y < height; ++y)
+                for (uint32_t x = 0; x < width; ++x) {
+                    const size_t i = (size_t(y) * width + x) * 3;
+                    glm::vec4 px(0.f, 0.f, 0.f, 1.f);
+                    for (int ch = 0; ch < 3; ++ch)
+                        px[ch] = float(m2[i + size_t(ch)] / double(batches - 1) / double(batches));
+                    v.at(x, y) = px;
+                }
+        }
         return copyTexture(*graph->fieldTexture(graph->outputs().front().str()));
     };
 
-    std::vector<Texture> refs;
     const uint64_t count = shared ? 1 : o.frames;
     for (uint64_t i = 0; i < count; ++i) {
-        const fs::path file = entry / (shared ? std::string("static.exr") : fmt::format("frame_{:06}.exr", i));
+        if (!shared && i < spec.firstFrame) {
+            out.frames.emplace_back();
+            out.noise.emplace_back();
+            continue;
+        }
+        const std::string stem = shared ? std::string("static") : fmt::format("frame_{:06}", i);
+        const fs::path file = entry / (stem + ".exr"), varFile = entry / (stem + "_var.exr");
+        auto usable = [&](const Texture& t) {
+            return t.width() == width && t.height() == height && t.format() == Format::RGBA32F;
+        };
         std::error_code ec;
-        if (fs::exists(file, ec)) {
+        if (fs::exists(file, ec) && (batches < 2 || fs::exists(varFile, ec))) {
             Texture t = readImage(file);
-            if (t.width() == width && t.height() == height && t.format() == Format::RGBA32F) {
-                refs.push_back(std::move(t));
-                ++info.referenceFramesCached;
+            Texture var = batches >= 2 ? readImage(varFile) : Texture();
+            if (usable(t) && (batches < 2 || usable(var))) {
+                out.noise.push_back(batches >= 2 ? std::optional<double>(noiseRelMSE(t, var)) : std::nullopt);
+                out.frames.push_back(std::move(t));
+                ++out.cached;
                 continue;
             }
-            spdlog::warn("reference {} has the wrong size or format; rendering it again", file.string());
+            spdlog::warn("{} {} has the wrong size or format; rendering it again", spec.label, file.string());
         }
         const auto start = std::chrono::steady_clock::now();
-        refs.push_back(render(i));
-        writeImage(file, refs.back());
-        ++info.referenceFramesRendered;
-        spdlog::info("reference {}/{} rendered ({} spp, {:.1f} s)", i + 1, count, o.referenceSpp,
-                     std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        Texture var;
+        out.frames.push_back(render(i, var));
+        if (batches >= 2) writeImage(varFile, var);  // before the image: an image in the cache has its variance
+        writeImage(file, out.frames.back());
+        out.noise.push_back(batches >= 2 ? std::optional<double>(noiseRelMSE(out.frames.back(), var)) : std::nullopt);
+        ++out.rendered;
+        spdlog::info("{} {}/{} rendered ({} spp, {} bounces, {:.1f} s)", spec.label, i + 1, count, o.referenceSpp,
+                     out.maxBounces, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     }
-    if (info.referenceFramesRendered == 0)
-        spdlog::info("reference: cache hit, {} frame(s) from {}", info.referenceFramesCached, entry.string());
+    if (out.rendered == 0)
+        spdlog::info("{}: cache hit, {} frame(s) from {}", spec.label, out.cached, entry.string());
     else
-        spdlog::info("reference: {} frame(s) rendered, {} from the cache, in {}", info.referenceFramesRendered,
-                     info.referenceFramesCached, entry.string());
+        spdlog::info("{}: {} frame(s) rendered, {} from the cache, in {}", spec.label, out.rendered, out.cached,
+                     entry.string());
     // A shared reference serves every frame.
-    while (refs.size() < o.frames) refs.push_back(copyTexture(refs.front()));
-    return refs;
+    while (out.frames.size() < o.frames) {
+        out.frames.push_back(copyTexture(out.frames.front()));
+        out.noise.push_back(out.noise.front());
+    }
+    return out;
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -380,8 +513,9 @@ std::vector<Texture> references(const BenchOptions& o, PluginRegistry& registry,
 FrameMetrics measure(const Texture& test, const Texture& ref, const Texture* testPrev, const Texture* refPrev) {
     FrameMetrics m;
     const MetricValue relmse = relMSE(test, ref), sm = smape(test, ref), ps = psnr(test, ref), ss = ssim(test, ref),
-                      fl = flip(test, ref);
+                      fl = flip(test, ref), tr = trimmedRelMSE(test, ref);
     m.relMSE = relmse.value;
+    m.trimmedRelMSE = tr.value;
     m.smape = sm.value;
     m.psnr = ps.value;
     m.ssim = ss.value;
@@ -443,8 +577,144 @@ bench::Lag runLag(const std::vector<FrameResult>& frames, const std::vector<uint
     return bench::runLag(relMSE, frames.empty() ? 0 : frames.front().frame, events, ages);
 }
 
-/// --brute-force-spp, or powers of two up to --brute-force-max (and at most a quarter of the reference's spp, so
-/// the reference's own noise stays small against the curve's).
+/// The brute-force curve: its runs (increasing spp) and where its cached images are.
+struct BruteForceCurve {
+    std::vector<Run> runs;
+    std::string cache;
+    uint64_t cached = 0, rendered = 0;
+};
+
+/// Whether curve point `point` reaches (is at or below) the error of every variant in every equal-error metric.
+bool crossesEveryVariant(const bench::Summary& point, const std::vector<Run>& variants) {
+    for (const Run& v : variants)
+        if (point.relMSE > v.summary.relMSE || point.trimmedRelMSE > v.summary.trimmedRelMSE ||
+            point.flip > v.summary.flip)
+            return false;
+    return true;
+}
+
+/// Runs the brute-force graph at each spp of `spps` (increasing) over frames [first, frames). The image of point k
+/// (n_k spp) is the mean of point k-1's image (cached) and a new batch of n_k - n_(k-1) spp with its own seed, so
+/// the whole curve costs about its largest point. Every image is cached (keyed by the sequence, the brute-force
+/// graph, --set and the spp chain), so a later run reuses it. A point's time is the median of `timingFrames`
+/// frames rendered directly at its spp (seed as given), from the warm-up on. With `stopWhenCrossed`, the curve
+/// ends at the first point that reaches every variant's error.
+BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, const std::string& tracer,
+                                const std::string& bruteKey, Scene& scene, const std::vector<Texture>& refs,
+                                const std::vector<uint32_t>& spps, bool stopWhenCrossed,
+                                const std::vector<Run>& variants, uint32_t width, uint32_t height, bool flicker) {
+    BruteForceCurve out;
+    const fs::path cacheRoot = o.cache.empty() ? defaultCacheDir() : fs::path(o.cache);
+    const fs::path entry =
+        cacheRoot / fmt::format("{}_{}x{}_bruteforce_{:016x}", fs::path(o.scene.scene).stem().string(), width, height,
+                                fnv1a(bruteKey));
+    ensureWritableDir(entry.string(), "--cache");
+    writeFileAtomic(entry / "key.txt", bruteKey);
+    out.cache = entry.string();
+    const uint32_t seed = uint32_t(intParam(*brute.graph, tracer, kSeedParam));
+    // Brute force has no history: of the warm-up frames it runs only the last one (which gives the first measured
+    // frame its temporal predecessor).
+    const uint64_t first = o.warmup > 0 ? o.warmup - 1 : 0;
+    const uint64_t timingFrames = std::min<uint64_t>(kBruteForceTimingFrames, o.frames - o.warmup);
+    std::string chain;
+    uint32_t prevSpp = 0;
+    for (size_t k = 0; k < spps.size(); ++k) {
+        const uint32_t n = spps[k], batch = n - prevSpp;
+        const std::string prevChain = chain;
+        chain += (chain.empty() ? "" : ",") + std::to_string(n);
+        auto fileOf = [&](const std::string& c, uint32_t spp, uint64_t i) {
+            return entry / fmt::format("{}spp_{:08x}_frame_{:06}.exr", spp, uint32_t(fnv1a(c)), i);
+        };
+        Run r;
+        r.bruteForce = true;
+        r.graph = brute.graph->desc().name;
+        r.graphFile = o.bruteForceGraph;
+        r.params = fmt::format("{}.{}={}", tracer, kSppParam, n);
+        r.spp = n;
+        r.measured = brute.measured.str();
+        const auto start = std::chrono::steady_clock::now();
+
+        // Times: frames rendered directly at n spp.
+        std::vector<std::pair<double, std::vector<std::pair<std::string, double>>>> times;
+        brute.graph->setParam(tracer, kSppParam, n, "--brute-force-spp");
+        brute.graph->setParam(tracer, kSeedParam, seed, "brute force");
+        for (uint64_t t = 0; t < timingFrames; ++t) {
+            const FrameInfo f = sceneFrame(scene, o.warmup + t, o.fps, width, height, true);
+            const auto t0 = std::chrono::steady_clock::now();
+            brute.graph->execute(f);
+            const auto t1 = std::chrono::steady_clock::now();
+            std::vector<std::pair<std::string, double>> passMs;
+            for (const PassTiming& pt : brute.graph->timings()) passMs.emplace_back(pt.name, pt.lastMs);
+            times.emplace_back(std::chrono::duration<double, std::milli>(t1 - t0).count(), std::move(passMs));
+        }
+
+        // Images: the cached mean of the previous point plus a new batch.
+        brute.graph->setParam(tracer, kSppParam, batch, "--brute-force-spp");
+        brute.graph->setParam(tracer, kSeedParam, k == 0 ? seed : kBruteForceSeedBase + seed + uint32_t(k),
+                              "brute force");
+        FlickerAccumulator flickerAcc;
+        Texture prevImage;
+        for (uint64_t i = first; i < o.frames; ++i) {
+            const fs::path file = fileOf(chain, n, i);
+            Texture image;
+            std::error_code ec;
+            if (fs::exists(file, ec)) {
+                image = readImage(file);
+                if (image.width() != width || image.height() != height || image.format() != Format::RGBA32F)
+                    image = Texture();
+            }
+            if (image.empty()) {
+                brute.graph->execute(sceneFrame(scene, i, o.fps, width, height, i == first));
+                image = copyTexture(*brute.graph->fieldTexture(brute.measured.str()));
+                if (k > 0) {
+                    const Texture before = readImage(fileOf(prevChain, prevSpp, i));
+                    if (before.width() != width || before.height() != height || before.format() != Format::RGBA32F)
+                        throw Error({ErrorKind::Runtime, fileOf(prevChain, prevSpp, i).string(), "--cache",
+                                     "a cached brute-force image has the wrong size or format", "",
+                                     "delete the cache folder " + entry.string()});
+                    const auto b = before.view<glm::vec4>();
+                    auto img = image.view<glm::vec4>();
+                    const double wPrev = double(prevSpp) / double(n), wNew = double(batch) / double(n);
+                    for (uint32_t y = 0; y < height; ++y)
+                        for (uint32_t x = 0; x < width; ++x) {
+                            const glm::dvec4 v = wPrev * glm::dvec4(b.at(x, y)) + wNew * glm::dvec4(img.at(x, y));
+                            img.at(x, y) = glm::vec4(glm::vec3(v), 1.f);
+                        }
+                }
+                writeImage(file, image);
+                ++out.rendered;
+            } else {
+                ++out.cached;
+            }
+            FrameResult fr;
+            fr.frame = i;
+            fr.time = double(i) / o.fps;
+            fr.totalMs = std::numeric_limits<double>::quiet_NaN();
+            if (i >= o.warmup && i - o.warmup < times.size()) {
+                fr.totalMs = times[i - o.warmup].first;
+                fr.passMs = times[i - o.warmup].second;
+            }
+            const bool hasPrev = i > first;
+            fr.metrics = measure(image, refs[i], hasPrev ? &prevImage : nullptr, hasPrev ? &refs[i - 1] : nullptr);
+            if (flicker && i >= o.warmup) flickerAcc.add(image);
+            prevImage = std::move(image);
+            r.frames.push_back(std::move(fr));
+        }
+        r.summary = bench::summarize(r.frames, o.warmup);
+        if (flicker && flickerAcc.frames() >= 2) r.summary.flicker = flickerAcc.value().value;
+        spdlog::info("brute force {} spp: RelMSE {:.4g}, trimmed {:.4g}, FLIP {:.4f}, {:.1f} ms/frame ({:.1f} s)", n,
+                     r.summary.relMSE, r.summary.trimmedRelMSE, r.summary.flip, r.summary.totalMs,
+                     std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        const bool done = stopWhenCrossed && crossesEveryVariant(r.summary, variants);
+        out.runs.push_back(std::move(r));
+        prevSpp = n;
+        if (done) break;
+    }
+    return out;
+}
+
+/// --brute-force-spp, or powers of two up to --brute-force-max (the curve stops earlier once it reaches every
+/// graph's error).
 std::vector<uint32_t> bruteForceSpps(const BenchOptions& o) {
     std::vector<uint32_t> spps;
     if (!o.bruteForceSpp.empty()) {
@@ -463,7 +733,7 @@ std::vector<uint32_t> bruteForceSpps(const BenchOptions& o) {
             spps.push_back(n);
         }
     } else {
-        const uint32_t cap = std::max(1u, std::min(o.bruteForceMax, o.referenceSpp / 4));
+        const uint32_t cap = std::max(1u, std::min(o.bruteForceMax, 4096u));
         for (uint32_t n = 1; n <= cap; n *= 2) spps.push_back(n);
     }
     std::sort(spps.begin(), spps.end());
@@ -620,19 +890,122 @@ void runBench(BenchOptions o) {
             g.setParam(v.sweep->pass, v.sweep->param, parseParamValue(v.value), "--sweep " + v.sweep->text);
         };
     };
-    for (const Variant& v : vars)
-        prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height);
+    // The path length of each variant's path tracer (after --set and its sweep value), for the matched reference.
+    std::vector<std::pair<std::string, std::pair<int, int>>> bounces;  // variant label -> (maxBounces, rrStart)
+    for (const Variant& v : vars) {
+        PreparedGraph p =
+            prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height);
+        const std::string tracer = tracerOf(v.desc);
+        if (!tracer.empty())
+            bounces.emplace_back(v.desc.name + (v.sweep ? " " + v.label() : ""),
+                                 std::make_pair(intParam(*p.graph, tracer, kMaxBouncesParam),
+                                                intParam(*p.graph, tracer, kRrStartParam)));
+    }
     const GraphDesc bruteDesc = loadGraph(o.bruteForceGraph);
     PreparedGraph brute =
         prepareGraph(bruteDesc, o.bruteForceGraph, registry, scene, o.set, true, {}, "", width, height);
-    std::string bruteTracer;
-    for (const PassDesc& p : bruteDesc.passes)
-        if (p.type == "PathTracer" || p.type == "CUDAPathTracer") bruteTracer = p.name;
+    const std::string bruteTracer = tracerOf(bruteDesc);
     if (bruteTracer.empty())
         throwBadInput("--brute-force-graph", "the brute-force graph has no path tracer",
                       "a graph like graphs/PathTracer.json", "", o.bruteForceGraph);
 
-    const std::vector<Texture> refs = references(o, registry, scene, width, height, info);
+    // The graphs' common path length: the reference (and the brute force) trace it, so the errors measure noise and
+    // the denoisers' bias, not the truncation of paths. Graphs of different lengths need --reference-bounces.
+    std::optional<std::pair<int, int>> graphBounces;
+    bool graphsDiffer = false;
+    for (const auto& [label, b] : bounces) {
+        if (!graphBounces) graphBounces = b;
+        graphsDiffer = graphsDiffer || b.first != graphBounces->first;
+    }
+    if (!graphBounces)
+        graphBounces = std::make_pair(intParam(*brute.graph, bruteTracer, kMaxBouncesParam),
+                                      intParam(*brute.graph, bruteTracer, kRrStartParam));
+    ReferenceSpec spec;
+    if (o.referenceBounces == "graph") {
+        if (graphsDiffer) {
+            std::vector<std::string> list;
+            for (const auto& [label, b] : bounces) list.push_back(fmt::format("{} {}", label, b.first));
+            throwBadInput("--reference-bounces",
+                          "the benchmarked graphs trace paths of different lengths (maxBounces: " + join(list) + ")",
+                          "graphs of one path length, so one matched reference serves them all",
+                          "bench them in separate runs, or give --reference-bounces N");
+        }
+        spec.maxBounces = graphBounces->first;
+        info.referenceBouncesFrom = "the graphs";
+    } else if (o.referenceBounces != "reference") {
+        int n = -1;
+        size_t used = 0;
+        try {
+            n = std::stoi(o.referenceBounces, &used);
+        } catch (const std::exception&) {
+            used = 0;
+        }
+        if (used != o.referenceBounces.size() || n < 0 || n > 64)
+            throwBadInput("--reference-bounces", "'" + o.referenceBounces + "' is not a path length",
+                          "graph (the benchmarked graphs' maxBounces), reference (the reference graph's own) or "
+                          "an integer in 0..64");
+        spec.maxBounces = n;
+        info.referenceBouncesFrom = "--reference-bounces";
+    } else {
+        info.referenceBouncesFrom = "the reference graph";
+    }
+    // Brute force traces what the graphs trace (when they agree), so it shares their bias.
+    if (!graphsDiffer) {
+        brute.graph->setParam(bruteTracer, kMaxBouncesParam, graphBounces->first, "--reference-bounces");
+        brute.graph->setParam(bruteTracer, kRrStartParam, graphBounces->second, "--reference-bounces");
+    }
+    // Jittered sequences are anti-aliased by TAA: their reference (and brute force) average over the pixel's area.
+    spec.pixelFilter = o.scene.jitter == "none" ? "center" : "box";
+    brute.graph->setParam(bruteTracer, kPixelFilterParam, spec.pixelFilter, "--jitter");
+    info.pixelFilter = spec.pixelFilter;
+
+    const ReferenceSet refSet = references(o, registry, scene, width, height, spec);
+    const std::vector<Texture>& refs = refSet.frames;
+    info.referenceShared = refSet.shared;
+    info.referenceCache = refSet.cache;
+    info.referenceFramesCached = refSet.cached;
+    info.referenceFramesRendered = refSet.rendered;
+    info.referenceBounces = refSet.maxBounces;
+    info.referenceRrStart = refSet.rrStartBounce;
+    info.referenceNoise = refSet.meanNoise(o.warmup);
+
+    // The bias of the matched path length: the matched reference against the reference graph's own length, over
+    // the measured frames only.
+    if (spec.maxBounces) {
+        ReferenceSpec full;
+        full.pixelFilter = spec.pixelFilter;
+        full.firstFrame = o.warmup;
+        full.label = "full-length reference";
+        // Its length first (cheap: the graph only), to skip it when the lengths agree.
+        const ReferenceSet fullSet = [&] {
+            const GraphDesc refDesc = loadGraph(o.referenceGraph);
+            RenderGraph g(refDesc, registry);
+            const std::string t = tracerOf(refDesc);
+            if (!t.empty() && intParam(g, t, kMaxBouncesParam) == refSet.maxBounces) return ReferenceSet{};
+            return references(o, registry, scene, width, height, full);
+        }();
+        if (!fullSet.frames.empty()) {
+            bench::BiasRow b;
+            b.graphBounces = refSet.maxBounces;
+            b.fullBounces = fullSet.maxBounces;
+            b.cache = fullSet.cache;
+            b.framesCached = fullSet.cached;
+            b.framesRendered = fullSet.rendered;
+            b.fullNoise = fullSet.meanNoise(o.warmup);
+            for (uint64_t i = o.warmup; i < o.frames; ++i) {
+                b.relMSE += relMSE(refs[i], fullSet.frames[i]).value;
+                b.trimmedRelMSE += trimmedRelMSE(refs[i], fullSet.frames[i]).value;
+                b.flip += flip(refs[i], fullSet.frames[i]).value;
+            }
+            const double n = double(o.frames - o.warmup);
+            b.relMSE /= n;
+            b.trimmedRelMSE /= n;
+            b.flip /= n;
+            spdlog::info("{}: RelMSE {:.4g}, trimmed {:.4g}, FLIP {:.4f}", b.label(), b.relMSE, b.trimmedRelMSE,
+                         b.flip);
+            info.bias = b;
+        }
+    }
 
     std::vector<Run> results;
     for (const Variant& v : vars) {
@@ -655,31 +1028,52 @@ void runBench(BenchOptions o) {
         results.push_back(std::move(r));
     }
 
-    // Brute force has no history: of the warm-up frames it runs only the last one (which warms caches and gives the
-    // first measured frame its temporal predecessor).
-    std::vector<Run> curve;
-    const uint64_t bruteFirst = o.warmup > 0 ? o.warmup - 1 : 0;
-    for (uint32_t n : spps) {
-        brute.graph->setParam(bruteTracer, kSppParam, n, "--brute-force-spp");
-        Run r;
-        r.bruteForce = true;
-        r.graph = bruteDesc.name;
-        r.graphFile = o.bruteForceGraph;
-        r.params = fmt::format("{}.{}={}", bruteTracer, kSppParam, n);
-        r.spp = n;
-        r.measured = brute.measured.str();
-        std::optional<double> flicker;
-        r.frames =
-            runSequence(brute, *scene, refs, bruteFirst, o.frames, o.fps, width, height,
-                        fmt::format("brute force {} spp", n), o.warmup, info.referenceShared ? &flicker : nullptr);
-        r.lag = runLag(r.frames, info.eventFrames, nullptr);
-        r.summary = bench::summarize(r.frames, o.warmup);
-        r.summary.flicker = flicker;
-        curve.push_back(std::move(r));
+    // The brute-force cache key: the sequence, the brute-force graph as configured (its parameters after --set,
+    // the matched path length and the pixel filter) and the reference frames' timing.
+    std::string bruteKey =
+        sequenceKeyText(o, width, height) + fmt::format("brute-force graph {} bytes {:016x}\nfps {}\n",
+                                                        fs::path(o.bruteForceGraph).filename().string(),
+                                                        fnv1a(readBytes(o.bruteForceGraph)), o.fps);
+    for (const PassDesc& p : brute.graph->desc().passes) {
+        nlohmann::json params = brute.graph->pass(p.name)->params().toJson(false);
+        params.erase(kSppParam);  // the curve sets it
+        bruteKey += "pass " + p.name + " " + params.dump() + "\n";
     }
+    BruteForceCurve bf = bruteForceCurve(o, brute, bruteTracer, bruteKey, *scene, refs, spps, o.bruteForceSpp.empty(),
+                                         results, width, height, info.referenceShared);
+    for (Run& r : bf.runs) r.lag = runLag(r.frames, info.eventFrames, nullptr);
+    const std::vector<Run>& curve = bf.runs;
+    info.bruteForceCache = bf.cache;
+    info.bruteForceFramesCached = bf.cached;
+    info.bruteForceFramesRendered = bf.rendered;
+    info.bruteForceTimingFrames = uint32_t(std::min<uint64_t>(kBruteForceTimingFrames, o.frames - o.warmup));
     for (Run& r : results) {
         r.speedupRelMSE = bench::equalErrorSpeedup(curve, r.summary.relMSE, r.summary.totalMs, &bench::Summary::relMSE);
         r.speedupFlip = bench::equalErrorSpeedup(curve, r.summary.flip, r.summary.totalMs, &bench::Summary::flip);
+        r.speedupTrimmed =
+            bench::equalErrorSpeedup(curve, r.summary.trimmedRelMSE, r.summary.totalMs, &bench::Summary::trimmedRelMSE);
+    }
+    if (o.bruteForceSpp.empty() && !curve.empty() && !crossesEveryVariant(curve.back().summary, results))
+        spdlog::warn(
+            "the brute-force curve stopped at --brute-force-max {} spp before reaching every graph's error: "
+            "some speedups are bounds",
+            curve.back().spp);
+
+    // The reference's noise against the smallest error measured against it.
+    if (info.referenceNoise) {
+        double smallest = std::numeric_limits<double>::infinity();
+        for (const Run& r : results) smallest = std::min(smallest, r.summary.relMSE);
+        for (const Run& r : curve) smallest = std::min(smallest, r.summary.relMSE);
+        if (*info.referenceNoise * kNoiseMargin > smallest) {
+            info.noiseWarning = fmt::format(
+                "the reference's own noise (RelMSE {:.3g}) is not {}x below the smallest error measured ({:.3g}): "
+                "errors near it are inflated by up to that much and the crossing of the brute-force curve is "
+                "uncertain; raise --reference-spp to about {} (the noise falls as 1 / spp)",
+                *info.referenceNoise, kNoiseMargin, smallest,
+                uint64_t(std::ceil(double(o.referenceSpp) * *info.referenceNoise * kNoiseMargin / smallest / 64.0)) *
+                    64);
+            spdlog::warn("{}", info.noiseWarning);
+        }
     }
 
     info.loadAfter = loadAverage();
@@ -709,10 +1103,15 @@ void addBenchCommand(CLI::App& app) {
     cmd->add_option("--reference-spp", o->referenceSpp, "samples per pixel of each frame's reference")
         ->capture_default_str();
     cmd->add_option("--brute-force-graph", o->bruteForceGraph, "brute-force graph (default graphs/PathTracer.json)");
+    cmd->add_option("--reference-bounces", o->referenceBounces,
+                    "path length of the reference: graph (the benchmarked graphs' PathTracer.maxBounces; the bias "
+                    "against the reference graph's own length is reported apart), reference (the reference graph's "
+                    "own) or N")
+        ->capture_default_str();
     cmd->add_option("--brute-force-spp", o->bruteForceSpp,
-                    "brute-force sample counts, e.g. 1,2,4,8 (default: powers of two up to --brute-force-max and "
-                    "a quarter of --reference-spp)");
-    cmd->add_option("--brute-force-max", o->bruteForceMax, "largest default brute-force sample count")
+                    "brute-force sample counts, e.g. 1,2,4,8 (default: powers of two up to --brute-force-max, "
+                    "stopping once every graph's error is reached)");
+    cmd->add_option("--brute-force-max", o->bruteForceMax, "largest default brute-force sample count (at most 4096)")
         ->capture_default_str();
     cmd->add_option("--warmup", o->warmup, "frames excluded from the summaries")->capture_default_str();
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();

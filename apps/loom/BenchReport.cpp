@@ -75,6 +75,7 @@ nlohmann::json runJson(const Run& r, bool withSpeedup) {
                           {"psnr", f.metrics.psnr},
                           {"ssim", f.metrics.ssim},
                           {"flip", f.metrics.flip},
+                          {"trimmed_relmse", f.metrics.trimmedRelMSE},
                           {"temporal", optionalJson(f.metrics.temporal)},
                           {"non_finite", f.metrics.nonFinite}});
     }
@@ -92,6 +93,7 @@ nlohmann::json runJson(const Run& r, bool withSpeedup) {
                           {"psnr", s.psnr},
                           {"ssim", s.ssim},
                           {"flip", s.flip},
+                          {"trimmed_relmse", s.trimmedRelMSE},
                           {"temporal", optionalJson(s.temporal)},
                           {"flicker", optionalJson(s.flicker)},
                           {"non_finite", s.nonFinite}}},
@@ -101,6 +103,7 @@ nlohmann::json runJson(const Run& r, bool withSpeedup) {
     if (withSpeedup) {
         j["speedup_relmse"] = speedupJson(r.speedupRelMSE);
         j["speedup_flip"] = speedupJson(r.speedupFlip);
+        j["speedup_trimmed_relmse"] = speedupJson(r.speedupTrimmed);
     }
     return j;
 }
@@ -109,7 +112,7 @@ std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& cu
                     const std::vector<uint32_t>& events) {
     std::ostringstream s;
     s << "kind,graph,params,measured,frame,time,warmup,total_ms,relmse,smape,psnr,ssim,flip,temporal,non_finite,"
-         "event,pass_ms\n";
+         "event,pass_ms,trimmed_relmse\n";
     // "cut" at a run's first frame, "light" at a lighting step.
     auto eventName = [&](const Run& r, uint64_t frame) {
         if (frame == r.frames.front().frame) return "cut";
@@ -121,10 +124,11 @@ std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& cu
                 const FrameMetrics& m = f.metrics;
                 s << (r.bruteForce ? "bruteforce" : "graph") << ',' << csvField(r.graph) << ',' << csvField(r.params)
                   << ',' << csvField(r.measured) << ',' << f.frame << ',' << number(f.time) << ','
-                  << (f.frame < warmup ? 1 : 0) << ',' << number(f.totalMs) << ',' << number(m.relMSE) << ','
-                  << number(m.smape) << ',' << number(m.psnr) << ',' << number(m.ssim) << ',' << number(m.flip) << ','
-                  << (m.temporal ? number(*m.temporal) : std::string()) << ',' << m.nonFinite << ','
-                  << eventName(r, f.frame) << ',' << csvField(passList(f.passMs, ";", 4)) << '\n';
+                  << (f.frame < warmup ? 1 : 0) << ',' << (std::isfinite(f.totalMs) ? number(f.totalMs) : "") << ','
+                  << number(m.relMSE) << ',' << number(m.smape) << ',' << number(m.psnr) << ',' << number(m.ssim) << ','
+                  << number(m.flip) << ',' << (m.temporal ? number(*m.temporal) : std::string()) << ',' << m.nonFinite
+                  << ',' << eventName(r, f.frame) << ',' << csvField(passList(f.passMs, ";", 4)) << ','
+                  << number(m.trimmedRelMSE) << '\n';
             }
         }
     };
@@ -152,21 +156,45 @@ std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& varia
         s << " Set on every graph: " << fmt::format("{}", fmt::join(quoted, ", ")) << ".";
     }
     s << "\n\n";
-    s << "| graph | params | measured | ms/frame | per pass (ms) | RelMSE | SMAPE | PSNR (dB) | SSIM | FLIP | temporal "
-         "| flicker | speedup (RelMSE) | speedup (FLIP) |\n";
-    s << "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    s << fmt::format(
+        "Reference path length: maxBounces {} (from {}), Russian roulette from bounce {}; pixel filter {}. "
+        "Reference noise (RelMSE): {}. Brute force: times are medians of {} frame(s) rendered at each spp; its "
+        "images are built as means of cached batches ({} frame(s) from the cache, {} rendered).",
+        info.referenceBounces, info.referenceBouncesFrom, info.referenceRrStart, info.pixelFilter,
+        info.referenceNoise ? fmt::format("{:.3g}", *info.referenceNoise) : std::string("n/a (one batch)"),
+        info.bruteForceTimingFrames, info.bruteForceFramesCached, info.bruteForceFramesRendered);
+    s << "\n\n";
+    if (!info.noiseWarning.empty()) s << "**Warning:** " << info.noiseWarning << "\n\n";
+    s << "| graph | params | measured | ms/frame | per pass (ms) | RelMSE | trimmed RelMSE | SMAPE | PSNR (dB) | SSIM "
+         "| FLIP | temporal | flicker | speedup (RelMSE) | speedup (trimmed) | speedup (FLIP) |\n";
+    s << "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     auto optional4 = [](const std::optional<double>& v) { return v ? fmt::format("{:.4f}", *v) : std::string("—"); };
     auto row = [&](const Run& r, bool withSpeedup) {
         const Summary& m = r.summary;
         s << fmt::format(
-            "| {} | {} | {} | {:.1f} | {} | {:.4g} | {:.4f} | {:.2f} | {:.4f} | {:.4f} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {:.1f} | {} | {:.4g} | {:.4g} | {:.4f} | {:.2f} | {:.4f} | {:.4f} | {} | {} | {} | {} | "
+            "{} "
+            "|\n",
             r.graph, r.params.empty() ? "—" : r.params, r.measured, m.totalMs, passList(m.passMs, " · ", 1), m.relMSE,
-            m.smape, m.psnr, m.ssim, m.flip, optional4(m.temporal), optional4(m.flicker),
-            withSpeedup ? r.speedupRelMSE.text() : "—", withSpeedup ? r.speedupFlip.text() : "—");
+            m.trimmedRelMSE, m.smape, m.psnr, m.ssim, m.flip, optional4(m.temporal), optional4(m.flicker),
+            withSpeedup ? r.speedupRelMSE.text() : "—", withSpeedup ? r.speedupTrimmed.text() : "—",
+            withSpeedup ? r.speedupFlip.text() : "—");
     };
     for (const Run& r : variants) row(r, true);
     for (const Run& r : curve) row(r, false);
+    if (info.bias) {
+        const BiasRow& b = *info.bias;
+        s << fmt::format("| {} | — | reference | — | — | {:.4g} | {:.4g} | — | — | — | {:.4f} | — | — | — | — | — |\n",
+                         b.label(), b.relMSE, b.trimmedRelMSE, b.flip);
+    }
     s << "\n";
+    if (info.bias)
+        s << fmt::format(
+            "The {} row is the matched reference against the reference graph's own {} bounces (same seeds, so the "
+            "difference is the longer paths' light; the full-length reference's own noise is {}), not an error of any "
+            "graph: every graph and brute-force point carries it in addition to the error above.\n\n",
+            info.bias->label(), info.bias->fullBounces,
+            info.bias->fullNoise ? fmt::format("{:.3g}", *info.bias->fullNoise) : std::string("n/a"));
     std::vector<std::pair<std::string, const Lag*>> lags;
     for (const auto* runs : {&variants, &curve})
         for (const Run& r : *runs)
@@ -176,6 +204,10 @@ std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& varia
 }
 
 }  // namespace
+
+std::string BiasRow::label() const {
+    return fmt::format("bias: {} vs {} bounces", graphBounces, fullBounces);
+}
 
 std::string Speedup::text() const {
     switch (kind) {
@@ -215,7 +247,7 @@ Summary summarize(const std::vector<FrameResult>& frames, uint64_t warmup) {
     for (const FrameResult& f : frames) {
         if (f.frame < warmup) continue;
         ++s.frames;
-        total.push_back(f.totalMs);
+        if (std::isfinite(f.totalMs)) total.push_back(f.totalMs);
         for (const auto& [name, ms] : f.passMs) {
             auto [it, inserted] = perPass.try_emplace(name);
             if (inserted) passOrder.push_back(name);
@@ -227,6 +259,7 @@ Summary summarize(const std::vector<FrameResult>& frames, uint64_t warmup) {
         s.psnr += m.psnr;
         s.ssim += m.ssim;
         s.flip += m.flip;
+        s.trimmedRelMSE += m.trimmedRelMSE;
         s.nonFinite += m.nonFinite;
         if (m.temporal) {
             temporalSum += *m.temporal;
@@ -240,6 +273,7 @@ Summary summarize(const std::vector<FrameResult>& frames, uint64_t warmup) {
     s.psnr /= n;
     s.ssim /= n;
     s.flip /= n;
+    s.trimmedRelMSE /= n;
     if (temporalCount) s.temporal = temporalSum / double(temporalCount);
     s.totalMs = median(total);
     for (const auto& name : passOrder) s.passMs.emplace_back(name, median(perPass[name]));
@@ -300,9 +334,34 @@ void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const
                       {"cache", info.referenceCache},
                       {"frames_cached", info.referenceFramesCached},
                       {"frames_rendered", info.referenceFramesRendered},
-                      {"shared", info.referenceShared}};
+                      {"shared", info.referenceShared},
+                      {"max_bounces", info.referenceBounces},
+                      {"rr_start_bounce", info.referenceRrStart},
+                      {"bounces_from", info.referenceBouncesFrom},
+                      {"pixel_filter", info.pixelFilter},
+                      {"noise_relmse", optionalJson(info.referenceNoise)},
+                      {"noise_warning", info.noiseWarning}};
+    if (info.bias) {
+        const BiasRow& b = *info.bias;
+        j["bias"] = {{"label", b.label()},
+                     {"graph_bounces", b.graphBounces},
+                     {"full_bounces", b.fullBounces},
+                     {"relmse", b.relMSE},
+                     {"trimmed_relmse", b.trimmedRelMSE},
+                     {"flip", b.flip},
+                     {"full_reference_noise_relmse", optionalJson(b.fullNoise)},
+                     {"cache", b.cache},
+                     {"frames_cached", b.framesCached},
+                     {"frames_rendered", b.framesRendered}};
+    } else {
+        j["bias"] = nullptr;
+    }
+    j["brute_force_timing_frames"] = info.bruteForceTimingFrames;
+    j["brute_force_cache"] = {{"folder", info.bruteForceCache},
+                              {"frames_cached", info.bruteForceFramesCached},
+                              {"frames_rendered", info.bruteForceFramesRendered}};
     j["brute_force_graph"] = info.bruteForceGraph;
-    j["equal_error_metrics"] = {"relmse", "flip"};
+    j["equal_error_metrics"] = {"relmse", "trimmed_relmse", "flip"};
     j["variants"] = nlohmann::json::array();
     for (const Run& r : variants) j["variants"].push_back(runJson(r, true));
     j["brute_force"] = nlohmann::json::array();

@@ -16,6 +16,7 @@ namespace loom::cli::bench {
 /// run (no previous frame).
 struct FrameMetrics {
     double relMSE = 0, smape = 0, psnr = 0, ssim = 0, flip = 0;
+    double trimmedRelMSE = 0;  ///< RelMSE without the largest 0.1 % of per-pixel terms (Metrics.h)
     std::optional<double> temporal;
     uint64_t nonFinite = 0;  ///< the largest nonFinite count over the metrics
 };
@@ -23,7 +24,7 @@ struct FrameMetrics {
 struct FrameResult {
     uint64_t frame = 0;
     double time = 0;                                     ///< seconds on the animation clock
-    double totalMs = 0;                                  ///< wall time of the graph's execute
+    double totalMs = 0;  ///< wall time of the graph's execute; NaN where not timed (brute force: see Run)
     std::vector<std::pair<std::string, double>> passMs;  ///< per pass, execution order
     FrameMetrics metrics;
 };
@@ -45,7 +46,7 @@ struct Summary {
     size_t frames = 0;
     double totalMs = 0;
     std::vector<std::pair<std::string, double>> passMs;
-    double relMSE = 0, smape = 0, psnr = 0, ssim = 0, flip = 0;
+    double relMSE = 0, smape = 0, psnr = 0, ssim = 0, flip = 0, trimmedRelMSE = 0;
     std::optional<double> temporal;
     /// Static-camera flicker (FlickerAccumulator, Metrics.h) over the measured frames, when nothing moves (the
     /// sequence shares one reference); empty otherwise.
@@ -63,8 +64,19 @@ struct Run {
     uint32_t spp = 0;       ///< brute force: samples per pixel per frame
     std::vector<FrameResult> frames;
     Summary summary;
-    Speedup speedupRelMSE, speedupFlip;
+    Speedup speedupRelMSE, speedupFlip, speedupTrimmed;
     Lag lag;  ///< frames to recover after the cut, lighting steps and disocclusion (BenchLag.h)
+};
+
+/// The bias of the matched reference's path length: its metrics against the reference graph's own (longer) paths,
+/// averaged over the measured frames. The references share seeds, so it holds the noise of the longer paths only.
+struct BiasRow {
+    int graphBounces = 0, fullBounces = 0;
+    double relMSE = 0, trimmedRelMSE = 0, flip = 0;
+    std::optional<double> fullNoise;  ///< reference noise (RelMSE) of the full-length reference
+    uint64_t framesCached = 0, framesRendered = 0;
+    std::string cache;
+    std::string label() const;  ///< "bias: 3 vs 8 bounces"
 };
 
 /// Everything about the run that is not a result: written at the top of every output.
@@ -86,12 +98,23 @@ struct BenchInfo {
     std::string referenceCache;  ///< the cache entry folder
     uint64_t referenceFramesCached = 0, referenceFramesRendered = 0;
     bool referenceShared = false;  ///< one reference for every frame (nothing moves)
+    int referenceBounces = 0, referenceRrStart = 0;  ///< the matched reference's path length
+    std::string referenceBouncesFrom;                ///< "the graphs", "--reference-bounces" or "the reference graph"
+    std::string pixelFilter;                         ///< the reference's (and brute force's) PathTracer.pixelFilter
+    /// The reference's own noise as a RelMSE term (mean over the measured frames of the per-pixel variance of its
+    /// mean, from the spread of its batches, over ref^2 + eps); empty with a single batch.
+    std::optional<double> referenceNoise;
+    std::optional<BiasRow> bias;
+    std::string noiseWarning;  ///< set when the reference noise is not 10x below the smallest error
+    uint32_t bruteForceTimingFrames = 0;
+    std::string bruteForceCache;
+    uint64_t bruteForceFramesCached = 0, bruteForceFramesRendered = 0;
     std::string bruteForceGraph;
     unsigned threads = 0;
     std::string loadBefore, loadAfter;  ///< /proc/loadavg at the start and the end
 };
 
-/// Medians of times and means of metrics over the frames with index >= warmup.
+/// Medians of times (over the timed frames) and means of metrics over the frames with index >= warmup.
 Summary summarize(const std::vector<FrameResult>& frames, uint64_t warmup);
 
 /// Interpolates the brute-force curve (runs in increasing spp) in log(time)-log(error) at `error`; `metric` picks

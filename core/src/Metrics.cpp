@@ -346,6 +346,19 @@ inline void convolveColumn(const float* rows, size_t stride, const float* w, int
 // ---------------------------------------------------------------------------------------------
 // HDR metrics
 
+namespace {
+/// The sum over R, G, B of a pixel's RelMSE terms (x - y)^2 / (y^2 + eps).
+inline double relMsePixelSum(const glm::vec4& t, const glm::vec4& r) {
+    double px = 0.0;
+    for (int c = 0; c < 3; ++c) {
+        const double d = double(t[c]) - double(r[c]);
+        const double yv = r[c];
+        px += d * d / (yv * yv + kRelMseEpsilon);
+    }
+    return px;
+}
+}  // namespace
+
 MetricValue relMSE(MetricImage test, MetricImage ref, ImageView<float>* errorImage) {
     checkSameSize(test, ref, "relMSE");
     checkMap(errorImage, test, "relMSE");
@@ -361,12 +374,7 @@ MetricValue relMSE(MetricImage test, MetricImage ref, ImageView<float>* errorIma
                     if (mr) mr[x] = 0.0f;
                     continue;
                 }
-                double px = 0.0;
-                for (int c = 0; c < 3; ++c) {
-                    const double d = double(tr[x][c]) - double(rr[x][c]);
-                    const double yv = rr[x][c];
-                    px += d * d / (yv * yv + kRelMseEpsilon);
-                }
+                const double px = relMsePixelSum(tr[x], rr[x]);
                 part.sum += px;
                 ++part.count;
                 if (mr) mr[x] = float(px / 3.0);
@@ -377,6 +385,60 @@ MetricValue relMSE(MetricImage test, MetricImage ref, ImageView<float>* errorIma
     // A huge but finite term could still overflow to Inf: cap at the largest double.
     const double v = std::min(meanOf(s, 3.0), std::numeric_limits<double>::max());
     return {v, s.nonFinite};
+}
+
+MetricValue trimmedRelMSE(MetricImage test, MetricImage ref, double dropFraction) {
+    checkSameSize(test, ref, "trimmedRelMSE");
+    if (!(dropFraction >= 0.0 && dropFraction < 1.0))
+        throwBadInput("trimmedRelMSE", "drop fraction out of range", "a value in [0, 1)");
+    // Per-pixel terms (sum over R, G, B) at fixed positions; non-finite pixels are marked by -1 (terms are >= 0).
+    const size_t n = size_t(test.width) * test.height;
+    std::vector<double> terms(n, -1.0);
+    const Sums all = reduceTiles(test.width, test.height, 64, [&](const Tile& tile) {
+        Sums part;
+        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
+            const glm::vec4* tr = test.row(y);
+            const glm::vec4* rr = ref.row(y);
+            double* out = terms.data() + size_t(y) * test.width;
+            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
+                if (!finite3(tr[x]) || !finite3(rr[x])) {
+                    ++part.nonFinite;
+                    continue;
+                }
+                out[x] = std::min(relMsePixelSum(tr[x], rr[x]), std::numeric_limits<double>::max());
+                ++part.count;
+            }
+        }
+        return part;
+    });
+    const uint64_t finite = all.count;
+    const uint64_t drop = uint64_t(std::floor(double(finite) * dropFraction));
+    const uint64_t keep = finite - drop;
+    if (keep == 0) return {0.0, all.nonFinite};
+    // The threshold: the keep-th smallest finite term. Every term below it is kept; of those equal to it, as many
+    // as make `keep` (ties are equal, so which ones does not matter and the sum is independent of order).
+    std::vector<double> sorted;
+    sorted.reserve(finite);
+    for (double t : terms)
+        if (t >= 0.0) sorted.push_back(t);
+    std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(keep - 1), sorted.end());
+    const double threshold = sorted[keep - 1];
+    const Sums below = reduceTiles(test.width, test.height, 64, [&](const Tile& tile) {
+        Sums part;
+        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
+            const double* row = terms.data() + size_t(y) * test.width;
+            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
+                if (row[x] >= 0.0 && row[x] < threshold) {
+                    part.sum += row[x];
+                    ++part.count;
+                }
+            }
+        }
+        return part;
+    });
+    const double sum = below.sum + double(keep - below.count) * threshold;
+    const double v = std::min(sum / (double(keep) * 3.0), std::numeric_limits<double>::max());
+    return {v, all.nonFinite};
 }
 
 MetricValue smape(MetricImage test, MetricImage ref, ImageView<float>* errorImage) {
@@ -1019,6 +1081,9 @@ MetricValue withTextures(const Texture& test, const Texture& ref, Texture* map, 
 MetricValue relMSE(const Texture& test, const Texture& ref, Texture* errorImage) {
     return withTextures(test, ref, errorImage, "relMSE",
                         [](MetricImage a, MetricImage b, ImageView<float>* m) { return relMSE(a, b, m); });
+}
+MetricValue trimmedRelMSE(const Texture& test, const Texture& ref, double dropFraction) {
+    return trimmedRelMSE(viewOf(test, "trimmedRelMSE"), viewOf(ref, "trimmedRelMSE"), dropFraction);
 }
 MetricValue smape(const Texture& test, const Texture& ref, Texture* errorImage) {
     return withTextures(test, ref, errorImage, "smape",

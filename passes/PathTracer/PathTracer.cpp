@@ -52,6 +52,9 @@ bool finite(glm::vec3 v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+/// Mixed into a path's key for its point in the pixel under pixelFilter "box".
+constexpr uint64_t kPixelSampleKey = 0x5851F42D4C957F2Dull;
+
 /// Paths of one tile kept in flight together (see execute()).
 constexpr uint32_t kPathBatch = 256;
 
@@ -216,7 +219,8 @@ void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
         .doc(
             "temporal gradients (A-SVGF), on last frame's pixel grid: for one pixel of each 3x3 block, (luminance of "
             "its samples re-shaded this frame at the same surface points with the same random numbers, their "
-            "luminance last frame), replicated over the block; (0, 0) without history or on a miss. Equal where the "
+            "luminance last frame), replicated over the block; (0, 0) without history, on a miss or with pixelFilter box. "
+            "Equal where the "
             "shading did not change");
     if (!info.wired || info.isOutputConsumed(kGradient)) {
         r.history(kGradientHits, Format::RGBA32U)
@@ -257,6 +261,12 @@ void PathTracer::declareParams(ParamList& p) {
         .doc(
             "camera rays skip back faces of single-sided materials, as the G-buffers' cullMode (bounce and shadow "
             "rays never cull)");
+    p.addEnum("pixelFilter", &mPixelFilter, PixelFilter::Center, {"center", "box"})
+        .doc(
+            "where camera paths start in the pixel: center = every sample at the (jittered) pixel centre, as the "
+            "G-buffers see it; box = each sample uniformly in the pixel, camera jitter ignored (an anti-aliased "
+            "image, for references of jittered sequences; its own camera rays, so a vbuffer feeds only albedo, "
+            "specAlbedo and emission)");
     p.add("alphaTest", &mAlphaTest, true)
         .doc(
             "every ray: alphaMode MASK passes where alpha < alphaCutoff, BLEND is stochastic transparency (there "
@@ -585,6 +595,7 @@ void PathTracer::execute(PassContext& ctx) {
     set.lambertOnly = mLambertOnly;
     set.multiScatter = mEnergyCompensation;
     set.indirectClamp = mIndirectClamp;
+    const bool boxFilter = mPixelFilter == PixelFilter::Box;
     const uint32_t spp = uint32_t(mSamplesPerPixel);
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
     const pt::LightsView lights = mLights;
@@ -684,8 +695,21 @@ void PathTracer::execute(PassContext& ctx) {
                 const uint64_t item = first + k;
                 const uint32_t i = uint32_t(item / spp), s = uint32_t(item % spp);
                 const uint32_t x = tile.x0 + i % tw, y = tile.y0 + i / tw;
-                pt::beginPath(ts.paths[k], cam.origin, ts.dir[i], pt::PathRng(y * w + x, frame, s));
-                ts.hits[k] = ts.primary[i];
+                const pt::PathRng rng(y * w + x, frame, s);
+                if (boxFilter) {
+                    // A point uniform in the pixel from the path's own key (not one of its dimensions, so the
+                    // path's random numbers are those of the centre filter).
+                    pt::PathRng pixelRng = rng;
+                    pixelRng.key ^= kPixelSampleKey;
+                    const glm::vec2 u = pixelRng.next2();
+                    const glm::vec3 dir = cameraRayDir(cam, float(x) + u.x, float(y) + u.y);
+                    pt::beginPath(ts.paths[k], cam.origin, dir, rng);
+                    ts.hits[k] = rayScene.intersect(cam.origin, dir, 0.f, 1e30f, cameraRules);  // culls as camera
+                    ++rays;
+                } else {
+                    pt::beginPath(ts.paths[k], cam.origin, ts.dir[i], rng);
+                    ts.hits[k] = ts.primary[i];
+                }
             }
             runPaths(batch, ts, count);
             for (uint32_t k = 0; k < count; ++k) {
@@ -723,7 +747,9 @@ void PathTracer::execute(PassContext& ctx) {
         tileDropped[tileIndex] = dropped;
     });
     uint64_t rays = 0, dropped = 0;
-    if (gradientTex)
+    if (gradientTex && boxFilter)
+        gradientTex->clear();  // the samples stored are the centre filter's: no exact replay of box samples
+    else if (gradientTex)
         rays += traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
     for (size_t i = 0; i < tileRays.size(); ++i) {
         rays += tileRays[i];

@@ -25,6 +25,7 @@ public:
     enum class LightSamplingMode { Mis, Nee, Bsdf };
     enum class CullMode { None, Back };
     enum class EmissionWeights { Texture, Area };
+    enum class PixelFilter { Center, Box };
 
 private:
     void buildLights(const Scene& scene);
@@ -45,6 +46,7 @@ private:
     CullMode mCullMode = CullMode::Back;
     bool mAlphaTest = true;
     EmissionWeights mEmissionWeights = EmissionWeights::Texture;
+    PixelFilter mPixelFilter = PixelFilter::Center;
 
     // Light data, rebuilt per frame (triangles, punctual lights: animated emission is followed) or per scene
     // (environment).

@@ -1,6 +1,8 @@
 // loom bench on tiny cases (64x64, a few frames, low reference spp): every output file, the shape and sanity of the
-// results (finite, the brute-force error falling with spp, a denoiser below 1 spp), the reference cache (a second
-// run hits it and gives bit-identical metrics, also with another thread count), sweeps, and bad input (exit 2).
+// results (finite, the brute-force error falling with spp, a denoiser below 1 spp, the curve extended until it
+// reaches every graph), the matched-length reference and its bias row, the reference noise estimate, box-filtered
+// references for jittered sequences, the reference and brute-force caches (a second run hits them and gives
+// bit-identical metrics, also with another thread count), sweeps, and bad input (exit 2).
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
@@ -139,19 +141,47 @@ TEST_F(BenchCli, TinyRunWritesEveryOutputWithSaneValues) {
     const json results = readJson("out/results.json");
     ASSERT_FALSE(results.is_discarded());
     ASSERT_EQ(results["variants"].size(), 3u);
-    // Reference 32 spp: the default curve is 1, 2, 4, 8 spp (a quarter of the reference at most).
+    // The default curve: 1, 2, 4, ... spp until the first point at or below every graph's RelMSE, trimmed RelMSE
+    // and FLIP (the one before it is above some graph in some metric).
     const json& curve = results["brute_force"];
-    ASSERT_EQ(curve.size(), 4u);
+    ASSERT_GE(curve.size(), 4u);
     for (size_t i = 0; i < curve.size(); ++i) EXPECT_EQ(curve[i]["spp"].get<int>(), 1 << i);
+    auto crossesAll = [&](const json& point) {
+        for (const json& v : results["variants"])
+            for (const char* m : {"relmse", "trimmed_relmse", "flip"})
+                if (point["summary"][m].get<double>() > v["summary"][m].get<double>()) return false;
+        return true;
+    };
+    EXPECT_TRUE(crossesAll(curve[curve.size() - 1]));
+    EXPECT_FALSE(crossesAll(curve[curve.size() - 2]));
     EXPECT_EQ(results["reference"]["frames_rendered"].get<int>(), 8);
     EXPECT_FALSE(results["reference"]["shared"].get<bool>());
+    // The reference traces the graphs' 3 bounces; the bias against the reference graph's 8 is a row of its own,
+    // taken over the 6 measured frames only.
+    EXPECT_EQ(results["reference"]["max_bounces"].get<int>(), 3);
+    EXPECT_EQ(results["reference"]["pixel_filter"], "center");
+    const json& bias = results["bias"];
+    ASSERT_TRUE(bias.is_object());
+    EXPECT_EQ(bias["graph_bounces"].get<int>(), 3);
+    EXPECT_EQ(bias["full_bounces"].get<int>(), 8);
+    EXPECT_EQ(bias["frames_rendered"].get<int>(), 6);
+    EXPECT_GT(bias["relmse"].get<double>(), 0.0);
+    EXPECT_LE(bias["trimmed_relmse"].get<double>(), bias["relmse"].get<double>());
+    // Reference noise from its 4 batches: positive, and below the 1 spp brute force's error by far (32 spp).
+    const double noise = results["reference"]["noise_relmse"].get<double>();
+    EXPECT_GT(noise, 0.0);
+    EXPECT_LT(noise, 0.2 * curve[0]["summary"]["relmse"].get<double>());
 
     // CSV: one row per graph and frame, and per brute-force point and frame after the first warm-up frame.
     const auto rows = readCsv("out/results.csv");
     size_t graphRows = 0, bruteRows = 0;
     for (const auto& row : rows) {
         (row.at("kind") == "graph" ? graphRows : bruteRows) += 1;
-        for (const char* col : {"total_ms", "relmse", "smape", "psnr", "ssim", "flip"}) {
+        // Brute force is timed on the first 3 measured frames only.
+        const int frame = std::stoi(row.at("frame"));
+        const bool timed = row.at("kind") == "graph" || (frame >= 2 && frame < 5);
+        EXPECT_EQ(row.at("total_ms").empty(), !timed) << row.at("kind") << " " << frame;
+        for (const char* col : {"relmse", "trimmed_relmse", "smape", "psnr", "ssim", "flip"}) {
             const double v = std::stod(row.at(col));
             EXPECT_TRUE(std::isfinite(v)) << col;
             EXPECT_GE(v, 0.0) << col;
@@ -162,10 +192,10 @@ TEST_F(BenchCli, TinyRunWritesEveryOutputWithSaneValues) {
         EXPECT_EQ(row.at("non_finite"), "0");
     }
     EXPECT_EQ(graphRows, 3u * 8u);
-    EXPECT_EQ(bruteRows, 4u * 7u);
+    EXPECT_EQ(bruteRows, curve.size() * 7u);
 
     // The brute-force error falls with spp: each doubling lowers RelMSE, and 8 spp is well below 1 spp (the
-    // variance part of RelMSE halves per doubling).
+    // variance part of RelMSE halves per doubling). Each point is timed.
     for (size_t i = 0; i + 1 < curve.size(); ++i)
         EXPECT_LT(curve[i + 1]["summary"]["relmse"].get<double>(), curve[i]["summary"]["relmse"].get<double>()) << i;
     const double bf1 = curve[0]["summary"]["relmse"].get<double>();
@@ -180,10 +210,15 @@ TEST_F(BenchCli, TinyRunWritesEveryOutputWithSaneValues) {
     EXPECT_LT(atrous["summary"]["relmse"].get<double>(), bf1);
     const std::set<std::string> kinds = {"exact", "at_least", "at_most"};
     for (const json& v : results["variants"]) {
-        EXPECT_TRUE(kinds.count(v["speedup_relmse"]["kind"].get<std::string>())) << v["graph"];
-        EXPECT_GT(v["speedup_relmse"]["value"].get<double>(), 0.0);
+        for (const char* s : {"speedup_relmse", "speedup_trimmed_relmse", "speedup_flip"}) {
+            EXPECT_TRUE(kinds.count(v[s]["kind"].get<std::string>())) << v["graph"] << " " << s;
+            EXPECT_GT(v[s]["value"].get<double>(), 0.0);
+            // The curve reaches every graph: a number, or an upper bound for one worse than 1 spp, never "> x".
+            EXPECT_NE(v[s]["kind"], "at_least") << v["graph"] << " " << s;
+        }
         EXPECT_TRUE(v["summary"]["temporal"].is_number());
     }
+    for (const json& point : curve) EXPECT_GT(point["summary"]["total_ms"].get<double>(), 0.0);
     // Below the 1 spp error at a cost above the 1 spp time: not an "at most" bound.
     EXPECT_NE(atrous["speedup_relmse"]["kind"], "at_most");
     // The object moves every frame, so the accumulation restarts every frame: it is the 1 spp path tracer, frame
@@ -202,8 +237,8 @@ TEST_F(BenchCli, TinyRunWritesEveryOutputWithSaneValues) {
     std::stringstream text;
     text << md.rdbuf();
     EXPECT_NE(text.str().find("| graph | params |"), std::string::npos);
-    for (const char* g :
-         {"| PathTracerSVGF |", "| PathTracerATrous |", "| PathTracerAccumulate |", "PathTracer.samplesPerPixel=8"})
+    for (const char* g : {"| PathTracerSVGF |", "| PathTracerATrous |", "| PathTracerAccumulate |",
+                          "PathTracer.samplesPerPixel=8", "| bias: 3 vs 8 bounces |", "Reference noise (RelMSE)"})
         EXPECT_NE(text.str().find(g), std::string::npos) << g;
 }
 
@@ -217,16 +252,30 @@ TEST_F(BenchCli, SecondRunHitsTheCacheWithIdenticalMetricsOnAnyThreadCount) {
     const json a = readJson("a/results.json"), b = readJson("b/results.json");
     EXPECT_EQ(b["reference"]["frames_cached"].get<int>(), 8);
     EXPECT_EQ(b["reference"]["frames_rendered"].get<int>(), 0);
+    EXPECT_EQ(b["bias"]["frames_rendered"].get<int>(), 0);
+    // Brute-force images come from the cache too: 1 spp, and 4 spp as 1 spp plus a batch of 3, over 7 frames.
+    EXPECT_EQ(a["brute_force_cache"]["frames_rendered"].get<int>(), 2 * 7);
+    EXPECT_EQ(b["brute_force_cache"]["frames_rendered"].get<int>(), 0);
+    EXPECT_EQ(b["brute_force_cache"]["frames_cached"].get<int>(), 2 * 7);
     EXPECT_EQ(frameMetrics(a), frameMetrics(b));
     EXPECT_EQ(frameMetrics(a).size(), 8u + 2u * 7u);
 
-    // A different reference spp is a different cache entry.
+    // A different reference spp is a different reference entry (matched and full length); the brute force's
+    // images do not depend on the reference and are reused.
     const json other =
         benchOk(kDynamic, "c", "--frames 8 --warmup 2 --reference-spp 16 --graph PathTracerATrous --brute-force-spp 1");
     EXPECT_EQ(other["reference"]["frames_cached"].get<int>(), 0);
-    size_t entries = 0;
-    for (const auto& e : fs::directory_iterator(mDir / "cache")) entries += e.is_directory() ? 1 : 0;
-    EXPECT_EQ(entries, 2u);
+    EXPECT_EQ(other["brute_force_cache"]["frames_rendered"].get<int>(), 0);
+    std::map<std::string, int> entries;
+    for (const auto& e : fs::directory_iterator(mDir / "cache")) {
+        const std::string name = e.path().filename().string();
+        if (!e.is_directory()) continue;
+        entries[name.find("_bruteforce_") != std::string::npos ? "bruteforce"
+                : name.find("_3b_") != std::string::npos       ? "matched"
+                : name.find("_8b_") != std::string::npos       ? "full"
+                                                               : name] += 1;
+    }
+    EXPECT_EQ(entries, (std::map<std::string, int>{{"bruteforce", 1}, {"full", 2}, {"matched", 2}}));
 }
 
 TEST_F(BenchCli, SweepGivesOneResultPerValue) {
@@ -275,6 +324,69 @@ TEST_F(BenchCli, StaticSceneSharesOneReferenceAndAccumulationConverges) {
     EXPECT_TRUE(orbit["variants"][0]["summary"]["flicker"].is_null());  // flicker is a static-camera metric
 }
 
+TEST_F(BenchCli, ReferenceBouncesAndNoise) {
+    // The reference graph's own length: no bias row.
+    const json own =
+        benchOk(kBox, "own",
+                "--frames 3 --warmup 1 --reference-spp 32 --brute-force-spp 1 --graph PathTracerAccumulate "
+                "--reference-bounces reference");
+    EXPECT_EQ(own["reference"]["max_bounces"].get<int>(), 8);
+    EXPECT_TRUE(own["bias"].is_null());
+    // A given length: the bias row compares it with the reference graph's 8 bounces. One bounce loses much more
+    // light than three.
+    const json one =
+        benchOk(kBox, "one",
+                "--frames 3 --warmup 1 --reference-spp 32 --brute-force-spp 1 --graph PathTracerAccumulate "
+                "--reference-bounces 1");
+    const json three = benchOk(kBox, "three",
+                               "--frames 3 --warmup 1 --reference-spp 32 --brute-force-spp 1 "
+                               "--graph PathTracerAccumulate");
+    EXPECT_EQ(one["reference"]["max_bounces"].get<int>(), 1);
+    EXPECT_EQ(one["reference"]["bounces_from"], "--reference-bounces");
+    EXPECT_EQ(three["reference"]["bounces_from"], "the graphs");
+    EXPECT_GT(one["bias"]["relmse"].get<double>(), 2.0 * three["bias"]["relmse"].get<double>());
+    // The noise estimate falls as 1 / spp: four times the samples, about a quarter of the noise.
+    const json more = benchOk(kBox, "more",
+                              "--frames 3 --warmup 1 --reference-spp 128 --brute-force-spp 1 "
+                              "--graph PathTracerAccumulate");
+    const double ratio =
+        more["reference"]["noise_relmse"].get<double>() / three["reference"]["noise_relmse"].get<double>();
+    EXPECT_GT(ratio, 0.15);
+    EXPECT_LT(ratio, 0.4);
+    // A reference as noisy as the errors measured against it is flagged.
+    const json noisy = benchOk(kBox, "noisy",
+                               "--frames 3 --warmup 1 --reference-spp 4 --brute-force-spp 1,64 "
+                               "--graph PathTracerAccumulate");
+    EXPECT_NE(noisy["reference"]["noise_warning"].get<std::string>().find("raise --reference-spp"), std::string::npos);
+}
+
+TEST_F(BenchCli, JitterUsesABoxFilteredReference) {
+    // TAA's output is anti-aliased: the reference of a jittered sequence averages over each pixel's area, ignores
+    // the jitter, and so is shared when nothing moves.
+    const json r = benchOk(kBox, "out",
+                           "--jitter halton --frames 4 --warmup 1 --reference-spp 32 --brute-force-spp 1 "
+                           "--graph PathTracerSVGF");
+    EXPECT_EQ(r["reference"]["pixel_filter"], "box");
+    EXPECT_TRUE(r["reference"]["shared"].get<bool>());
+    EXPECT_EQ(r["reference"]["frames_rendered"].get<int>(), 1);
+}
+
+TEST_F(BenchCli, TrimmedRelMseIsMonotonicAlongTheCurveWithFireflies) {
+    // materials.gltf has fireflies: RelMSE along the brute-force curve need not fall, its trimmed form does.
+    const json r = benchOk(loom::test::dataScene("materials.gltf"), "out",
+                           "--frames 3 --warmup 1 --reference-spp 256 --brute-force-spp 1,2,4,8,16,32,64 "
+                           "--graph PathTracerAccumulate");
+    const json& curve = r["brute_force"];
+    ASSERT_EQ(curve.size(), 7u);
+    for (size_t i = 0; i + 1 < curve.size(); ++i) {
+        std::printf("materials %d spp: RelMSE %.4g, trimmed %.4g\n", curve[i]["spp"].get<int>(),
+                    curve[i]["summary"]["relmse"].get<double>(), curve[i]["summary"]["trimmed_relmse"].get<double>());
+        EXPECT_LT(curve[i + 1]["summary"]["trimmed_relmse"].get<double>(),
+                  curve[i]["summary"]["trimmed_relmse"].get<double>())
+            << curve[i + 1]["spp"];
+    }
+}
+
 TEST_F(BenchCli, PlotWithoutMatplotlibIsRefusedBeforeTheBenchmarkRuns) {
     // A plot that cannot be made is known before the frames: nothing is rendered or written.
     const auto r = run(tinyArgs("out") + " --graph PathTracerAccumulate --brute-force-spp 1 --plot --python " +
@@ -296,6 +408,9 @@ TEST_F(BenchCli, BadInputExitsWithCode2AndAMessage) {
     expectBadInput({{"--measure", "Nowhere.color"}}, {"has no pass 'Nowhere'"});
     expectBadInput({{"--reference-spp", "100"}}, {"not a multiple"});
     expectBadInput({{"--brute-force-spp", "1,x"}}, {"'x' is not a sample count"});
+    expectBadInput({{"--reference-bounces", "eight"}}, {"'eight' is not a path length"});
+    expectBadInput({{"--reference-bounces", "65"}}, {"not a path length"});
+    expectBadInput({{"--sweep", "PathTracer.maxBounces=2,3"}}, {"different lengths", "--reference-bounces"});
     expectBadInput({{"--size", "64by64"}}, {"is not a size"});
     expectBadInput({{"--frames", "0"}}, {"frame count is 0"});
     expectBadInput({{"--warmup", "8"}}, {"nothing to measure"});

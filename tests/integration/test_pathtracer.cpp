@@ -981,3 +981,76 @@ TEST(PathTracer, TemporalGradientsMeasureALightingStep) {
         EXPECT_GT(lit, size_t(W * H) / 2) << "frame " << f;
     }
 }
+
+// pixelFilter "box": each sample starts uniformly inside its pixel, so the image of an emitter's edge converges to
+// the area of each pixel the emitter covers (found here by testing a 64 x 64 grid of points per pixel against the
+// quad), where "center" sees 0 or 1. Box ignores the camera jitter and is identical for any thread count.
+TEST(PathTracer, BoxPixelFilterConvergesToPixelCoverage) {
+    const uint32_t W = 24, H = 20, spp = 1024;
+    // A large emissive quad on the ground whose near edge crosses the view at a slant, seen from above.
+    const glm::vec3 u = glm::vec3(1.f, 0.f, 0.37f) * 20.f, v = glm::vec3(0.37f, 0.f, -1.f) * 20.f;
+    const glm::vec3 corner = glm::vec3(0.11f, 0.f, 0.07f) - 0.5f * u;
+    auto makeScene = [&] {
+        auto scene = sceneOf({quad(corner, u, v)}, {lambert(glm::vec3(0.f), glm::vec3(1.f))});
+        scene->finalize();
+        lookAt(*scene, glm::vec3(0.f, 3.f, 0.f), glm::vec3(0.f, 0.f, 0.f), 0.6f);
+        return scene;
+    };
+    auto render = [&](const char* filter, unsigned threads, bool jitter) {
+        ThreadLimit limit(threads);
+        auto scene = makeScene();
+        if (jitter) scene->camera.jitterPattern = JitterPattern::Halton;
+        auto g = ptGraph({{"maxBounces", 0}, {"samplesPerPixel", spp}, {"pixelFilter", filter}}, W, H, scene);
+        frame(*g, *scene, 3, W, H);
+        const Texture* c = g->fieldTexture("PT.color");
+        Texture copy(c->width(), c->height(), c->format());
+        copy.copyFrom(*c);
+        return copy;
+    };
+    // Coverage of each pixel by the quad: the fraction of a 64 x 64 grid of points whose ray hits it.
+    auto scene = makeScene();
+    scene->camera.aspect = float(W) / float(H);
+    const CameraData cam = makeCameraData(scene->camera, W, H);
+    auto inside = [&](glm::vec3 p) {
+        const float a = glm::dot(p - corner, u) / glm::dot(u, u), b = glm::dot(p - corner, v) / glm::dot(v, v);
+        return a >= 0.f && a <= 1.f && b >= 0.f && b <= 1.f;
+    };
+    auto coverage = [&](uint32_t x, uint32_t y) {
+        const int n = 64;
+        int hits = 0;
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                const glm::vec3 d =
+                    cameraRayDir(cam, float(x) + (float(i) + 0.5f) / n, float(y) + (float(j) + 0.5f) / n);
+                hits += inside(cam.origin + d * (-cam.origin.y / d.y)) ? 1 : 0;
+            }
+        return double(hits) / double(n * n);
+    };
+
+    const Texture box = render("box", 2, false), center = render("center", 2, false);
+    const auto b = box.view<glm::vec4>(), c = center.view<glm::vec4>();
+    int edgePixels = 0;
+    double sumError = 0.0, sumVariance = 0.0;
+    for (uint32_t y = 0; y < H; ++y) {
+        for (uint32_t x = 0; x < W; ++x) {
+            const double cov = coverage(x, y);
+            EXPECT_TRUE(c.at(x, y).r == 0.f || c.at(x, y).r == 1.f) << x << "," << y;
+            if (cov == 0.0 || cov == 1.0) {
+                EXPECT_NEAR(b.at(x, y).r, cov, 1e-6) << x << "," << y;  // every sample agrees
+                continue;
+            }
+            // A Bernoulli mean of spp samples: within 5 standard deviations (and the grid's resolution).
+            const double sd = std::sqrt(cov * (1.0 - cov) / spp);
+            EXPECT_NEAR(b.at(x, y).r, cov, 5.0 * sd + 1.0 / 64.0) << x << "," << y;
+            sumError += b.at(x, y).r - cov;
+            sumVariance += cov * (1.0 - cov) / spp;
+            ++edgePixels;
+        }
+    }
+    ASSERT_GE(edgePixels, int(W));  // the edge crosses the whole view
+    EXPECT_LT(std::abs(sumError), 5.0 * std::sqrt(sumVariance) + edgePixels / 4096.0);
+    std::printf("box filter: %d edge pixels, mean error %.5f\n", edgePixels, sumError / edgePixels);
+    // The camera jitter moves "center" samples, never "box" ones; the thread count changes nothing.
+    EXPECT_TRUE(box.samePixels(render("box", 1, true)));
+    EXPECT_FALSE(center.samePixels(render("center", 2, true)));
+}

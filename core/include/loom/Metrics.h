@@ -56,6 +56,23 @@ inline constexpr double kPsnrCap = 100.0;
 MetricValue relMSE(MetricImage test, MetricImage ref, ImageView<float>* errorImage = nullptr);
 MetricValue relMSE(const Texture& test, const Texture& ref, Texture* errorImage = nullptr);
 
+/// Fraction of the largest per-pixel RelMSE terms trimmedRelMSE drops by default: 0.1 %.
+inline constexpr double kTrimmedRelMseDrop = 1e-3;
+
+/// Trimmed RelMSE, robust to fireflies: the per-pixel RelMSE term (the sum over R, G, B of
+/// (x - y)^2 / (y^2 + eps)) of every finite pixel is computed, the floor(N * dropFraction) largest
+/// of the N finite pixels are dropped, and the value is the mean over the rest and the channels.
+/// It is RelMSE's trimmed mean (a classical robust estimator of location): a few pixels of huge
+/// error (a firefly in the test image, or one in the reference) cannot dominate it, yet the kept
+/// pixels count exactly as in RelMSE, so a firefly-free image (every term alike, or fewer than
+/// 1 / dropFraction pixels) gives RelMSE's value. When at least one pixel is dropped, raising one
+/// pixel's term to any value (a firefly) raises the result by at most the smallest dropped term /
+/// (3 (N - dropped)), where RelMSE grows without bound. Ties at the threshold are kept by count, so the
+/// value is independent of the order of equal terms (and of the thread count). Non-finite pixels
+/// are excluded and counted, as in RelMSE. dropFraction in [0, 1), else loom::Error (bad input).
+MetricValue trimmedRelMSE(MetricImage test, MetricImage ref, double dropFraction = kTrimmedRelMseDrop);
+MetricValue trimmedRelMSE(const Texture& test, const Texture& ref, double dropFraction = kTrimmedRelMseDrop);
+
 /// SMAPE: mean over pixels and channels of |x - y| / (|x| + |y| + eps), eps = kSmapeEpsilon, no
 /// factor 2: the value lies in [0, 1). Non-finite channels count as 1.
 MetricValue smape(MetricImage test, MetricImage ref, ImageView<float>* errorImage = nullptr);
