@@ -4,9 +4,9 @@
 #   pattern/    the graph machinery on test passes (PNG), with a dump of every Blur field
 #   gbuffer/    every G-buffer channel of the animated Cornell box, 8 frames (EXR)
 #   pathtraced/ the Cornell box path traced and accumulated, 8 frames x 16 spp (EXR, linear HDR)
-#   denoised/   the default graph (PathTracerSVGF: G-buffer, 1 spp path tracing, SVGF, TAA, tone mapping) on the
+#   denoised/   the default graph (PathTracerSVGF: G-buffer, 1 spp path tracing, SVGF, tone mapping) on the
 #               animated Cornell box, 30 frames (PNG), and side_by_side.png of the last frame:
-#               1 spp input | SVGF + TAA | reference (256 spp), all through the same tone map
+#               1 spp input | SVGF | reference (256 spp), all through the same tone map
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/build.sh release
@@ -48,4 +48,4 @@ echo "Images written to $out/:"
 for d in pattern gbuffer pathtraced denoised; do
   echo "  $d/: $(ls "$out/$d" | wc -l) files, e.g. $(ls "$out/$d" | grep -E '\.(png|exr)$' | tail -1)"
 done
-echo "  side by side (1 spp | SVGF + TAA | 256 spp reference): $out/denoised/side_by_side.png"
+echo "  side by side (1 spp | SVGF | 256 spp reference): $out/denoised/side_by_side.png"

@@ -342,7 +342,7 @@ def main():
         sets = []
         for _ in range(rng.randint(1, 3)):
             sets += ["--set", "%s=%s" % (rng.choice(params), rng.choice(values))]
-        run("set %d" % i, ["render", "--graph", os.path.join(graphs_dir, "PathTracerSVGF.json"), "--scene",
+        run("set %d" % i, ["render", "--graph", os.path.join(graphs_dir, "PathTracerSVGFTAA.json"), "--scene",
                            dynamic] + small + sets)
     hdr, header_size = write_hdr(os.path.join(work, "sky.hdr"), 40, 12, rng)
     for i in range(o.runs):
@@ -363,7 +363,7 @@ def main():
             f.write(b)
         run("env map %d (%s)" % (i, kind), ["render", "--graph", os.path.join(graphs_dir, "PathTracerRaw.json"),
                                             "--scene", dynamic, "--env", path, "--size", "32x24", "--dump", "*"])
-    shown = {"PathTracerSVGF.json": ["SVGF.variance", "SVGF.moments", "TAA.colorHistory", "GBuffer.meshId",
+    shown = {"PathTracerSVGFTAA.json": ["SVGF.variance", "SVGF.moments", "TAA.colorHistory", "GBuffer.meshId",
                                      "GBuffer.mvec", "ToneMap.dst", "PathTracer.color", "GBuffer.vbuffer"],
              "GBufferRaster.json": ["GBuffer.mvec", "GBuffer.linearZ", "GBuffer.meshId", "GBuffer.normW"],
              "TestPattern.json": ["Blur.dst", "Counter.dst", "Display.dst", "Blur.tmp"]}

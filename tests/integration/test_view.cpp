@@ -50,7 +50,7 @@ protected:
     /// The default graph on the dynamic scene (its camera and objects animated), 64x64, jittered: every pass has
     /// history.
     std::string svgfRun(const std::string& extra) const {
-        return "view --headless --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+        return "view --headless --graph " + shellQuoted(kGraphs + "PathTracerSVGFTAA.json") + " --scene " +
                shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) + " --size 64x64 --jitter halton " + extra;
     }
 };
@@ -72,7 +72,7 @@ TEST_F(View, SwitchingTheShownFieldLeavesTheRenderUnchanged) {
     ASSERT_EQ(r.code, 0) << r.output;
     r = loom(svgfRun("--frames 8 --script switching.txt"));
     ASSERT_EQ(r.code, 0) << r.output;
-    r = loom("render --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+    r = loom("render --graph " + shellQuoted(kGraphs + "PathTracerSVGFTAA.json") + " --scene " +
              shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
              " --size 64x64 --jitter halton --frames 7 --out out --dump TAA.colorOut "
              "--dump-frames 6 -q");
@@ -367,7 +367,7 @@ TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
     // G-buffer rasterizer's own EGL context share the thread; the screen is the session's display, and the window's
     // own pixels, read back from GL, hold it magnified without a change of value.
     ASSERT_EQ(std::system("command -v xvfb-run >/dev/null 2>&1"), 0) << "xvfb-run is missing: run scripts/setup.sh";
-    const std::string args = "--graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+    const std::string args = "--graph " + shellQuoted(kGraphs + "PathTracerSVGFTAA.json") + " --scene " +
                              shellQuoted(loom::test::dataScene("cornell_dynamic.gltf")) +
                              " --size 64x48 --frames 4 --field SVGF.filtered --exposure 1 ";
     auto r = loom("view --headless " + args + "--screenshot headless.png");
