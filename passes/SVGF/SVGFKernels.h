@@ -298,28 +298,38 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 /// Temporal gradients (Schied et al. 2018, "Gradient Estimation for Real-Time Adaptive Temporal Filtering"): the
 /// path tracer's `gradient` channel holds, on last frame's pixel grid, for one sample of each 3x3 block (replicated
 /// over the block) the luminance of that sample re-shaded this frame with the same surface point and random numbers,
-/// and its luminance last frame. Where nothing changed the two are equal. The change of a block is
-/// lambda = sum |new - old| / sum max(new, old) over the 3x3 blocks around it, in [0, 1] (0 where nothing was
-/// sampled or everything is black).
+/// and its luminance last frame. Where nothing changed the two are equal. The change of a block comes from the
+/// samples of the 3x3 blocks around it (antilagChange).
 inline constexpr uint32_t kGradientBlock = 3;  ///< side of the blocks of the gradient channel (its contract)
 
 inline constexpr float kAntilagMaxRatio = 16.f;  ///< bound of the history's rescaling (either way)
 
-/// (|new - old|, max(new, old), new, old) of one gradient sample (non-finite, negative or huge samples count as
-/// none).
-LOOM_HD inline glm::vec4 gradientTerms(const glm::vec2& g) {
-    if (!(g.x >= 0.f && g.x < 1e18f) || !(g.y >= 0.f && g.y < 1e18f)) return glm::vec4(0.f);
-    return glm::vec4(fabsf(g.x - g.y), maxf(g.x, g.y), g.x, g.y);
+/// One gradient sample (new, old) if usable, else (0, 0): non-finite, negative or huge samples count as none.
+LOOM_HD inline glm::vec2 gradientSample(const glm::vec2& g) {
+    if (!(g.x >= 0.f && g.x < 1e18f) || !(g.y >= 0.f && g.y < 1e18f)) return glm::vec2(0.f);
+    return g;
 }
 
-/// (lambda, luminance ratio new / old) from the window sums of gradientTerms: (0, 1) where nothing was lit; the
-/// ratio bounded to [1 / kAntilagMaxRatio, kAntilagMaxRatio] (a light switched on from black: lambda = 1 does the
-/// work), 1 where there was no light before.
-LOOM_HD inline glm::vec2 antilagChange(const glm::vec4& sums) {
-    if (!(sums.y > 1e-12f)) return glm::vec2(0.f, 1.f);
-    const float lambda = minf(sums.x / sums.y, 1.f);
-    const float ratio = sums.w > 1e-12f ? minf(maxf(sums.z / sums.w, 1.f / kAntilagMaxRatio), kAntilagMaxRatio) : 1.f;
-    return glm::vec2(lambda, ratio);
+/// (lambda, ratio) from the gradient samples (new, old) around a block. The ratio is sum new / sum old (bounded to
+/// [1 / kAntilagMaxRatio, kAntilagMaxRatio]; 1 where there was no light before): the history is rescaled by it. lambda
+/// is what the rescaling does not explain, sum |new - ratio old| / sum max(new, ratio old) in [0, 1]: 0 for a light
+/// that only dims or brightens (the rescaled history is right), large where a shadow moved or a light appeared
+/// from black. (0, 1) where nothing was lit.
+LOOM_HD inline glm::vec2 antilagChange(const glm::vec2* samples, int count) {
+    float sumNew = 0.f, sumOld = 0.f;
+    for (int k = 0; k < count; ++k) {
+        sumNew += samples[k].x;
+        sumOld += samples[k].y;
+    }
+    if (!(maxf(sumNew, sumOld) > 1e-12f)) return glm::vec2(0.f, 1.f);
+    const float ratio = sumOld > 1e-12f ? minf(maxf(sumNew / sumOld, 1.f / kAntilagMaxRatio), kAntilagMaxRatio) : 1.f;
+    float residual = 0.f, scale = 0.f;
+    for (int k = 0; k < count; ++k) {
+        const float rescaled = ratio * samples[k].y;
+        residual += fabsf(samples[k].x - rescaled);
+        scale += maxf(samples[k].x, rescaled);
+    }
+    return glm::vec2(scale > 1e-12f ? minf(residual / scale, 1.f) : 0.f, ratio);
 }
 
 /// The spatial variance estimate's weight, spelt in operations a vector unit performs identically (products and

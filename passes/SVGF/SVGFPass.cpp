@@ -50,7 +50,7 @@ const char kIntegratedIndirect[] = "integratedIndirect";
 const char kEstimate[] = "estimate";
 const char kEstimateIndirect[] = "estimateIndirect";
 const char kDemodulationAlbedo[] = "demodulationAlbedo";
-const char kGradientSums[] = "gradientSums";
+const char kGradientSamples[] = "gradientSamples";
 const char kChange[] = "shadingChange";
 
 // Frame stats.
@@ -179,10 +179,8 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
         .doc("input of the a-trous levels: integrated colour with its variance estimate (spatial while short)");
     if (splitFields) r.internal(kEstimateIndirect, Format::RGBA32F).doc("indirect, as estimate (split only)");
     if (!info.wired || info.isInputConnected(kGradient)) {
-        r.internal(kGradientSums, Format::RGBA32F)
-            .doc(
-                "gradient terms (|new - old|, max(new, old), new, old) of each 3x3 block's sample, on the block grid "
-                "(gradient only)");
+        r.internal(kGradientSamples, Format::RG32F)
+            .doc("the gradient sample (new, old) of each 3x3 block, on the block grid (gradient only)");
         r.internal(kChange, Format::RG32F)
             .doc(
                 "shading change on last frame's grid, what the anti-lag reprojects: lambda in [0, 1] and the "
@@ -265,7 +263,7 @@ ImageView<const glm::vec4> SVGFPass::demodulationAlbedo(PassContext& ctx) const 
 ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
     const auto gradient = inputView<glm::vec2>(ctx, kGradient);
     if (!gradient.data || !mTemporal) return {};
-    const auto terms = ctx.internal(kGradientSums)->view<glm::vec4>();
+    const auto samples = ctx.internal(kGradientSamples)->view<glm::vec2>();
     const auto change = ctx.internal(kChange)->view<glm::vec2>();
     const uint32_t w = change.width, h = change.height;
     // One sample per block (the channel replicates it over the block): its terms on the block grid, then for each
@@ -277,8 +275,8 @@ ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
         [&](const Tile& band) {
             for (uint32_t by = band.y0; by < band.y1; ++by)
                 for (int bx = 0; bx < bw; ++bx)
-                    terms.at(uint32_t(bx), by) =
-                        gradientTerms(gradient.at(uint32_t(bx) * kGradientBlock, by * kGradientBlock));
+                    samples.at(uint32_t(bx), by) =
+                        gradientSample(gradient.at(uint32_t(bx) * kGradientBlock, by * kGradientBlock));
         },
         kTemporalBandRows);
     parallelFor2D(
@@ -286,11 +284,12 @@ ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
         [&](const Tile& band) {
             for (uint32_t by = band.y0; by < band.y1; ++by)
                 for (int bx = 0; bx < bw; ++bx) {
-                    glm::vec4 sum(0.f);
+                    glm::vec2 around[9];
+                    int count = 0;
                     for (int j = std::max(0, int(by) - 1); j <= std::min(bh - 1, int(by) + 1); ++j)
                         for (int i = std::max(0, bx - 1); i <= std::min(bw - 1, bx + 1); ++i)
-                            sum += terms.at(uint32_t(i), uint32_t(j));
-                    const glm::vec2 c = antilagChange(sum);
+                            around[count++] = samples.at(uint32_t(i), uint32_t(j));
+                    const glm::vec2 c = antilagChange(around, count);
                     for (uint32_t y = by * kGradientBlock; y < std::min(h, (by + 1) * kGradientBlock); ++y)
                         for (uint32_t x = uint32_t(bx) * kGradientBlock; x < std::min(w, uint32_t(bx + 1) * kGradientBlock);
                              ++x)

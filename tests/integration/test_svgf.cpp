@@ -955,3 +955,24 @@ TEST(SVGF, JitteredHistoryIsRegisteredWithTheSamples) {
     EXPECT_LT(worst, 2e-5) << "history and sample disagree: misregistered by the jitter";
     EXPECT_GT(slopeTimesJitter, 100 * 2e-5) << "the jitter moves the samples by far more than the tolerance";
 }
+
+// The anti-lag's reading of the gradient samples (new, old) around a block: a light that only dims or brightens is a
+// ratio with nothing left over (the rescaled history is right, lambda 0); a shadow that moves over part of the
+// window leaves a residual; nothing lit is no change.
+TEST(SVGF, AntilagSeparatesRescalingFromChange) {
+    const glm::vec2 dimmed[4] = {{0.5f, 2.f}, {0.25f, 1.f}, {1.f, 4.f}, {0.75f, 3.f}};
+    const glm::vec2 c = svgf::antilagChange(dimmed, 4);
+    EXPECT_EQ(c.y, 0.25f);
+    EXPECT_EQ(c.x, 0.f);
+    const glm::vec2 shadowed[4] = {{1.f, 1.f}, {1.f, 1.f}, {0.f, 1.f}, {0.f, 1.f}};
+    const glm::vec2 s = svgf::antilagChange(shadowed, 4);
+    EXPECT_FLOAT_EQ(s.y, 0.5f);
+    EXPECT_FLOAT_EQ(s.x, 2.f / 3.f);  // rescaled by 0.5: residuals 4 x 0.5 over maxima 1 + 1 + 0.5 + 0.5
+    const glm::vec2 dark[2] = {{0.f, 0.f}, {0.f, 0.f}};
+    EXPECT_EQ(svgf::antilagChange(dark, 2), glm::vec2(0.f, 1.f));
+    const glm::vec2 switchedOn[2] = {{2.f, 0.f}, {1.f, 0.f}};
+    EXPECT_EQ(svgf::antilagChange(switchedOn, 2), glm::vec2(1.f, 1.f)) << "from black: no ratio, all change";
+    // Non-finite and negative samples count as none.
+    EXPECT_EQ(svgf::gradientSample(glm::vec2(std::nanf(""), 1.f)), glm::vec2(0.f));
+    EXPECT_EQ(svgf::gradientSample(glm::vec2(1.f, -1.f)), glm::vec2(0.f));
+}
