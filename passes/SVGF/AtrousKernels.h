@@ -9,7 +9,8 @@
 //   h(q)  = b(i) b(j), b = (1, 4, 6, 4, 1) / 16                                      (B3 spline)
 //   w_z   = exp(-|z_p - z_q| / (phiDepth * dz_p * step * |(i, j)| + eps))               (paper eq. 3, the gradient
 //           times the screen distance of the tap)
-//   w_n   = max(0, n_p . n_q) ^ phiNormal                                              (eq. 4)
+//   w_n   = min(clamp(n_p . n_q, 0, 1.01) ^ phiNormal, 1e15)                            (eq. 4; the caps matter only
+//           for normals that are not unit length)
 //   w_l   = exp(-|l_p - l_q| / (phiColor * sqrt(max(0, g(Var)_p)) + eps))              (eq. 5, g = 3x3 Gaussian
 //           (1/4 centre, 1/8 edges, 1/16 corners) of the variance around p at unit spacing)
 //   w     = w_z * w_n * w_l
@@ -32,6 +33,11 @@ struct AtrousParams {
 };
 
 inline constexpr float kAtrousEpsilon = 1e-10f;
+/// The largest cosine between normals the normal weight uses (the fast path's cap): above 1 only for normals that
+/// are not unit length.
+inline constexpr float kAtrousMaxCosine = 1.01f;
+/// The largest normal weight: its square, summed over 25 taps, stays finite.
+inline constexpr float kAtrousMaxNormalWeight = 1e15f;
 
 /// Rec. 709 luminance.
 LOOM_HD inline float luminance(const glm::vec3& c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
@@ -82,7 +88,10 @@ LOOM_HD inline glm::vec4 atrousPixel(ImageView<const glm::vec4> illum, ImageView
             const float distance = sqrtf(float(i * i + j * j));
             const float wz = fabsf(zCentre.x - zq.x) / (phiZ * distance + kAtrousEpsilon);
             const float wl = fabsf(lCentre - luminance(glm::vec3(cq))) / phiL;
-            const float wn = powf(fmaxf(0.f, glm::dot(nCentre, nq)), p.phiNormal);
+            // The cosine capped at kAtrousMaxCosine (as the fast path) and the power at kAtrousMaxNormalWeight: a
+            // non-unit normal must not overflow it (Inf / Inf was NaN). Unit normals are unaffected.
+            const float cosine = fminf(fmaxf(0.f, glm::dot(nCentre, nq)), kAtrousMaxCosine);
+            const float wn = fminf(powf(cosine, p.phiNormal), kAtrousMaxNormalWeight);
             const float w = h * expf(-wz - wl) * wn;
             sumColour += w * glm::vec3(cq);
             sumVariance += w * w * cq.a;

@@ -279,7 +279,8 @@ HWY_INLINE void sampleHistoryVec(const ClampedImage<glm::vec4>& history, FloatVe
     const auto ixv = hn::ConvertTo(di, fx0), iyv = hn::ConvertTo(di, fy0);
     const FloatMask integer = hn::And(hn::Eq(px, fx0), hn::Eq(py, fy0));
     const int32_t ix0 = hn::GetLane(ixv), iy0 = hn::GetLane(iyv);
-    if (hn::AllTrue(d, integer) && ix0 >= 0 && ix0 + N <= W && iy0 >= 0 && iy0 < H &&
+    // ix0 <= W - N rather than ix0 + N <= W: a position far off the frame converts to a saturated integer.
+    if (hn::AllTrue(d, integer) && ix0 >= 0 && ix0 <= W - N && iy0 >= 0 && iy0 < H &&
         hn::AllTrue(di, hn::And(hn::Eq(ixv, firstPlusLane(di, ix0)), hn::Eq(iyv, hn::Set(di, iy0))))) {
         hn::LoadInterleaved4(d, reinterpret_cast<const float*>(&history.at(ix0, iy0)), hr, hg, hb, ha);
         if (prefetchNext && iy0 + 1 < H) prefetchRange(&history.at(ix0, iy0 + 1), sizeof(glm::vec4) * kLanes);

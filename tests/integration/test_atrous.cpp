@@ -363,6 +363,29 @@ TEST(Atrous, BadInputStaysFinite) {
             }
 }
 
+// Normals that are not unit length (a cosine above 1) with sharp normal stopping: the reference's power of the
+// cosine overflowed (Inf / Inf). Both paths cap the cosine at 1.01 and stay finite; unit normals are unaffected.
+TEST(Atrous, NonUnitNormalsStayFiniteOnBothPaths) {
+    Frame f = makeEdgyFrame(40, 30, 29);
+    auto n = f.normal.view<glm::vec4>();
+    for (uint32_t y = 20; y < 26; ++y)
+        for (uint32_t x = 4; x < 12; ++x) n.at(x, y) = glm::vec4(0.f, 0.f, x % 2 ? 2.f : 1e3f, 0.f);
+    AtrousParams sharp;
+    sharp.phiNormal = 1e3f;
+    for (const bool reference : {false, true})
+        for (const AtrousParams& p : {AtrousParams{}, sharp}) {
+            const Result r = runFilter(f, 5, reference, 2, p);
+            for (uint32_t y = 0; y < f.height; ++y)
+                for (uint32_t x = 0; x < f.width; ++x)
+                    for (int ch = 0; ch < 4; ++ch) {
+                        ASSERT_TRUE(std::isfinite(r.dst.view<glm::vec4>().at(x, y)[ch]))
+                            << x << "," << y << " reference " << reference << " phiNormal " << p.phiNormal;
+                        ASSERT_TRUE(std::isfinite(r.feedback.view<glm::vec4>().at(x, y)[ch]))
+                            << x << "," << y << " reference " << reference << " phiNormal " << p.phiNormal;
+                    }
+        }
+}
+
 // The level addresses every plane of a tap from two pointers and the plane spacing, so it refuses planes that do
 // not lie planeSize() apart instead of reading the wrong memory; the allocator's own layout passes the check.
 TEST(Atrous, LevelRefusesPlanesNotEvenlySpaced) {

@@ -274,6 +274,24 @@ TEST(TAAPass, InvalidHistoryOrOffFrameReprojectionGivesTheCurrentColour) {
     }
 }
 
+// Motion vectors far beyond the frame, integer ones (which take the vector path's contiguous load when in the frame)
+// and the largest floats of either sign: no history anywhere, the output is the current colour, for the tiled path
+// and the reference kernel alike.
+TEST(TAAPass, HugeMotionVectorsGiveTheCurrentColour) {
+    for (const bool reference : {false, true}) {
+        for (const float m : {4096.f, -4096.f, 1e30f, -1e30f, std::numeric_limits<float>::max()}) {
+            Harness h(nlohmann::json{{"reference", reference}});
+            h.source->color = [](uint64_t f, uint32_t x, uint32_t y) { return noisyPattern(f, x, y); };
+            h.run();
+            h.source->motion = [m](uint64_t, uint32_t, uint32_t) { return glm::vec2(m, m); };
+            h.run();
+            EXPECT_EQ(h.stat("noHistory"), 64 * 64) << m;
+            for (uint32_t y = 0; y < 64; y += 3)
+                for (uint32_t x = 0; x < 64; ++x) ASSERT_EQ(h.out(x, y), noisyPattern(1, x, y)) << m << " " << x;
+        }
+    }
+}
+
 // A static scene rendered with Halton jitter: TAA converges to the supersampled image (the mean of the jittered
 // frames, from AccumulatePass) far more closely than any single frame is to it.
 TEST(TAAPass, ConvergesToTheSupersampledImageOfAJitteredGBuffer) {
