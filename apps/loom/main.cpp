@@ -62,6 +62,9 @@ int main(int argc, char** argv) {
     } catch (const std::exception& e) {
         std::cerr << "error: " << e.what() << "\n";
         return 1;
+    } catch (...) {
+        std::cerr << "error: an exception that is not a std::exception (thrown by a plugin?)\n";
+        return 1;
     }
     return 0;
 }

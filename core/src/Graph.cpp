@@ -98,8 +98,9 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
     if (!root.is_object()) throwBadInput("/", "a graph must be a JSON object", "{\"loom_graph\": 1, ...}", {}, file);
     checkKeys(root, {"loom_graph", "name", "passes", "edges", "outputs"}, "", file);
     const json& version = require(root, "loom_graph", json::value_t::number_integer, "an integer", "", file);
-    if (version.get<int>() != kGraphFormatVersion)
-        throwBadInput("/loom_graph", fmt::format("unsupported graph format version {}", version.get<int>()),
+    // Compared as a 64-bit value: an int conversion would take 4294967297 for 1.
+    if (!version.is_number_integer() || version.get<int64_t>() != int64_t(kGraphFormatVersion))
+        throwBadInput("/loom_graph", fmt::format("unsupported graph format version {}", version.dump()),
                       fmt::format("{}", kGraphFormatVersion), "this Loom reads version 1 graphs", file);
 
     GraphDesc g;

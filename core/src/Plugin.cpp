@@ -222,6 +222,10 @@ std::unique_ptr<RenderPass> PluginRegistry::create(const std::string& type) {
         throwBadInput({}, "unknown pass type '" + type + "'", "one of: " + join(known), hint);
     }
     auto pass = it->second.factory();
+    if (!pass)
+        pluginError(it->second.library, "the factory of pass type '" + type + "' returned no pass",
+                    "a factory that returns a new pass", "fix the plugin's LOOM_DEFINE_PLUGIN registration",
+                    ErrorKind::Runtime);
     pass->declareParams(pass->params());
     return pass;
 }

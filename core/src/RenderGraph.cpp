@@ -734,7 +734,21 @@ void RenderGraph::execute(const FrameInfo& frame) {
             for (const auto& name : n->observeBefore) mObserver(frame, n->desc.name, name, *ctx.input(name));
         n->stats.clear();
         auto t0 = std::chrono::steady_clock::now();
-        n->pass->execute(ctx);
+        try {
+            n->pass->execute(ctx);
+        } catch (const Error&) {
+            throw;
+        } catch (const std::bad_alloc&) {
+            throw;
+        } catch (const std::exception& e) {
+            throw Error(Error::Info{ErrorKind::Runtime, {}, n->desc.name, std::string("pass failed: ") + e.what(), {},
+                                    {}});
+        } catch (...) {
+            // A plugin may throw anything; it must not abort the process.
+            throw Error(Error::Info{ErrorKind::Runtime, {}, n->desc.name,
+                                    "pass failed with an exception that is not a std::exception", {},
+                                    "report it to the plugin's author"});
+        }
         auto t1 = std::chrono::steady_clock::now();
         double ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
         n->timing.lastMs = ms;

@@ -113,6 +113,20 @@ private:
     bool mHistoryObserved = false;
 };
 
+/// A pass whose execute throws: a std::logic_error or, as a careless plugin might, an int.
+class ThrowingPass final : public RenderPass {
+public:
+    explicit ThrowingPass(bool standard) : mStandard(standard) {}
+    void reflect(Reflection& r, const CompileInfo&) const override { r.output("dst", Format::RGBA32F); }
+    void execute(PassContext&) override {
+        if (mStandard) throw std::logic_error("broken invariant");
+        throw 42;
+    }
+
+private:
+    bool mStandard;
+};
+
 /// The test passes plugin plus the pass types defined here (registered once per process).
 PluginRegistry& registry() {
     static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
@@ -127,6 +141,12 @@ PluginRegistry& registry() {
                          [] { return std::make_unique<ConnectionFieldsPass>(); });
         reg.registerPass("PortChanger", "declares another output once wired",
                          [] { return std::make_unique<ConnectionFieldsPass>(true); });
+        reg.registerPass("NullFactory", "a faulty plugin whose factory returns no pass",
+                         []() -> std::unique_ptr<RenderPass> { return nullptr; });
+        reg.registerPass("ThrowsInt", "a faulty plugin that throws an int from execute",
+                         [] { return std::make_unique<ThrowingPass>(false); });
+        reg.registerPass("ThrowsStd", "a faulty plugin that throws a std::logic_error from execute",
+                         [] { return std::make_unique<ThrowingPass>(true); });
         return true;
     }();
     (void)registered;
@@ -1068,3 +1088,33 @@ TEST(RenderGraphDesc, SetParamTakesEffectWithoutRecompiling) {
 }
 
 }  // namespace
+
+// Plugin faults are errors, not crashes: a factory that returns no pass, and a pass that throws something that is
+// not a loom::Error (a std::exception, or not even that) from execute; each names what failed.
+TEST(RenderGraphErrors, PluginFaultsAreErrorsNamingThePass) {
+    try {
+        registry().create("NullFactory");
+        FAIL() << "a null pass was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("NullFactory"), std::string::npos) << e.what();
+        EXPECT_EQ(e.kind(), ErrorKind::Runtime);
+    }
+    for (const char* type : {"ThrowsInt", "ThrowsStd"}) {
+        nlohmann::json g = {{"loom_graph", 1},
+                            {"name", "faulty"},
+                            {"passes", {{{"name", "Faulty"}, {"type", type}}}},
+                            {"outputs", {"Faulty.dst"}}};
+        RenderGraph graph(parseGraph(g.dump()), registry());
+        CompileOptions o;
+        o.width = 8;
+        o.height = 8;
+        graph.compile(o);
+        try {
+            graph.execute(FrameInfo{});
+            FAIL() << type << " did not fail";
+        } catch (const Error& e) {
+            EXPECT_EQ(e.info().where, "Faulty") << e.what();
+            EXPECT_EQ(e.kind(), ErrorKind::Runtime);
+        }
+    }
+}

@@ -369,6 +369,11 @@ TEST(GraphJsonErrors, WrongVersion) {
     g["loom_graph"] = 2;
     Error e = expectGraphError(g.dump(), "/loom_graph", "unsupported graph format version 2");
     EXPECT_EQ(e.info().expected, "1");
+    // Beyond 32 bits: read as 1 by an int conversion, a different version all the same.
+    g["loom_graph"] = 4294967297LL;
+    expectGraphError(g.dump(), "/loom_graph", "unsupported graph format version 4294967297");
+    g["loom_graph"] = -4294967295LL;
+    expectGraphError(g.dump(), "/loom_graph", "unsupported graph format version");
     g["loom_graph"] = "1";
     expectGraphError(g.dump(), "/loom_graph", "wrong type");
     g["loom_graph"] = 1.0;
