@@ -294,6 +294,13 @@ struct ReferenceSpec {
     std::string label = "reference";
 };
 
+/// A reference sequence's images by frame index: a shared (static) reference is one image that serves every frame,
+/// held once rather than copied per frame (memory that grew with --frames).
+struct ReferenceFrames {
+    const std::vector<Texture>& images;
+    const Texture& operator[](size_t i) const { return images.size() == 1 ? images.front() : images[i]; }
+};
+
 /// A reference sequence: one image per frame (empty before the spec's first frame), the per-frame noise estimate
 /// (RelMSE term; empty with a single batch), and where it came from.
 struct ReferenceSet {
@@ -499,11 +506,8 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
     else
         spdlog::info("{}: {} frame(s) rendered, {} from the cache, in {}", spec.label, out.rendered, out.cached,
                      entry.string());
-    // A shared reference serves every frame.
-    while (out.frames.size() < o.frames) {
-        out.frames.push_back(copyTexture(out.frames.front()));
-        out.noise.push_back(out.noise.front());
-    }
+    // A shared reference serves every frame: one image (ReferenceFrames), its noise repeated.
+    while (out.noise.size() < o.frames) out.noise.push_back(out.noise.front());
     return out;
 }
 
@@ -532,7 +536,7 @@ FrameMetrics measure(const Texture& test, const Texture& ref, const Texture* tes
 /// Runs a prepared graph over frames [first, frames) from the start of its history, measuring every frame. With
 /// `flicker`, the frames from `warmup` on also go into a FlickerAccumulator whose value lands there. With `ages`, every
 /// frame's G-buffer goes to the age tracker of the disocclusion lag.
-std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, const std::vector<Texture>& refs, uint64_t first,
+std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, ReferenceFrames refs, uint64_t first,
                                      uint64_t frames, double fps, uint32_t width, uint32_t height,
                                      const std::string& label, uint64_t warmup = 0,
                                      std::optional<double>* flicker = nullptr,
@@ -600,7 +604,7 @@ bool crossesEveryVariant(const bench::Summary& point, const std::vector<Run>& va
 /// frames rendered directly at its spp (seed as given), from the warm-up on. With `stopWhenCrossed`, the curve
 /// ends at the first point that reaches every variant's error.
 BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, const std::string& tracer,
-                                const std::string& bruteKey, Scene& scene, const std::vector<Texture>& refs,
+                                const std::string& bruteKey, Scene& scene, ReferenceFrames refs,
                                 const std::vector<uint32_t>& spps, bool stopWhenCrossed,
                                 const std::vector<Run>& variants, uint32_t width, uint32_t height, bool flicker) {
     BruteForceCurve out;
@@ -960,7 +964,7 @@ void runBench(BenchOptions o) {
     info.pixelFilter = spec.pixelFilter;
 
     const ReferenceSet refSet = references(o, registry, scene, width, height, spec);
-    const std::vector<Texture>& refs = refSet.frames;
+    const ReferenceFrames refs{refSet.frames};
     info.referenceShared = refSet.shared;
     info.referenceCache = refSet.cache;
     info.referenceFramesCached = refSet.cached;
@@ -992,10 +996,11 @@ void runBench(BenchOptions o) {
             b.framesCached = fullSet.cached;
             b.framesRendered = fullSet.rendered;
             b.fullNoise = fullSet.meanNoise(o.warmup);
+            const ReferenceFrames full{fullSet.frames};
             for (uint64_t i = o.warmup; i < o.frames; ++i) {
-                b.relMSE += relMSE(refs[i], fullSet.frames[i]).value;
-                b.trimmedRelMSE += trimmedRelMSE(refs[i], fullSet.frames[i]).value;
-                b.flip += flip(refs[i], fullSet.frames[i]).value;
+                b.relMSE += relMSE(refs[i], full[i]).value;
+                b.trimmedRelMSE += trimmedRelMSE(refs[i], full[i]).value;
+                b.flip += flip(refs[i], full[i]).value;
             }
             const double n = double(o.frames - o.warmup);
             b.relMSE /= n;
