@@ -60,14 +60,18 @@ LOOM_HD inline void neumaierAdd(float& sum, float& compensation, float x) {
 
 /// Adds one sample to the state. A sample with any non-finite channel is
 /// skipped as a whole (channels stay consistent, and one NaN cannot poison the
-/// mean forever); returns false then.
+/// mean forever); returns false then. So is a finite sample that would take
+/// a float running sum past the largest float (samples near 3e38): the sum
+/// would become Inf, and Kahan's compensation -Inf, their mean NaN.
 LOOM_HD inline bool addSample(Precision precision, PixelState& s, const glm::vec4& x) {
     if (!isFinite(x)) return false;
     switch (precision) {
         case Precision::Float:
+            if (!isFinite(s.sum + x)) return false;
             s.sum += x;
             break;
         case Precision::Kahan:
+            if (!isFinite(s.sum + x)) return false;
             for (int c = 0; c < 4; ++c) neumaierAdd(s.sum[c], s.compensation[c], x[c]);
             break;
         case Precision::Double:
@@ -101,8 +105,11 @@ LOOM_HD inline glm::vec4 sumAsFloat(Precision precision, const PixelState& s) {
     switch (precision) {
         case Precision::Kahan:
             return glm::vec4(glm::dvec4(s.sum) + glm::dvec4(s.compensation));
-        case Precision::Double:
-            return glm::vec4(s.sumDouble);
+        case Precision::Double: {
+            // A double sum of floats can exceed the largest float: shown clamped to it, not as Inf.
+            const double m = 3.4028234663852886e38;
+            return glm::vec4(glm::clamp(s.sumDouble, glm::dvec4(-m), glm::dvec4(m)));
+        }
         case Precision::Float:
         default:
             return s.sum;

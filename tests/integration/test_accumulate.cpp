@@ -622,4 +622,22 @@ TEST(AccumulateKernels, NonFiniteSamplesAreRejectedWhole) {
     }
 }
 
+// Finite but huge samples (near the largest float): a float or Kahan sum would overflow to Inf (and Kahan's
+// compensation to -Inf, the mean to NaN). The sample that would overflow is skipped like a non-finite one, so the
+// mean stays finite and is the mean of the samples kept; the double sum, which cannot overflow, shows as the largest
+// float in `sum`.
+TEST(AccumulateKernels, HugeSamplesNeverMakeTheMeanNonFinite) {
+    const float big = 3e38f;
+    for (auto precision : {accumulate::Precision::Float, accumulate::Precision::Kahan, accumulate::Precision::Double}) {
+        accumulate::PixelState s;
+        uint32_t kept = 0;
+        for (int i = 0; i < 5; ++i) kept += accumulate::addSample(precision, s, glm::vec4(big, 1.f, -big, 0.f)) ? 1 : 0;
+        const glm::vec4 m = accumulate::mean(precision, s);
+        EXPECT_TRUE(accumulate::isFinite(m)) << int(precision);
+        EXPECT_TRUE(accumulate::isFinite(accumulate::sumAsFloat(precision, s))) << int(precision);
+        EXPECT_EQ(m, glm::vec4(big, 1.f, -big, 0.f)) << int(precision);
+        EXPECT_EQ(kept, precision == accumulate::Precision::Double ? 5u : 1u) << int(precision);
+    }
+}
+
 }  // namespace
