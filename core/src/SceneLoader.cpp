@@ -1140,9 +1140,12 @@ std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primInde
         size_t repaired = 0;
         for (size_t v = 0; v < vertexCount; ++v) {
             const glm::vec3 n = glm::make_vec3(&nrm[3 * v]);
-            const float len = glm::length(n);
-            if (len > 1e-20f) {
-                mesh.normals[v] = n / len;
+            // Scaled by its largest component first: the length of a normal near 1e30 overflows (Inf, and n / Inf
+            // is a zero normal), that of one near 1e-30 underflows; the direction is what counts.
+            const float largest = std::max({std::fabs(n.x), std::fabs(n.y), std::fabs(n.z)});
+            if (largest > 0.f && std::isfinite(largest)) {
+                const glm::vec3 d = n / largest;
+                mesh.normals[v] = d / glm::length(d);
                 continue;
             }
             if (faceSum.empty()) {

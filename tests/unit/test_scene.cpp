@@ -533,6 +533,23 @@ TEST_F(SceneFiles, AllIndexTypes) {
     }
 }
 
+// Normals of any finite length, huge or tiny, keep their direction: the length of (1e30, 0, 0) overflows a float
+// and that of 1e-30 underflows, so normalising by it gave a zero normal (NaN downstream in the G-buffers).
+TEST_F(SceneFiles, NormalsOfExtremeLengthKeepTheirDirection) {
+    Gltf g;
+    const int pos = g.floats({0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0}, "VEC3");
+    const int idx = g.indices(std::vector<uint32_t>{0, 1, 2, 2, 1, 3});
+    const int nrm = g.floats({1e30f, 0, 0, 0, -3e38f, 0, 0, 0, 1e-30f, 2e30f, 2e30f, 0}, "VEC3");
+    g.scene({g.node({{"mesh", g.mesh("Quad", {{"POSITION", pos}, {"NORMAL", nrm}}, idx)}})});
+    auto s = load(g);
+    const Mesh& m = s->meshes.at(0);
+    ASSERT_EQ(m.normals.size(), 4u);
+    expectNear(m.normals[0], glm::vec3(1, 0, 0));
+    expectNear(m.normals[1], glm::vec3(0, -1, 0));
+    expectNear(m.normals[2], glm::vec3(0, 0, 1));
+    expectNear(m.normals[3], glm::normalize(glm::vec3(1, 1, 0)));
+}
+
 TEST_F(SceneFiles, NonIndexedStripAndSparse) {
     Gltf g;
     // Four vertices; vertex 3 is wrong in the buffer and fixed by a sparse substitution.
