@@ -171,7 +171,19 @@ void PluginRegistry::loadLibrary(const fs::path& file) {
     }
     mHandles[lib] = handle;
     Registrar r(*this, lib);
-    reg(r);
+    // A registration that fails names the library, whatever it threw.
+    try {
+        reg(r);
+    } catch (const Error& e) {
+        if (!e.info().file.empty()) throw;
+        throw e.withFile(lib.string());
+    } catch (const std::exception& e) {
+        pluginError(lib, std::string("registering the plugin failed: ") + e.what(), "a registration that succeeds",
+                    "fix or remove the plugin", ErrorKind::Runtime);
+    } catch (...) {
+        pluginError(lib, "registering the plugin failed with an exception that is not a std::exception",
+                    "a registration that succeeds", "fix or remove the plugin", ErrorKind::Runtime);
+    }
     spdlog::debug("loaded plugin {}", lib.string());
 }
 

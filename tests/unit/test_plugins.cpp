@@ -235,6 +235,16 @@ TEST(PluginErrors, AbiMismatch) {
     EXPECT_EQ(reg.typeInfo("BadAbi"), nullptr);
 }
 
+TEST(PluginErrors, RegistrationThatThrowsNamesTheLibrary) {
+    PluginRegistry reg({badDir("throws")}, false);
+    const fs::path lib = badDir("throws") / "libloom_throws_on_register.so";
+    Error e = expectError([&] { reg.loadLibrary(lib); });
+    EXPECT_TRUE(contains(e.what(), "libloom_throws_on_register.so")) << e.what();
+    EXPECT_TRUE(contains(e.what(), "registering the plugin failed")) << e.what();
+    Error viaType = expectError([&] { (void)reg.create("Thrower"); });
+    EXPECT_TRUE(contains(viaType.what(), "libloom_throws_on_register.so")) << viaType.what();
+}
+
 TEST(PluginErrors, DuplicateTypeNamesBothLibraries) {
     PluginRegistry reg({pluginDir(), badDir("duplicate")}, false);
     Error e = expectError([&] { reg.loadAll(); });
