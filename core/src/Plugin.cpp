@@ -105,7 +105,10 @@ void PluginRegistry::scan() {
                 fs::path lib = fs::weakly_canonical(dir / manifest["library"].get<std::string>(), ec);
                 for (const auto& t : manifest["types"]) {
                     auto type = t.get<std::string>();
-                    if (!mAnnounced.count(type)) mAnnounced[type] = lib;
+                    if (!mAnnounced.count(type))
+                        mAnnounced[type] = lib;
+                    else if (mAnnounced[type] != lib)
+                        mAnnouncedAlso[type].push_back(lib);
                 }
                 if (seen.insert(lib).second) mLibraries.push_back(lib);
             }
@@ -209,6 +212,12 @@ void PluginRegistry::loadAll() {
 
 std::unique_ptr<RenderPass> PluginRegistry::create(const std::string& type) {
     scan();
+    // A type two plugins announce: loading them all reports the duplicate (registerPass), rather than silently
+    // using the first one found.
+    if (auto also = mAnnouncedAlso.find(type); also != mAnnouncedAlso.end()) {
+        if (auto first = mAnnounced.find(type); first != mAnnounced.end()) loadLibrary(first->second);
+        for (const auto& lib : also->second) loadLibrary(lib);
+    }
     if (!mTypes.count(type)) {
         if (auto it = mAnnounced.find(type); it != mAnnounced.end()) {
             loadLibrary(it->second);

@@ -88,6 +88,7 @@ private:
     std::vector<std::filesystem::path> mDirs;
     std::map<std::string, PassTypeInfo> mTypes;                 // registered
     std::map<std::string, std::filesystem::path> mAnnounced;    // type -> library, from manifests
+    std::map<std::string, std::vector<std::filesystem::path>> mAnnouncedAlso;  // type -> further libraries announcing it
     std::vector<std::filesystem::path> mUnannounced;            // libraries without a manifest
     std::vector<std::filesystem::path> mLibraries;              // every library found, in search order
     std::map<std::filesystem::path, void*> mHandles;            // loaded libraries
