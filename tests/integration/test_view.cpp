@@ -372,7 +372,9 @@ TEST_F(View, TheWindowShowsWhatTheHeadlessSessionShows) {
                              " --size 64x48 --frames 4 --field SVGF.filtered --exposure 1 ";
     auto r = loom("view --headless " + args + "--screenshot headless.png");
     ASSERT_EQ(r.code, 0) << r.output;
-    const std::string cmd = "cd " + shellQuoted(mDir.string()) + " && xvfb-run -a -s '-screen 0 1024x768x24' " +
+    // -a finds a free display from -n on; the two window tests start from different numbers, since CTest runs them
+    // side by side and two xvfb-run -a from the same start can race for one display ("no display").
+    const std::string cmd = "cd " + shellQuoted(mDir.string()) + " && xvfb-run -a -n 150 -s '-screen 0 1024x768x24' " +
                             shellQuoted(LOOM_TEST_LOOM_EXE) + " view " + args +
                             "--open-passes --screenshot window.png --window-shot whole.png > window.log 2>&1";
     const int status = std::system(cmd.c_str());
@@ -427,7 +429,7 @@ TEST_F(View, TheWindowZoomsAboutTheMousePansOnDragAndClosesOnEscape) {
                           "xdotool keydown Escape; sleep 0.2; xdotool keyup Escape\n"
                           "wait $pid\n");
     const std::string cmd = "cd " + shellQuoted(mDir.string()) +
-                            " && timeout 60 xvfb-run -a -s '-screen 0 1024x768x24' bash input.sh > input.log 2>&1";
+                            " && timeout 60 xvfb-run -a -n 250 -s '-screen 0 1024x768x24' bash input.sh > input.log 2>&1";
     const int status = std::system(cmd.c_str());
     ASSERT_EQ(status, 0) << fileBytes(mDir / "input.log") << fileBytes(mDir / "window.log");
     const loom::Texture whole = loom::readImage(mDir / "whole.png");
