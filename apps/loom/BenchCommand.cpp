@@ -1,7 +1,7 @@
 // loom bench: run time against error. Renders (and caches) a per-frame reference of a scene and camera path, runs
 // each graph (and each point of a parameter sweep) and the brute-force path tracer at 1, 2, 4, ... spp over the
 // same sequence, and writes per-frame and summary results, the equal-error speedup, and optionally a plot.
-// The protocol is documented in docs/BENCHMARKS.md ("loom bench: run time against error").
+// The protocol is documented in docs/BENCH.md.
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <sys/wait.h>

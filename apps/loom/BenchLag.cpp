@@ -13,7 +13,7 @@ namespace loom::cli::bench {
 
 namespace {
 
-// Pass types and channels of the G-buffer the age tracker reads (docs/BENCHMARKS.md, "Lag").
+// Pass types and channels of the G-buffer the age tracker reads (docs/BENCH.md, "Lag").
 const char* const kGBufferTypes[] = {"GBufferRaster", "GBufferRT"};
 const char kLinearZ[] = "linearZ";
 const char kMvec[] = "mvec";
@@ -260,7 +260,7 @@ std::string lagMarkdown(const std::vector<std::pair<std::string, const Lag*>>& r
     std::ostringstream s;
     s << fmt::format(
         "Lag: frames until the RelMSE is back, for good, within {:.0f} % of its steady state (mean of {}-frame "
-        "windows less their largest frame; docs/BENCHMARKS.md, \"Lag\"). Disocclusion: the smallest age (frames "
+        "windows less their largest frame; docs/BENCH.md, \"Lag\"). Disocclusion: the smallest age (frames "
         "since a pixel became visible) from which the RelMSE of pixels of that age stays within {:.0f} % of the {}+ "
         "pixels'.\n\n",
         100 * kLagTolerance, kLagWindow, 100 * kLagTolerance, kAgeCap);

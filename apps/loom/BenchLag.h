@@ -1,7 +1,7 @@
 #pragma once
 // loom bench: lag figures. How many frames a temporal graph needs to recover after an event: the camera cut that
 // starts every run, a lighting step at a given frame, and the disocclusion of a pixel (by its age since it became
-// visible). The definitions are in docs/BENCHMARKS.md ("Lag"); everything here is a plain function of its inputs.
+// visible). The definitions are in docs/BENCH.md ("Lag"); everything here is a plain function of its inputs.
 #include <array>
 #include <cstdint>
 #include <glm/vec2.hpp>
