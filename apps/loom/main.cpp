@@ -1,6 +1,7 @@
 // loom: render graphs headless, check them, list passes, inspect scenes, benchmark run time against error.
 #include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <iostream>
 
 #include <CLI/CLI.hpp>
@@ -36,6 +37,21 @@ int main(int argc, char** argv) {
     loom::cli::addImageCommand(app);
     loom::cli::addBenchCommand(app);
     loom::cli::addViewCommand(app);
+    // An unsigned option would take "-1" as 18446744073709551615: every count and size refuses a sign instead.
+    const CLI::Validator nonNegative(
+        [](std::string& value) {
+            const size_t first = value.find_first_not_of(" \t");
+            return first != std::string::npos && value[first] == '-'
+                       ? value + " is out of range: a count or a size is never negative"
+                       : std::string();
+        },
+        "", "non-negative");
+    const std::function<void(CLI::App&)> refuseNegatives = [&](CLI::App& cmd) {
+        for (CLI::Option* option : cmd.get_options())
+            if (option->get_type_name().rfind("UINT", 0) == 0) option->check(nonNegative);
+        for (CLI::App* sub : cmd.get_subcommands({})) refuseNegatives(*sub);
+    };
+    refuseNegatives(app);
 
     try {
         if (argc > 1 && argv[1][0] != '-') {

@@ -1,13 +1,23 @@
 #include "loom/Error.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <sstream>
 
 namespace loom {
 
 namespace {
 
-/// The length of the well-formed UTF-8 sequence at s[i] (a printable character), or 0.
+/// Whether a code point is a C1 control or one of Unicode's invisible format characters (soft hyphen, zero-width
+/// spaces and joiners, bidirectional overrides and isolates, the byte-order mark): text holding them is not shown
+/// as it is (a right-to-left override makes "exr.evil" of "live.rxe").
+bool hiddenCodePoint(uint32_t cp) {
+    return (cp >= 0x80 && cp <= 0x9F) || cp == 0xAD || cp == 0x61C || cp == 0x180E || (cp >= 0x200B && cp <= 0x200F) ||
+           (cp >= 0x202A && cp <= 0x202E) || (cp >= 0x2060 && cp <= 0x206F) || cp == 0xFEFF ||
+           (cp >= 0xFFF9 && cp <= 0xFFFB);
+}
+
+/// The length of the well-formed UTF-8 sequence at s[i] (a printable, visible character), or 0.
 size_t utf8Length(std::string_view s, size_t i) {
     const auto byte = [&](size_t k) { return static_cast<unsigned char>(s[k]); };
     const unsigned char b = byte(i);
@@ -20,7 +30,9 @@ size_t utf8Length(std::string_view s, size_t i) {
     const unsigned char b1 = byte(i + 1);
     if ((b == 0xe0 && b1 < 0xa0) || (b == 0xed && b1 >= 0xa0) || (b == 0xf0 && b1 < 0x90) || (b == 0xf4 && b1 >= 0x90))
         return 0;
-    return n;
+    uint32_t cp = b & (0x7F >> n);
+    for (size_t k = 1; k < n; ++k) cp = (cp << 6) | (byte(i + k) & 0x3F);
+    return hiddenCodePoint(cp) ? 0 : n;
 }
 
 }  // namespace
@@ -99,6 +111,12 @@ std::string closestMatch(std::string_view name, const std::vector<std::string>& 
     }
     size_t limit = std::max<size_t>(2, name.size() / 3);
     return bestDist <= limit ? best : std::string();
+}
+
+bool isPlainName(std::string_view s) {
+    const auto letter = [](char c) { return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_'; };
+    return !s.empty() && letter(s[0]) &&
+           std::all_of(s.begin(), s.end(), [&](char c) { return letter(c) || (c >= '0' && c <= '9'); });
 }
 
 std::string join(const std::vector<std::string>& items, std::string_view sep) {

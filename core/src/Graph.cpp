@@ -121,7 +121,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
         d.name = require(p, "name", json::value_t::string, "a string", where, file).get<std::string>();
         d.type = require(p, "type", json::value_t::string, "a string", where, file).get<std::string>();
         // Names become parts of file names (Pass.field.0001.exr) and of "Pass.field" references.
-        const bool allowed = !d.name.empty() && d.name.size() <= kMaxPassNameLength &&
+        const bool allowed = !d.name.empty() && d.name.size() <= kMaxPassNameLength && printable(d.name) == d.name &&
                              std::none_of(d.name.begin(), d.name.end(), [](char c) {
                                  return static_cast<unsigned char>(c) < 0x20 || c == 0x7F ||
                                         std::string_view(".@ /\\:*?\"<>|").find(c) != std::string_view::npos;
@@ -130,8 +130,8 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
             throwBadInput(where + "/name",
                           "pass name '" + printable(d.name.substr(0, kMaxPassNameLength)) +
                               (d.name.size() > kMaxPassNameLength ? "...'" : "'") + " is not allowed",
-                          fmt::format("1 to {} bytes without spaces, control characters or any of . @ / \\ : * ? "
-                                      "\" < > |",
+                          fmt::format("1 to {} bytes of UTF-8 without spaces, control or invisible formatting "
+                                      "characters or any of . @ / \\ : * ? \" < > |",
                                       kMaxPassNameLength),
                           "e.g. \"SVGF\" or \"GBuffer_2\"", file);
         if (!names.insert(d.name).second)

@@ -5,6 +5,10 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <optional>
+#include <set>
+#include <string_view>
+#include <vector>
 
 #include "loom/Error.h"
 #include "loom/Graph.h"
@@ -41,18 +45,37 @@ void checkJsonText(std::string_view text, const std::string& file, bool numbers)
         lineColumn(text, offset, line, column);
         return fmt::format("line {}, column {}", line, column);
     };
-    int depth = 0;
+    // The keys of each open object (an array holds none): a key given twice would silently keep the last value.
+    std::vector<std::optional<std::set<std::string_view>>> open;
     for (size_t i = 0; i < text.size(); ++i) {
         const char c = text[i];
         if (c == '"') {  // a string: skip it, escapes included (an unterminated one is the parser's to report)
+            const size_t start = i + 1;
             for (++i; i < text.size() && text[i] != '"'; ++i)
                 if (text[i] == '\\') ++i;
+            if (open.empty() || !open.back() || i >= text.size()) continue;
+            size_t next = i + 1;
+            while (next < text.size() && std::isspace(static_cast<unsigned char>(text[next]))) ++next;
+            if (next >= text.size() || text[next] != ':') continue;
+            const std::string_view key = text.substr(start, i - start);
+            if (!open.back()->insert(key).second)
+                throwBadInput(at(start - 1), "the key \"" + printable(key.substr(0, 60)) + "\" appears twice in one object",
+                              "each key once per object", "remove one of them: only one value can count", file);
         } else if (c == '[' || c == '{') {
-            if (++depth > kMaxJsonDepth)
+            if (open.size() >= size_t(kMaxJsonDepth))
                 throwBadInput(at(i), fmt::format("arrays and objects nested more than {} deep", kMaxJsonDepth),
                               fmt::format("at most {} levels", kMaxJsonDepth), {}, file);
+            open.push_back(c == '{' ? std::optional<std::set<std::string_view>>(std::in_place) : std::nullopt);
         } else if (c == ']' || c == '}') {
-            --depth;
+            if (!open.empty()) open.pop_back();
+        } else if (c == '\0') {
+            // Padding of NUL bytes at the very end is tolerated (some writers pad binary glTF's JSON chunk so);
+            // anything after a NUL would be read by no parser, and is an error rather than silently ignored.
+            const bool padding = text.find_first_not_of(std::string_view("\0 \t\r\n", 5), i) == std::string_view::npos;
+            if (!padding)
+                throwBadInput(at(i), "a NUL byte inside the JSON text, with more text after it",
+                              "JSON text without NUL bytes", "the file is damaged or not JSON", file);
+            return;
         } else if (numbers && (c == '-' || (c >= '0' && c <= '9'))) {
             size_t end = i + 1;
             while (end < text.size() && (std::isdigit(static_cast<unsigned char>(text[end])) || text[end] == '.' ||

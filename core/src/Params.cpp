@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <limits>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "loom/Error.h"
@@ -96,14 +97,19 @@ ParamBuilder ParamList::addEnumImpl(std::string name, std::function<int()> get, 
     auto& d = push(std::move(name), ParamType::Enum);
     d.enumValues = std::move(values);
     auto names = d.enumValues;
-    d.get = [get, names] { return json(names.at(size_t(get()))); };
+    d.get = [get, names] {
+        const int i = get();
+        return i >= 0 && size_t(i) < names.size() ? json(names[size_t(i)]) : json();
+    };
     d.set = [set, names](const json& v) {
         const auto s = v.get<std::string>();
         for (size_t i = 0; i < names.size(); ++i)
             if (names[i] == s) set(int(i));
     };
-    std::string defName = d.enumValues.at(size_t(def));
-    d.defaultValue = [defName] { return json(defName); };
+    // An index outside the values is a faulty declaration: declarationProblem() reports it, so nothing throws here.
+    const bool valid = def >= 0 && size_t(def) < d.enumValues.size();
+    std::string defName = valid ? d.enumValues[size_t(def)] : std::string();
+    d.defaultValue = [defName, valid] { return valid ? json(defName) : json(); };
     return ParamBuilder(d);
 }
 
@@ -211,6 +217,37 @@ json ParamList::toJson(bool onlyNonDefault) const {
         if (!onlyNonDefault || v != d.defaultValue()) out[d.name] = std::move(v);
     }
     return out;
+}
+
+std::string ParamList::declarationProblem() const {
+    std::set<std::string> seen;
+    for (const auto& d : mDecls) {
+        const std::string name = "parameter '" + printable(d.name) + "'";
+        if (!isPlainName(d.name)) return name + " does not have a plain name (a letter or _, then letters, digits, _)";
+        if (!seen.insert(d.name).second) return name + " is declared twice";
+        const bool numeric = d.type == ParamType::Int || d.type == ParamType::Float || d.type == ParamType::Vec3 ||
+                             d.type == ParamType::Vec4;
+        if ((d.min && !std::isfinite(*d.min)) || (d.max && !std::isfinite(*d.max)) || (d.min && d.max && *d.min > *d.max))
+            return name + " has an empty or non-finite range";
+        if (d.type == ParamType::Enum) {
+            if (d.enumValues.empty()) return name + " is an enum without values";
+            if (std::set<std::string>(d.enumValues.begin(), d.enumValues.end()).size() != d.enumValues.size())
+                return name + " lists an enum value twice";
+            if (!d.defaultValue().is_string()) return name + " has a default outside its enum values";
+        }
+        if (!numeric) continue;
+        const json def = d.defaultValue();
+        std::vector<double> values;
+        if (def.is_array()) {
+            for (const auto& c : def) values.push_back(c.get<double>());
+        } else {
+            values.push_back(def.get<double>());
+        }
+        for (double x : values)
+            if (!std::isfinite(x) || (d.min && x < *d.min) || (d.max && x > *d.max))
+                return fmt::format("{} has the default {}, outside its own range ({})", name, def.dump(), rangeText(d));
+    }
+    return {};
 }
 
 json parseParamValue(const std::string& text) {

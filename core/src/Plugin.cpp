@@ -247,7 +247,17 @@ std::unique_ptr<RenderPass> PluginRegistry::create(const std::string& type) {
         pluginError(it->second.library, "the factory of pass type '" + type + "' returned no pass",
                     "a factory that returns a new pass", "fix the plugin's LOOM_DEFINE_PLUGIN registration",
                     ErrorKind::Runtime);
-    pass->declareParams(pass->params());
+    try {
+        pass->declareParams(pass->params());
+    } catch (const Error&) {
+        throw;
+    } catch (const std::exception& e) {
+        pluginError(it->second.library, "pass type '" + type + "' failed to declare its parameters: " + e.what(),
+                    "declareParams() that does not throw", "fix the pass's declareParams()", ErrorKind::Runtime);
+    }
+    if (const std::string problem = pass->params().declarationProblem(); !problem.empty())
+        pluginError(it->second.library, "pass type '" + type + "': " + problem, "valid parameter declarations",
+                    "fix the pass's declareParams()", ErrorKind::Runtime);
     return pass;
 }
 

@@ -16,6 +16,7 @@
 #include <glm/gtc/matrix_inverse.hpp>
 #define GL_GLEXT_PROTOTYPES
 #include <GL/glcorearb.h>
+#include <fmt/format.h>
 
 #include "GBufferCommon.h"
 #include "GLContext.h"
@@ -967,6 +968,15 @@ struct GBufferRaster::Gpu {
             Group& g = groups.back();
             g.channels.push_back(int(c));
         }
+        // Render targets are where a large frame runs out of GL memory: say so with the size, not as a bare code.
+        const size_t targetBytes = size_t(width) * height * 4 * (1 + size_t(std::popcount(mask)) * 4);
+        if (const GLenum e = glGetError(); e == GL_OUT_OF_MEMORY)
+            runtimeError(fmt::format("out of GL memory for the {}x{} render targets (about {} MiB)", width, height,
+                                     targetBytes >> 20),
+                         "render at a smaller size");
+        else if (e != GL_NO_ERROR)
+            runtimeError(fmt::format("OpenGL error 0x{:04X} creating the {}x{} render targets", unsigned(e), width,
+                                     height));
         for (Group& g : groups) {
             glCreateFramebuffers(1, &g.fbo);
             std::vector<GLenum> buffers;
@@ -981,7 +991,9 @@ struct GBufferRaster::Gpu {
             if (status != GL_FRAMEBUFFER_COMPLETE) {
                 char buf[32];
                 std::snprintf(buf, sizeof buf, "0x%04X", unsigned(status));
-                runtimeError(std::string("framebuffer incomplete (status ") + buf + ")");
+                runtimeError(fmt::format("the {}x{} render targets are incomplete (framebuffer status {}, about {} MiB)",
+                                         width, height, buf, targetBytes >> 20),
+                             "render at a smaller size");
             }
         }
         checkGl("render targets");

@@ -378,7 +378,8 @@ TEST_F(Cli, AGraphOrScriptThatIsAPipeADeviceOrTooDeepIsBadInput) {
 }
 
 TEST_F(Cli, CountsThreadsAndRatesOutOfRangeAreBadInput) {
-    expectBadInput(render("--frames -1"), {"--frames", "out of range"});
+    expectBadInput(render("--frames -1"), {"--frames", "-1 is out of range"});
+    expectBadInput(render("--start-frame -5"), {"--start-frame", "-5 is out of range"});
     expectBadInput(render("--frames 2000000"), {"--frames", "out of range"});
     expectBadInput(render("--start-frame 99999999999"), {"--start-frame", "out of range"});
     expectBadInput(render("--threads 4294967295"), {"--threads", "too many"});

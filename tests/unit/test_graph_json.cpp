@@ -446,7 +446,10 @@ TEST(GraphJsonErrors, PassNameNotAllowed) {
     // Names become parts of file names and of "Pass.field" references: at most 64 bytes, no control characters,
     // spaces or characters that file names or references give a meaning (UTF-8 letters are fine: RoundTrip*).
     for (const std::string& bad : std::vector<std::string>{"A.B", "A@B", "A B", "", "a/b", "a\\b", "a\nb", "a:b",
-                                                           std::string("a\0b", 3), std::string(65, 'x')}) {
+                                                           std::string("a\0b", 3), std::string(65, 'x'),
+                                                           // U+202E (right-to-left override), U+200B (zero-width
+                                                           // space), a C1 control. (Invalid UTF-8 is malformed JSON.)
+                                                           "evil\xE2\x80\xAE" "exr", "a\xE2\x80\x8B", "a\xC2\x85"}) {
         json g = minimalGraph();
         g["passes"][0]["name"] = bad;
         expectGraphError(g.dump(), "/passes/0/name", "is not allowed");
@@ -455,6 +458,31 @@ TEST(GraphJsonErrors, PassNameNotAllowed) {
     g["passes"][0]["name"] = std::string(64, 'x');
     g["outputs"][0] = std::string(64, 'x') + ".dst";
     EXPECT_NO_THROW(parseGraph(g.dump()));
+}
+
+// A parser keeps one value of a key given twice, and stops at a NUL byte: both would let a file say something
+// other than what it seems to say.
+TEST(GraphJsonErrors, DuplicateKeysAreReported) {
+    const std::string text = R"({"loom_graph": 1, "passes": [], "passes": [], "outputs": []})";
+    Error e = expectError([&] { (void)parseGraph(text, kFile); });
+    EXPECT_TRUE(contains(e.what(), "\"passes\" appears twice")) << e.what();
+    EXPECT_TRUE(contains(e.what(), "line 1, column 33")) << e.what();
+    // Nested objects have their own keys; the same key in two objects, or as a value, is fine.
+    json g = minimalGraph();
+    g["passes"][0]["params"] = json{{"name", "name"}};
+    g["passes"][1]["params"] = json{{"name", "other"}};
+    EXPECT_NO_THROW((void)parseGraph(g.dump(), kFile));
+    const std::string inner = R"({"loom_graph": 1, "passes": [{"name": "A", "type": "T", "name": "B"}], "outputs": []})";
+    Error e2 = expectError([&] { (void)parseGraph(inner, kFile); });
+    EXPECT_TRUE(contains(e2.what(), "\"name\" appears twice")) << e2.what();
+}
+
+TEST(GraphJsonErrors, NulByteWithTextAfterIsReported) {
+    const std::string graph = minimalGraph().dump();
+    Error e = expectError([&] { (void)parseGraph(graph + std::string("\0garbage", 8), kFile); });
+    EXPECT_TRUE(contains(e.what(), "NUL byte")) << e.what();
+    // NUL padding at the very end (as some writers pad binary glTF's JSON chunk) is harmless.
+    EXPECT_NO_THROW((void)parseGraph(graph + std::string("\0\0 \0", 4), kFile));
 }
 
 TEST(GraphJsonErrors, EdgeNotAPair) {

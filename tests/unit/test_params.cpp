@@ -470,6 +470,64 @@ TEST(ParamValue, FeedsSet) {
 // ---------------------------------------------------------------------------------------------------------------
 // Error, closestMatch, didYouMean, join
 
+// A plugin's declarations are checked when a pass is created (PluginRegistry::create): each fault is named.
+TEST(ParamsErrors, DeclarationProblems) {
+    EXPECT_EQ(Owner().params.declarationProblem(), "");
+    const auto problem = [](auto declare) {
+        float f = 0.f;
+        int i = 0;
+        ToneMap t{};
+        ParamList p;
+        declare(p, f, i, t);
+        return p.declarationProblem();
+    };
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) { p.add("a.b", &f, 0.f); }), "plain name"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) { p.add("", &f, 0.f); }), "plain name"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) { p.add("9x", &f, 0.f); }), "plain name"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int& i, ToneMap&) {
+                             p.add("x", &f, 0.f);
+                             p.add("x", &i, 0);
+                         }),
+                         "declared twice"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) { p.add("x", &f, 2.f).range(0, 1); }),
+                         "default 2.0, outside its own range"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float&, int& i, ToneMap&) { p.add("x", &i, -1).min(0); }),
+                         "outside its own range"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) { p.add("x", &f, 0.5f).range(1, 0); }),
+                         "empty or non-finite range"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) {
+                             p.add("x", &f, 0.f).range(0, std::numeric_limits<double>::infinity());
+                         }),
+                         "non-finite range"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float& f, int&, ToneMap&) {
+                             p.add("x", &f, std::numeric_limits<float>::quiet_NaN());
+                         }),
+                         "outside its own range"));
+    EXPECT_TRUE(contains(problem([](ParamList& p, float&, int&, ToneMap& t) {
+                             p.addEnum("x", &t, ToneMap::Aces, {"linear", "reinhard"});
+                         }),
+                         "default outside its enum values"));
+    EXPECT_TRUE(contains(
+        problem([](ParamList& p, float&, int&, ToneMap& t) { p.addEnum("x", &t, ToneMap::Linear, {"a", "a"}); }),
+        "enum value twice"));
+    EXPECT_TRUE(
+        contains(problem([](ParamList& p, float&, int&, ToneMap& t) { p.addEnum("x", &t, ToneMap::Linear, {}); }),
+                 "without values"));
+}
+
+// Messages show invisible formatting characters as bytes: a right-to-left override would reverse what follows it.
+TEST(ErrorHelpers, PrintableEscapesInvisibleFormatting) {
+    EXPECT_EQ(printable("a\xE2\x80\xAE" "b"), "a\\xe2\\x80\\xaeb");
+    EXPECT_EQ(printable("\xEF\xBB\xBFx"), "\\xef\\xbb\\xbfx");  // byte-order mark
+    EXPECT_EQ(printable("\xC2\x85"), "\\xc2\\x85");              // C1 control NEL
+    EXPECT_EQ(printable("caf\xC3\xA9 \xE2\x86\x92"), "caf\xC3\xA9 \xE2\x86\x92");  // letters and arrows stay
+}
+
+TEST(ErrorHelpers, PlainNames) {
+    for (const char* good : {"a", "_x", "normW", "pass_2"}) EXPECT_TRUE(isPlainName(good)) << good;
+    for (const char* bad : {"", "2a", "a.b", "a b", "a-b", "a@prev", "caf\xC3\xA9"}) EXPECT_FALSE(isPlainName(bad)) << bad;
+}
+
 TEST(ErrorHelpers, ClosestMatch) {
     const std::vector<std::string> names = {"radius", "sigma", "alpha", "iterations"};
     EXPECT_EQ(closestMatch("radus", names), "radius");

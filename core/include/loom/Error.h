@@ -53,8 +53,13 @@ std::string didYouMean(std::string_view name, const std::vector<std::string>& ca
                        std::string_view listLabel = "known");
 
 /// Text from files (a JSON parser's "last read" bytes, a header line, a decoder's reason) as a terminal shows it:
-/// well-formed UTF-8, line breaks and tabs kept, every other byte written as \xNN. Error messages pass through it.
+/// well-formed UTF-8, line breaks and tabs kept, every other byte written as \xNN (invisible formatting characters
+/// such as U+202E, the right-to-left override, included). Error messages pass through it.
 std::string printable(std::string_view s);
+
+/// A letter or '_', then letters, digits and '_': the names of parameters and fields, which appear in
+/// "Pass.field" references, globs and file names.
+bool isPlainName(std::string_view s);
 
 /// Joins strings with a separator.
 std::string join(const std::vector<std::string>& items, std::string_view sep = ", ");

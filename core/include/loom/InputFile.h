@@ -23,8 +23,10 @@ std::string inputFileProblem(const std::filesystem::path& path, uint64_t maxByte
 std::string readInputFile(const std::filesystem::path& path, const std::string& what, const std::string& expected,
                           uint64_t maxBytes);
 
-/// Bad input, with line and column, for JSON text whose arrays and objects nest deeper than kMaxJsonDepth or (with
-/// `numbers`) that holds a number beyond the range of a double (1e400). Anything else is left to the parser.
+/// Bad input, with line and column, for JSON text whose arrays and objects nest deeper than kMaxJsonDepth, that
+/// gives a key twice in one object (parsers keep one value silently), that holds a NUL byte with text after it
+/// (parsers stop there silently), or (with `numbers`) that holds a number beyond the range of a double (1e400).
+/// Anything else is left to the parser. Keys are compared as written: "a" and "\u0061" count as two.
 void checkJsonText(std::string_view text, const std::string& file, bool numbers = true);
 
 /// A JSON value as error messages quote it: its text, cut to at most maxChars characters with "..." after.

@@ -72,6 +72,9 @@ public:
     nlohmann::json get(const std::string& name) const;
     /// All values (or only those that differ from their default) as a JSON object.
     nlohmann::json toJson(bool onlyNonDefault) const;
+    /// What is wrong with the declarations themselves, or empty: a name that is not plain, a name declared twice,
+    /// an empty or non-finite range, an enum without values, a default outside its own range or values.
+    std::string declarationProblem() const;
 
 private:
     ParamBuilder addEnumImpl(std::string name, std::function<int()> get, std::function<void(int)> set, int def,
