@@ -127,6 +127,27 @@ private:
     bool mStandard;
 };
 
+/// A faulty plugin's pass: declares a field or a parameter it should not (which fault: the constructor's argument).
+class BadDeclarationPass final : public RenderPass {
+public:
+    enum class Fault { FieldWithDot, EmptyField, ParamTwice, DefaultOutOfRange, DeclareThrows };
+    explicit BadDeclarationPass(Fault fault) : mFault(fault) {}
+    void reflect(Reflection& r, const CompileInfo&) const override {
+        r.output(mFault == Fault::FieldWithDot ? "a.b" : mFault == Fault::EmptyField ? "" : "dst", Format::RGBA32F);
+    }
+    void declareParams(ParamList& p) override {
+        if (mFault == Fault::ParamTwice) p.add("radius", &mInt, 1);
+        if (mFault == Fault::DeclareThrows) throw std::runtime_error("no such table");
+        p.add("radius", &mFloat, mFault == Fault::DefaultOutOfRange ? 9.f : 1.f).range(0, 4);
+    }
+    void execute(PassContext&) override {}
+
+private:
+    Fault mFault;
+    int mInt = 0;
+    float mFloat = 0.f;
+};
+
 /// The test passes plugin plus the pass types defined here (registered once per process).
 PluginRegistry& registry() {
     static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
@@ -147,6 +168,15 @@ PluginRegistry& registry() {
                          [] { return std::make_unique<ThrowingPass>(false); });
         reg.registerPass("ThrowsStd", "a faulty plugin that throws a std::logic_error from execute",
                          [] { return std::make_unique<ThrowingPass>(true); });
+        using Fault = BadDeclarationPass::Fault;
+        for (const auto& [type, fault] : std::vector<std::pair<std::string, Fault>>{
+                 {"FieldWithDot", Fault::FieldWithDot},
+                 {"EmptyField", Fault::EmptyField},
+                 {"ParamTwice", Fault::ParamTwice},
+                 {"DefaultOutOfRange", Fault::DefaultOutOfRange},
+                 {"DeclareThrows", Fault::DeclareThrows}})
+            reg.registerPass(type, "a faulty plugin's declarations",
+                             [fault] { return std::make_unique<BadDeclarationPass>(fault); });
         return true;
     }();
     (void)registered;
@@ -1115,6 +1145,39 @@ TEST(RenderGraphErrors, PluginFaultsAreErrorsNamingThePass) {
         } catch (const Error& e) {
             EXPECT_EQ(e.info().where, "Faulty") << e.what();
             EXPECT_EQ(e.kind(), ErrorKind::Runtime);
+        }
+    }
+}
+
+// A plugin's declarations are checked: parameters when the pass is created, fields when the graph compiles.
+// Names with a dot (or none) would break "Pass.field" references, globs and dump file names.
+TEST(RenderGraphErrors, FaultyDeclarationsAreErrorsNamingThePass) {
+    const std::vector<std::pair<std::string, std::string>> paramFaults = {
+        {"ParamTwice", "parameter 'radius' is declared twice"},
+        {"DefaultOutOfRange", "default 9.0, outside its own range"},
+        {"DeclareThrows", "failed to declare its parameters: no such table"}};
+    for (const auto& [type, message] : paramFaults) {
+        try {
+            (void)registry().create(type);
+            ADD_FAILURE() << type << " was accepted";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+            EXPECT_NE(std::string(e.what()).find("'" + type + "'"), std::string::npos) << e.what();
+            EXPECT_EQ(e.kind(), ErrorKind::Runtime);
+        }
+    }
+    for (const std::string type : {"FieldWithDot", "EmptyField"}) {
+        nlohmann::json g = {{"loom_graph", 1},
+                            {"name", "faulty"},
+                            {"passes", {{{"name", "Faulty"}, {"type", type}}}},
+                            {"outputs", {"Faulty.dst"}}};
+        RenderGraph graph(parseGraph(g.dump()), registry());
+        try {
+            graph.compile(sized(8, 8));
+            ADD_FAILURE() << type << " compiled";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("not a plain name"), std::string::npos) << e.what();
+            EXPECT_EQ(e.info().where, "Faulty") << e.what();
         }
     }
 }

@@ -44,6 +44,8 @@ enum class ResourceKind { Transient, History };
 /// One allocation of the compiled plan.
 struct ResourceInfo {
     std::string name;  ///< "Pass.field" of the field that owns it
+    uint32_t pass = 0;  ///< the owner's index in the graph description
+    std::string field;  ///< the owner's field
     ResourceKind kind = ResourceKind::Transient;
     Format format = Format::RGBA32F;
     uint32_t width = 0, height = 0;

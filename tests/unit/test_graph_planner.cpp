@@ -1,0 +1,214 @@
+// The graph planner from lists of reflections, without plugins: wiring by name, culling, order, cycles, second
+// reflections, lifetimes and arena placement.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "TestUtil.h"
+#include "loom/Error.h"
+#include "loom/GraphPlanner.h"
+
+using namespace loom;
+using loom::test::expectError;
+
+namespace {
+
+bool contains(const std::string& haystack, const std::string& needle) {
+    return haystack.find(needle) != std::string::npos;
+}
+
+/// A pass for the planner: its name, and its fields as "kind:name" ("in:color", "out:color", "opt-in:albedo",
+/// "opt-out:mask", "int:scratch", "hist:moments"), all RGBA32F at the frame size.
+struct TestPass {
+    std::string name;
+    std::vector<std::string> fields;
+};
+
+Reflection reflectionOf(const std::vector<std::string>& fields) {
+    Reflection r;
+    for (const auto& f : fields) {
+        const auto colon = f.find(':');
+        const std::string kind = f.substr(0, colon), name = f.substr(colon + 1);
+        if (kind == "in") r.input(name, Format::RGBA32F);
+        if (kind == "opt-in") r.input(name, Format::RGBA32F).optional();
+        if (kind == "out") r.output(name, Format::RGBA32F);
+        if (kind == "opt-out") r.output(name, Format::RGBA32F).optional();
+        if (kind == "int") r.internal(name, Format::RGBA32F);
+        if (kind == "hist") r.history(name, Format::RGBA32F);
+    }
+    return r;
+}
+
+struct Planned {
+    GraphDesc desc;
+    GraphPlan plan;
+    std::vector<std::string> order() const { return plan.summary.order; }
+};
+
+Planned plan(const std::vector<TestPass>& passes, const std::vector<std::pair<std::string, std::string>>& edges,
+             const std::vector<std::string>& outputs, const std::vector<std::string>& observe = {}, uint32_t size = 8) {
+    Planned p;
+    PlannerInput in;
+    for (const auto& t : passes) {
+        p.desc.passes.push_back({t.name, "T" + t.name, nlohmann::json::object(), {}});
+        in.reflections.push_back(reflectionOf(t.fields));
+    }
+    for (const auto& [src, dst] : edges)
+        p.desc.edges.push_back({parseChannelRef(src, "edge"), parseChannelRef(dst, "edge")});
+    for (const auto& o : outputs) p.desc.outputs.push_back(parseChannelRef(o, "output"));
+    in.desc = &p.desc;
+    in.width = in.height = size;
+    in.observe = observe;
+    p.plan = planGraph(in);
+    planResources(p.plan, p.desc);
+    return p;
+}
+
+const ResourceInfo* resource(const GraphPlan& plan, const std::string& name) {
+    for (const auto& r : plan.summary.resources)
+        if (r.name == name) return &r;
+    return nullptr;
+}
+
+/// No two transients whose lifetimes overlap share arena bytes, and every transient lies inside the arena.
+void expectPlacementIsSound(const GraphPlan& plan) {
+    const auto& rs = plan.summary.resources;
+    for (size_t i = 0; i < rs.size(); ++i) {
+        if (rs[i].kind != ResourceKind::Transient) continue;
+        EXPECT_LE(rs[i].offset + rs[i].bytes, plan.summary.transientPeakBytes) << rs[i].name;
+        for (size_t j = i + 1; j < rs.size(); ++j) {
+            if (rs[j].kind != ResourceKind::Transient) continue;
+            const bool alive = rs[i].firstUse <= rs[j].lastUse && rs[j].firstUse <= rs[i].lastUse;
+            const bool share = rs[i].offset < rs[j].offset + rs[j].bytes && rs[j].offset < rs[i].offset + rs[i].bytes;
+            EXPECT_FALSE(alive && share) << rs[i].name << " and " << rs[j].name;
+        }
+    }
+}
+
+}  // namespace
+
+TEST(GraphPlanner, WiresByNameCullsAndOrders) {
+    const Planned p =
+        plan({{"Tone", {"in:hdr", "out:ldr"}}, {"Unused", {"in:hdr", "out:other"}}, {"Render", {"out:hdr"}}}, {},
+             {"Tone.ldr"});
+    EXPECT_EQ(p.order(), (std::vector<std::string>{"Render", "Tone"}));
+    ASSERT_EQ(p.plan.summary.culled.size(), 1u);
+    EXPECT_EQ(p.plan.summary.culled[0].name, "Unused");
+    ASSERT_EQ(p.plan.summary.wires.size(), 1u);
+    EXPECT_TRUE(p.plan.summary.wires[0].byName);
+    EXPECT_EQ(p.plan.summary.wires[0].src.str(), "Render.hdr");
+    const PassPlan& tone = p.plan.passes[0];
+    ASSERT_EQ(tone.inputs.size(), 1u);
+    EXPECT_EQ(tone.inputs[0].srcPass, 2u);
+    EXPECT_EQ(tone.position, 1);
+    EXPECT_EQ(p.plan.passes[1].position, -1);
+    EXPECT_TRUE(tone.info.wired);
+    EXPECT_EQ(tone.info.connectedInputs, std::vector<std::string>{"hdr"});
+}
+
+TEST(GraphPlanner, IndependentPassesRunInDescriptionOrder) {
+    const Planned p = plan({{"C", {"out:c"}}, {"A", {"out:a"}}, {"B", {"out:b"}}}, {}, {"A.a", "B.b", "C.c"});
+    EXPECT_EQ(p.order(), (std::vector<std::string>{"C", "A", "B"}));
+}
+
+TEST(GraphPlanner, ExplicitEdgesOverrideWiringByName) {
+    const Planned p =
+        plan({{"A", {"out:x"}}, {"B", {"out:x"}}, {"Use", {"in:x", "out:y"}}}, {{"B.x", "Use.x"}}, {"Use.y"});
+    EXPECT_EQ(p.order(), (std::vector<std::string>{"B", "Use"}));
+    ASSERT_EQ(p.plan.summary.wires.size(), 1u);
+    EXPECT_FALSE(p.plan.summary.wires[0].byName);
+}
+
+TEST(GraphPlanner, AmbiguousAndMissingInputsAreErrorsOnlyWhenLive) {
+    Error ambiguous = expectError([] {
+        plan({{"A", {"out:x"}}, {"B", {"out:x"}}, {"Use", {"in:x", "out:y"}}}, {}, {"Use.y"});
+    });
+    EXPECT_TRUE(contains(ambiguous.what(), "ambiguous: several passes output 'x': A.x, B.x")) << ambiguous.what();
+    Error missing = expectError([] { plan({{"Use", {"in:x", "out:y"}}}, {}, {"Use.y"}); });
+    EXPECT_TRUE(contains(missing.what(), "no pass outputs a channel named 'x'")) << missing.what();
+    // Culled, the same problem is a warning.
+    const Planned p = plan({{"Use", {"in:x", "out:y"}}, {"Other", {"out:z"}}}, {}, {"Other.z"});
+    ASSERT_EQ(p.plan.summary.warnings.size(), 1u);
+    EXPECT_TRUE(contains(p.plan.summary.warnings[0], "Use (culled)")) << p.plan.summary.warnings[0];
+}
+
+TEST(GraphPlanner, CycleIsNamedAndPrevBreaksIt) {
+    const std::vector<TestPass> passes = {{"A", {"in:b", "out:a"}}, {"B", {"in:a", "out:b"}}};
+    Error e = expectError([&] { plan(passes, {}, {"B.b"}); });
+    EXPECT_TRUE(contains(e.what(), "the graph has a cycle: B -> A -> B")) << e.what();
+    const Planned p = plan(passes, {{"B.b@prev", "A.b"}}, {"B.b"});
+    EXPECT_EQ(p.order(), (std::vector<std::string>{"A", "B"}));
+    const ResourceInfo* history = resource(p.plan, "B.b");
+    ASSERT_NE(history, nullptr);
+    EXPECT_EQ(history->kind, ResourceKind::History);
+    EXPECT_TRUE(p.plan.passes[0].inputs[0].prev);
+}
+
+TEST(GraphPlanner, SecondReflectionMayDropInternalsButNotPorts) {
+    GraphDesc desc;
+    desc.passes.push_back({"P", "T", nlohmann::json::object(), {}});
+    desc.outputs.push_back(parseChannelRef("P.out", "output"));
+    PlannerInput in;
+    in.desc = &desc;
+    in.width = in.height = 4;
+    in.reflections.push_back(reflectionOf({"opt-in:src", "out:out", "int:scratch"}));
+    in.observe = {"P.scratch"};
+    in.reflectWired = [](size_t, const CompileInfo& info) {
+        EXPECT_TRUE(info.wired);
+        EXPECT_TRUE(info.connectedInputs.empty());
+        return reflectionOf({"opt-in:src", "out:out"});
+    };
+    GraphPlan p = planGraph(in);
+    EXPECT_EQ(p.passes[0].reflection.fields().size(), 2u);
+    ASSERT_EQ(p.summary.warnings.size(), 1u);
+    EXPECT_TRUE(contains(p.summary.warnings[0], "'P.scratch' is not computed")) << p.summary.warnings[0];
+    in.reflectWired = [](size_t, const CompileInfo&) { return reflectionOf({"out:out"}); };
+    Error e = expectError([&] { (void)planGraph(in); });
+    EXPECT_TRUE(contains(e.what(), "other inputs or outputs")) << e.what();
+}
+
+TEST(GraphPlanner, OptionalOutputsNobodyReadsAreSkipped) {
+    const Planned p = plan({{"A", {"out:x", "opt-out:mask"}}}, {}, {"A.x"});
+    EXPECT_EQ(p.plan.summary.skippedOutputs, std::vector<std::string>{"A.mask"});
+    EXPECT_EQ(resource(p.plan, "A.mask"), nullptr);
+    const Planned observed = plan({{"A", {"out:x", "opt-out:mask"}}}, {}, {"A.x"}, {"A.*"});
+    EXPECT_TRUE(observed.plan.summary.skippedOutputs.empty());
+    EXPECT_NE(resource(observed.plan, "A.mask"), nullptr);
+}
+
+// A chain ping-pongs: each output lives from its writer to its reader, so two textures' worth of arena serve any
+// length; the marked output lives to the end of the frame.
+TEST(GraphPlanner, ChainPlacementPingPongs) {
+    for (int n : {2, 3, 10, 2000}) {
+        std::vector<TestPass> passes = {{"P0", {"out:c0"}}};
+        for (int i = 1; i < n; ++i)
+            passes.push_back({"P" + std::to_string(i), {"in:c" + std::to_string(i - 1), "out:c" + std::to_string(i)}});
+        const Planned p = plan(passes, {}, {"P" + std::to_string(n - 1) + ".c" + std::to_string(n - 1)});
+        ASSERT_EQ(p.order().size(), size_t(n));
+        const size_t bytes = textureByteSize(8, 8, Format::RGBA32F);
+        EXPECT_EQ(p.plan.summary.transientPeakBytes, 2 * bytes) << n << " passes";
+        EXPECT_EQ(p.plan.summary.transientSumBytes, size_t(n) * bytes);
+        const ResourceInfo* last = resource(p.plan, "P" + std::to_string(n - 1) + ".c" + std::to_string(n - 1));
+        ASSERT_NE(last, nullptr);
+        EXPECT_EQ(last->lastUse, n);
+        if (n <= 10) expectPlacementIsSound(p.plan);
+    }
+}
+
+// A diamond with scratch fields and different sizes: whatever the order of placement, live transients never share
+// bytes (checked pairwise), and the arena is no larger than the sum.
+TEST(GraphPlanner, PlacementNeverSharesLiveBytes) {
+    const Planned p = plan({{"Src", {"out:a", "int:s0"}},
+                            {"Left", {"in:a", "out:l", "int:s1", "int:s2"}},
+                            {"Right", {"in:a", "out:r", "int:s3"}},
+                            {"Join", {"in:l", "in:r", "out:j", "int:s4"}},
+                            {"Tail", {"in:j", "out:t"}}},
+                           {}, {"Tail.t", "Left.l"}, {}, 16);
+    expectPlacementIsSound(p.plan);
+    EXPECT_LT(p.plan.summary.transientPeakBytes, p.plan.summary.transientSumBytes);
+    EXPECT_EQ(resource(p.plan, "Left.l")->lastUse, 5);  // marked: kept after the frame
+    EXPECT_EQ(resource(p.plan, "Src.a")->lastUse, 2);   // read by Left (1) and Right (2)
+}
