@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <glm/gtc/type_ptr.hpp>
@@ -24,6 +25,7 @@
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
 #include "loom/InputFile.h"
+#include "loom/RayScene.h"
 #include "loom/Scene.h"
 
 namespace loom {
@@ -786,6 +788,7 @@ private:
     std::string meshLabel(size_t i) const { return labelOf("meshes", i, m.meshes[i].name); }
     std::string imageFileProblem(const std::string& uri) const;
     void checkNodeCycles() const;
+    void checkWorldRange() const;
 
     [[noreturn]] void fail(const std::string& where, const std::string& what, const std::string& expected = {},
                            const std::string& suggestion = {}) const {
@@ -1804,6 +1807,29 @@ void Importer::checkNodeCycles() const {
     }
 }
 
+/// Every instance's vertices at time 0 lie within kWorldLimit, the range rays are traced in: beyond it (a node scaled
+/// by 1e30, say) positions, their derivatives and the camera that frames them overflow to Inf and NaN (motion vectors
+/// were NaN). A node scaled to 0 on some axis (hidden, Instance::visible) collapses its vertices and passes.
+void Importer::checkWorldRange() const {
+    for (const Instance& inst : s.instances) {
+        const Bounds& b = s.meshes[inst.mesh].bounds;
+        float largest = 0.f;
+        for (int corner = 0; corner < 8; ++corner) {
+            const glm::vec3 p(corner & 1 ? b.hi.x : b.lo.x, corner & 2 ? b.hi.y : b.lo.y, corner & 4 ? b.hi.z : b.lo.z);
+            const glm::vec4 w = inst.world * glm::vec4(p, 1.f);
+            for (int c = 0; c < 3; ++c) largest = std::isfinite(w[c]) ? std::max(largest, std::fabs(w[c])) : INFINITY;
+        }
+        if (largest <= kWorldLimit) continue;
+        char value[32];
+        std::snprintf(value, sizeof value, "%g", double(largest));
+        fail(labelOf("nodes", inst.node, m.nodes[inst.node].name),
+             "the node places mesh '" + s.meshes[inst.mesh].name + "' at world coordinates up to " + value +
+                 " (at time 0, its parents' transforms included)",
+             "world coordinates within +-1e8, the range Loom traces rays in",
+             "scale the scene down, or fix the node's (or a parent's) scale, translation or matrix");
+    }
+}
+
 void Importer::run() {
     checkRequiredExtensions(m.extensionsRequired, mFile);
     checkNodeCycles();
@@ -1867,6 +1893,7 @@ void Importer::run() {
     } catch (const Error& e) {
         throw e.withFile(mFile);
     }
+    checkWorldRange();
     if (s.triangleCount() == 0)
         fail({}, "scene has no triangles", "at least one node with a triangle mesh in the active scene",
              s.warnings.empty() ? "" : "see the warnings above for skipped primitives");
