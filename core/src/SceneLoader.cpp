@@ -294,11 +294,11 @@ bool inspectImage(tinygltf::Image* image, const int index, std::string* /*err*/,
 /// material): neither may pass silently. A SAX pass keeps the JSON path without building a document.
 class NegativeIndexFinder : public nlohmann::json_sax<nlohmann::json> {
 public:
-    std::optional<std::pair<std::string, int64_t>> found;  ///< the value's path ("accessors[1]/byteOffset"), value
+    std::optional<std::pair<std::string, std::string>> found;  ///< the path ("accessors[1]/byteOffset"), the value
 
     bool number_integer(number_integer_t v) override {
         if (v < 0 && mustBeNonNegative()) {
-            found.emplace(path(), v);
+            found.emplace(path(), std::to_string(v));
             return false;  // stop: one error is reported
         }
         return value();
@@ -306,7 +306,13 @@ public:
     bool null() override { return value(); }
     bool boolean(bool) override { return value(); }
     bool number_unsigned(number_unsigned_t) override { return value(); }
-    bool number_float(number_float_t, const string_t&) override { return value(); }
+    bool number_float(number_float_t v, const string_t& text) override {
+        if (v < 0 && mustBeNonNegative()) {  // -4.0: tinygltf drops it as it drops -4
+            found.emplace(path(), text);
+            return false;
+        }
+        return value();
+    }
     bool string(string_t&) override { return value(); }
     bool binary(binary_t&) override { return value(); }
     bool start_object(std::size_t) override {
@@ -387,7 +393,7 @@ void checkNonNegativeIndices(std::string_view jsonText, const std::string& file)
     if (!finder.found) return;
     const auto& [where, value] = *finder.found;
     const std::string key = where.substr(where.find_last_of('/') + 1);
-    throwBadInput(where, key + " is " + std::to_string(value) + ", a negative index, offset or size",
+    throwBadInput(where, key + " is " + printable(value) + ", a negative index, offset or size",
                   "an integer >= 0 (glTF 2.0)", "fix the exporter, or the file", file);
 }
 

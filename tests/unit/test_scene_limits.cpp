@@ -186,6 +186,17 @@ TEST_F(SceneLimits, NegativeAccessorByteOffsetIsAnError) {
     EXPECT_HAS(msg, "-4");
 }
 
+TEST_F(SceneLimits, NegativeByteOffsetWrittenAsAFloatIsAnError) {
+    Gltf g = triangleScene();
+    std::string text = g.text();
+    const std::string view = "\"byteOffset\": 0";
+    ASSERT_NE(text.find(view), std::string::npos);
+    text.replace(text.find(view), view.size(), "\"byteOffset\": -4.0");
+    const std::string msg = loadError(put("scene.gltf", toBytes(text)));
+    EXPECT_HAS(msg, "bufferViews[0]/byteOffset");
+    EXPECT_HAS(msg, "-4.0");
+}
+
 TEST_F(SceneLimits, NegativeMaterialIndexIsAnError) {
     Gltf g = triangleScene();
     g.j["meshes"][0]["primitives"][0]["material"] = -2;
