@@ -10,8 +10,16 @@
 
 #include "CliUtil.h"
 #include "loom/Error.h"
+#include "loom/InputFile.h"
 
 namespace loom::cli {
+
+namespace {
+
+/// The largest environment map file --env reads (a 16k x 8k float EXR is 1.5 GiB).
+constexpr uint64_t kMaxEnvironmentFileBytes = uint64_t(4) << 30;
+
+}  // namespace
 
 void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
     cmd->add_option("--scene,-s", o.scene, "glTF 2.0 scene (.gltf or .glb)");
@@ -24,6 +32,13 @@ void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
     cmd->add_option("--jitter", o.jitter, "sub-pixel camera jitter: none, halton or stratified")->capture_default_str();
     cmd->add_option("--jitter-count", o.jitterCount, "period of the jitter pattern")->capture_default_str();
     cmd->add_option("--env", o.env, "environment: an equirectangular .hdr file, or a colour R,G,B");
+    cmd->add_option("--texture-budget", o.textureBudgetMiB,
+                    "MiB the scene's decoded textures may take together (RGBA8: 4 bytes a texel); beyond it loading "
+                    "fails")
+        ->capture_default_str();
+    cmd->add_flag("--allow-missing-textures", o.allowMissingTextures,
+                  "a texture whose image is missing or cannot be decoded is dropped with a warning instead of "
+                  "failing the load");
 }
 
 std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
@@ -63,7 +78,13 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
     if (o.jitterCount == 0 || o.jitterCount > 1024)
         throwBadInput("--jitter-count", "jitter period out of range", "1 to 1024 samples");
 
-    std::shared_ptr<Scene> scene = Scene::load(o.scene);
+    if (o.textureBudgetMiB == 0 || o.textureBudgetMiB > (uint64_t(1) << 30))
+        throwBadInput("--texture-budget", fmt::format("texture budget {} MiB is out of range", o.textureBudgetMiB),
+                      "1 to 1073741824 MiB");
+    SceneLoadOptions loadOptions;
+    loadOptions.textureBudgetBytes = o.textureBudgetMiB << 20;
+    loadOptions.allowMissingTextures = o.allowMissingTextures;
+    std::shared_ptr<Scene> scene = Scene::load(o.scene, loadOptions);
     if (path.kind != CameraPathKind::Static && scene->cameraAnimated())
         spdlog::warn("--camera-path {} is ignored: {} animates its camera, which the frames follow", o.cameraPath,
                      o.scene);
@@ -93,6 +114,14 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
             scene->environment = Environment{};
             scene->environment.color = c;
         } else {
+            // Named here, with the option: Scene::loadEnvironmentMap would only find no file.
+            if (const std::string problem = inputFileProblem(o.env, kMaxEnvironmentFileBytes); !problem.empty())
+                throwBadInput("--env", "the environment map " + problem,
+                              "an equirectangular .hdr or .exr file, or a colour R,G,B",
+                              problem == "does not exist" ? "check the path"
+                              : problem == "is a folder"  ? "name an image file inside the folder"
+                                                          : "",
+                              o.env);
             scene->loadEnvironmentMap(o.env);
         }
     }

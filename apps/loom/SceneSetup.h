@@ -17,9 +17,12 @@ struct SceneOptions {
     std::string jitter = "none";
     uint32_t jitterCount = 16;
     std::string env;
+    uint64_t textureBudgetMiB = kDefaultTextureBudget >> 20;
+    bool allowMissingTextures = false;
 };
 
-/// Adds --scene, --camera-path, --camera-speed, --jitter, --jitter-count, --env.
+/// Adds --scene, --camera-path, --camera-speed, --jitter, --jitter-count, --env, --texture-budget,
+/// --allow-missing-textures.
 void addSceneOptions(CLI::App* cmd, SceneOptions& o);
 /// Loads the scene and applies the options; nullptr when no --scene was given.
 /// Throws loom::Error (BadInput) for bad values.

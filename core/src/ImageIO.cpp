@@ -24,6 +24,7 @@
 #include <iterator>
 #include <limits>
 #include <memory>
+#include <new>
 #include <system_error>
 #include <vector>
 
@@ -36,6 +37,10 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr std::array<const char*, 4> kChannelNames = {"R", "G", "B", "A"};
+
+/// The most pixels readImage decodes from a PNG or JPEG (2^30, 4 GiB as RGBA8), checked from the header before
+/// anything is allocated.
+constexpr uint64_t kMaxReadTexels = uint64_t(1) << 30;
 
 [[noreturn]] void throwRuntime(const fs::path& file, std::string what, std::string suggestion = {}) {
     throw Error(Error::Info{ErrorKind::Runtime, file.string(), "", std::move(what), "", std::move(suggestion)});
@@ -164,16 +169,31 @@ void writeExr(const fs::path& path, const Texture& tex) {
 }
 
 void writePng(const fs::path& path, const Texture& tex) {
-    std::string bytes;
+    struct Encoded {
+        std::string bytes;
+        bool outOfMemory = false;
+    } encoded;
+    // stb is C: nothing may be thrown through it, so a failed append is noted and reported below.
     auto append = [](void* context, void* data, int size) {
-        static_cast<std::string*>(context)->append(static_cast<const char*>(data), size_t(size));
+        auto* out = static_cast<Encoded*>(context);
+        if (out->outOfMemory) return;
+        try {
+            out->bytes.append(static_cast<const char*>(data), size_t(size));
+        } catch (const std::bad_alloc&) {
+            out->outOfMemory = true;
+            out->bytes = std::string();
+        }
     };
-    if (tex.rowPitch() > size_t(std::numeric_limits<int>::max()) ||
-        !stbi_write_png_to_func(append, &bytes, int(tex.width()), int(tex.height()), 4, tex.data(),
-                                int(tex.rowPitch()))) {
-        throwRuntime(path, "PNG encoding failed", "check the image size");
-    }
-    writeFileAtomic(path, bytes);
+    const std::string size = std::to_string(tex.width()) + "x" + std::to_string(tex.height()) + " (" +
+                             std::to_string(tex.byteSize() >> 20) + " MiB of pixels)";
+    if (tex.rowPitch() > size_t(std::numeric_limits<int>::max()) || tex.height() > uint32_t(1) << 30)
+        throwRuntime(path, "the " + size + " image is too large to encode as PNG", "dump a smaller region or as EXR");
+    const bool ok = stbi_write_png_to_func(append, &encoded, int(tex.width()), int(tex.height()), 4, tex.data(),
+                                           int(tex.rowPitch())) != 0;
+    if (!ok || encoded.outOfMemory)
+        throwRuntime(path, "out of memory encoding the " + size + " image as PNG",
+                     "free memory, or write a smaller image");
+    writeFileAtomic(path, encoded.bytes);
 }
 
 /// The first four bytes of a file (zeros past its end), which tell the image formats apart.
@@ -248,12 +268,28 @@ Texture readExr(const fs::path& path) {
 }
 
 Texture readStb(const fs::path& path) {
+    const std::string bytes = readFileBytes(path);
+    const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
     int width = 0, height = 0, channelsInFile = 0;
-    std::unique_ptr<stbi_uc, void (*)(void*)> pixels(stbi_load(path.c_str(), &width, &height, &channelsInFile, 4),
-                                                     stbi_image_free);
+    // The header's size first: a small file may claim a huge image.
+    if (bytes.size() <= size_t(std::numeric_limits<int>::max()) &&
+        stbi_info_from_memory(data, int(bytes.size()), &width, &height, &channelsInFile) &&
+        (uint64_t(width) * uint64_t(height) > kMaxReadTexels || width <= 0 || height <= 0))
+        throwBadInput("",
+                      "the image is " + std::to_string(width) + "x" + std::to_string(height) + " (" +
+                          std::to_string(uint64_t(width) * uint64_t(height) * 4 >> 20) + " MiB decoded)",
+                      "at most " + std::to_string(kMaxReadTexels) + " pixels", "downscale the image", path.string());
+    std::unique_ptr<stbi_uc, void (*)(void*)> pixels(
+        bytes.size() <= size_t(std::numeric_limits<int>::max())
+            ? stbi_load_from_memory(data, int(bytes.size()), &width, &height, &channelsInFile, 4)
+            : nullptr,
+        stbi_image_free);
     if (!pixels) {
         const char* reason = stbi_failure_reason();
-        throwBadInput("", std::string("cannot read the image: ") + (reason ? reason : "unknown error"),
+        if (reason && std::strcmp(reason, "outofmem") == 0)
+            throwRuntime(
+                path, "out of memory decoding the " + std::to_string(width) + "x" + std::to_string(height) + " image");
+        throwBadInput("", "cannot read the image: " + describeImageDecodeFailure(data, bytes.size(), reason),
                       "a valid PNG or EXR file", "check that the file is a complete PNG or OpenEXR image",
                       path.string());
     }
@@ -375,6 +411,31 @@ private:
 };
 
 }  // namespace
+
+std::string describeImageDecodeFailure(const unsigned char* bytes, size_t size, const char* reason) {
+    if (!bytes || size == 0) return "an empty file";
+    // stb tries every decoder in turn: when the data's own decoder fails early, the reason left is another
+    // decoder's ("bad png sig" for a truncated JPEG), which would only mislead.
+    std::string why = reason ? reason : "";
+    for (const char* other : {"png", "jpeg", "jpg", "bmp", "gif", "psd", "tga", "pnm", "hdr", "pic", "image type"})
+        if (why.find(other) != std::string::npos) why.clear();
+    const std::string stb = why.empty() ? "" : " (stb: " + why + ")";
+    const auto startsWith = [&](std::initializer_list<unsigned char> magic) {
+        if (size < magic.size()) return false;
+        size_t i = 0;
+        for (unsigned char m : magic)
+            if (bytes[i++] != m) return false;
+        return true;
+    };
+    if (startsWith({0xFF, 0xD8, 0xFF})) return "a truncated or corrupt JPEG" + stb;
+    if (startsWith({0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'})) return "a truncated or corrupt PNG" + stb;
+    std::string lead;
+    for (size_t i = 0; i < std::min<size_t>(size, 4); ++i) {
+        static const char* hex = "0123456789abcdef";
+        lead += std::string(lead.empty() ? "" : " ") + hex[bytes[i] >> 4] + hex[bytes[i] & 15];
+    }
+    return "not a PNG or JPEG image (it starts with bytes " + lead + ")" + stb;
+}
 
 const char* imageExtension(Format f) { return formatInfo(f).component == ComponentType::Unorm8 ? "png" : "exr"; }
 

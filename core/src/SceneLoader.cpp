@@ -10,9 +10,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <glm/gtc/type_ptr.hpp>
+#include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
@@ -22,6 +25,7 @@
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
 #include "loom/InputFile.h"
+#include "loom/RayScene.h"
 #include "loom/Scene.h"
 
 namespace loom {
@@ -164,24 +168,70 @@ std::optional<PointerTarget> supportedPointer(const std::string& pointer) {
 // ---------------------------------------------------------------------------
 // Image decoding (replaces tinygltf's default loader)
 
+/// A glTF image as the image callback leaves it: its header read and checked, its encoded bytes kept (a view into a
+/// glTF buffer, or a copy of a file or data URI, which tinygltf frees), decoded later by Importer::convertImages, once
+/// every image's size is known to fit the limits. Loom keeps the texels here rather than in tinygltf::Image so that
+/// they are moved, not copied, into Scene::images.
+struct PendingImage {
+    uint32_t width = 0, height = 0;
+    const unsigned char* encoded = nullptr;  ///< into a glTF buffer, or into `copy`
+    size_t encodedSize = 0;
+    std::vector<unsigned char> copy;
+    int sameAs = -1;  ///< another glTF image with the same file: decoded once, shared
+};
+
 /// Shared with the image callback: tinygltf parses buffers and bufferViews
 /// before images, so the callback can check an image's bufferView against
 /// its buffer before reading it (tinygltf does not).
 struct ImageLoadContext {
     const tinygltf::Model* model = nullptr;
-    std::vector<std::string> failures;  ///< per glTF image: why it could not be decoded ("" = fine)
+    const SceneLoadOptions* options = nullptr;
+    std::string file;
+    std::vector<std::string> failures;  ///< per glTF image: why it cannot be decoded ("" = fine)
+    std::vector<PendingImage> pending;  ///< per glTF image
+    std::map<std::string, int> byUri;   ///< external image file -> the first glTF image that names it
+    uint64_t textureBytes = 0;          ///< the decoded size of every image accepted so far
+    std::optional<Error> fatal;         ///< a limit exceeded: loading stops with this error
 };
 
-/// Decodes any image to RGBA8 with stb: 1-3 channel images gain channels and
-/// 16-bit images are reduced to 8 bits by stb itself. A failure is recorded
-/// and loading goes on; the materials that use the image get a warning.
-bool decodeImage(tinygltf::Image* image, const int index, std::string* /*err*/, std::string* /*warn*/, int /*reqWidth*/,
-                 int /*reqHeight*/, const unsigned char* bytes, int size, void* user) {
+std::string mib(uint64_t bytes) {
+    return std::to_string((bytes + (uint64_t(1) << 19)) >> 20) + " MiB";
+}
+
+/// "images[3] 'name' (file 'brick.png')": how errors about a glTF image name it.
+std::string imageLabel(size_t index, const tinygltf::Image& image) {
+    std::string label = labelOf("images", index, image.name);
+    if (!image.uri.empty() && image.uri.rfind("data:", 0) != 0) label += " (file '" + image.uri + "')";
+    return label;
+}
+
+std::string decodeFailure(const unsigned char* bytes, size_t size) {
+    return "cannot decode the image: " + describeImageDecodeFailure(bytes, size, stbi_failure_reason()) +
+           "; PNG and JPEG are supported";
+}
+
+/// tinygltf's image callback. Reads the image's header (stb) and checks its size against the options' limits and
+/// the scene's texture budget, so that a small file claiming a huge image is refused before anything is decoded or
+/// allocated; exceeding a limit stops loading with an error naming the image. Data whose header cannot be read is
+/// recorded, and the materials that use the image report it.
+bool inspectImage(tinygltf::Image* image, const int index, std::string* /*err*/, std::string* /*warn*/,
+                  int /*reqWidth*/, int /*reqHeight*/, const unsigned char* bytes, int size, void* user) {
     auto* ctx = static_cast<ImageLoadContext*>(user);
-    if (index >= 0 && size_t(index) >= ctx->failures.size()) ctx->failures.resize(size_t(index) + 1);
+    if (index < 0) return true;
+    const size_t i = size_t(index);
+    if (i >= ctx->failures.size()) {
+        ctx->failures.resize(i + 1);
+        ctx->pending.resize(i + 1);
+    }
     auto fail = [&](std::string why) {
-        if (index >= 0) ctx->failures[size_t(index)] = std::move(why);
-        return true;  // not fatal: the texture is dropped, rendering goes on
+        ctx->failures[i] = std::move(why);
+        return true;  // reported by the materials that use the image
+    };
+    const SceneLoadOptions& limits = *ctx->options;
+    auto fatal = [&](std::string what, std::string expected, std::string suggestion) {
+        ctx->fatal = Error(Error::Info{ErrorKind::BadInput, ctx->file, imageLabel(i, *image), std::move(what),
+                                       std::move(expected), std::move(suggestion)});
+        return false;  // tinygltf stops; Scene::load throws the error
     };
     if (image->bufferView >= 0) {
         const auto& views = ctx->model->bufferViews;
@@ -191,21 +241,160 @@ bool decodeImage(tinygltf::Image* image, const int index, std::string* /*err*/, 
             return fail("bufferViews[" + std::to_string(image->bufferView) + "] runs past the end of its buffer");
     }
     if (!bytes || size <= 0) return fail("the image data is empty");
-    int w = 0, h = 0, channels = 0;
-    unsigned char* data = stbi_load_from_memory(bytes, size, &w, &h, &channels, 4);
-    if (!data) {
-        const char* reason = stbi_failure_reason();
-        return fail(std::string("cannot decode the image (") + (reason ? reason : "unknown format") +
-                    "); PNG and JPEG are supported");
+    // The same file named by several images is decoded once and shared.
+    const bool external = !image->uri.empty() && image->uri.rfind("data:", 0) != 0;
+    if (external) {
+        const auto [it, inserted] = ctx->byUri.emplace(image->uri, index);
+        if (!inserted) {
+            ctx->pending[i].sameAs = it->second;
+            ctx->failures[i] = ctx->failures[size_t(it->second)];
+            return true;
+        }
     }
+    int w = 0, h = 0, channels = 0;
+    if (!stbi_info_from_memory(bytes, size, &w, &h, &channels)) return fail(decodeFailure(bytes, size_t(size)));
+    const uint64_t texels = uint64_t(w) * uint64_t(h), imageBytes = texels * 4;
+    const std::string shape = std::to_string(w) + "x" + std::to_string(h);
+    if (w <= 0 || h <= 0) return fail("the image header gives an empty " + shape + " image");
+    if (uint64_t(w) > limits.maxTextureSide || uint64_t(h) > limits.maxTextureSide || texels > limits.maxTextureTexels)
+        return fatal("the texture is " + shape + " (" + mib(imageBytes) + " decoded)",
+                     "at most " + std::to_string(limits.maxTextureSide) + " pixels a side and " +
+                         std::to_string(limits.maxTextureTexels) + " texels (" + mib(limits.maxTextureTexels * 4) + ")",
+                     "downscale the image");
+    if (imageBytes > limits.textureBudgetBytes || ctx->textureBytes > limits.textureBudgetBytes - imageBytes)
+        return fatal("the " + shape + " texture (" + mib(imageBytes) + " decoded) takes the scene's textures to " +
+                         mib(ctx->textureBytes + imageBytes),
+                     "decoded textures within the texture budget of " + mib(limits.textureBudgetBytes),
+                     "downscale the scene's textures, or raise the budget (--texture-budget)");
+    ctx->textureBytes += imageBytes;
+    PendingImage& out = ctx->pending[i];
+    out.width = uint32_t(w);
+    out.height = uint32_t(h);
+    if (image->bufferView >= 0) {
+        out.encoded = bytes;  // glTF buffers outlive the import
+    } else {
+        out.copy.assign(bytes, bytes + size);  // tinygltf frees a file's or data URI's bytes after this call
+        out.encoded = out.copy.data();
+    }
+    out.encodedSize = size_t(size);
+    // tinygltf's record of the image: its shape, no pixels (Loom keeps those in Scene::images).
     image->width = w;
     image->height = h;
     image->component = 4;
     image->bits = 8;
     image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
-    image->image.assign(data, data + size_t(w) * size_t(h) * 4);
-    stbi_image_free(data);
     return true;
+}
+
+// ---------------------------------------------------------------------------
+// Negative indices and offsets
+
+/// Finds the first negative integer where glTF 2.0 requires an index, an offset or a size (all >= 0). tinygltf reads
+/// a negative byteOffset as 0 and passes a negative index on, which would then mean "none" (material -2: the default
+/// material): neither may pass silently. A SAX pass keeps the JSON path without building a document.
+class NegativeIndexFinder : public nlohmann::json_sax<nlohmann::json> {
+public:
+    std::optional<std::pair<std::string, std::string>> found;  ///< the path ("accessors[1]/byteOffset"), the value
+
+    bool number_integer(number_integer_t v) override {
+        if (v < 0 && mustBeNonNegative()) {
+            found.emplace(path(), std::to_string(v));
+            return false;  // stop: one error is reported
+        }
+        return value();
+    }
+    bool null() override { return value(); }
+    bool boolean(bool) override { return value(); }
+    bool number_unsigned(number_unsigned_t) override { return value(); }
+    bool number_float(number_float_t v, const string_t& text) override {
+        if (v < 0 && mustBeNonNegative()) {  // -4.0: tinygltf drops it as it drops -4
+            found.emplace(path(), text);
+            return false;
+        }
+        return value();
+    }
+    bool string(string_t&) override { return value(); }
+    bool binary(binary_t&) override { return value(); }
+    bool start_object(std::size_t) override {
+        mFrames.push_back({false, {}, 0});
+        return true;
+    }
+    bool key(string_t& k) override {
+        mFrames.back().key = k;
+        return true;
+    }
+    bool end_object() override {
+        mFrames.pop_back();
+        return value();
+    }
+    bool start_array(std::size_t) override {
+        mFrames.push_back({true, {}, 0});
+        return true;
+    }
+    bool end_array() override {
+        mFrames.pop_back();
+        return value();
+    }
+    bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+        return false;  // the parser and tinygltf report malformed JSON
+    }
+
+private:
+    struct Frame {
+        bool array;
+        std::string key;  // objects: the member being read
+        size_t index;     // arrays: the element being read
+    };
+    /// A value ended: an array moves on to its next element.
+    bool value() {
+        if (!mFrames.empty() && mFrames.back().array) ++mFrames.back().index;
+        return true;
+    }
+    bool mustBeNonNegative() const {
+        static const std::set<std::string> kIndexKeys = {
+            "byteOffset", "byteLength", "byteStride", "count", "bufferView", "buffer",  "material",
+            "indices",    "mesh",       "camera",     "skin",  "source",     "sampler", "index",
+            "texCoord",   "input",      "output",     "node",  "scene",      "light",   "skeleton"};
+        static const std::set<std::string> kIndexArrays = {"children", "nodes", "joints"};
+        // Extras are free-form, and so are extensions other than Khronos ones.
+        for (size_t f = 0; f + 1 < mFrames.size(); ++f) {
+            if (mFrames[f].array) continue;
+            if (mFrames[f].key == "extras") return false;
+            if (mFrames[f].key == "extensions" && !mFrames[f + 1].array && mFrames[f + 1].key.rfind("KHR_", 0) != 0)
+                return false;
+        }
+        if (mFrames.empty()) return false;
+        const Frame& top = mFrames.back();
+        if (!top.array) {
+            if (kIndexKeys.count(top.key)) return true;
+            // A primitive's attributes and morph targets: accessor indices.
+            return mFrames.size() >= 2 && !mFrames[mFrames.size() - 2].array &&
+                   mFrames[mFrames.size() - 2].key == "attributes";
+        }
+        return mFrames.size() >= 2 && !mFrames[mFrames.size() - 2].array &&
+               kIndexArrays.count(mFrames[mFrames.size() - 2].key);
+    }
+    std::string path() const {
+        std::string out;
+        for (const Frame& f : mFrames) {
+            if (f.array)
+                out += "[" + std::to_string(f.index) + "]";
+            else
+                out += (out.empty() ? "" : "/") + f.key;
+        }
+        return out;
+    }
+    std::vector<Frame> mFrames;
+};
+
+void checkNonNegativeIndices(std::string_view jsonText, const std::string& file) {
+    NegativeIndexFinder finder;
+    nlohmann::json::sax_parse(jsonText.begin(), jsonText.end(), &finder);
+    if (!finder.found) return;
+    const auto& [where, value] = *finder.found;
+    const std::string key = where.substr(where.find_last_of('/') + 1);
+    throwBadInput(where, key + " is " + printable(value) + ", a negative index, offset or size",
+                  "an integer >= 0 (glTF 2.0)", "fix the exporter, or the file", file);
 }
 
 // ---------------------------------------------------------------------------
@@ -566,8 +755,8 @@ const char* typeName(int type) {
 
 class Importer {
 public:
-    Importer(const tinygltf::Model& model, const ImageLoadContext& images, Scene& scene,
-             const SceneLoadOptions& options, std::vector<PointerChannel> pointers)
+    Importer(const tinygltf::Model& model, ImageLoadContext& images, Scene& scene, const SceneLoadOptions& options,
+             std::vector<PointerChannel> pointers)
         : m(model),
           mImageCtx(images),
           s(scene),
@@ -603,6 +792,9 @@ private:
     void readIorAndSpecular(const tinygltf::Material& src, const std::string& label, Material& mat);
     uint32_t defaultMaterial();
     std::string meshLabel(size_t i) const { return labelOf("meshes", i, m.meshes[i].name); }
+    std::string imageFileProblem(const std::string& uri) const;
+    void checkNodeCycles() const;
+    void checkWorldRange() const;
 
     [[noreturn]] void fail(const std::string& where, const std::string& what, const std::string& expected = {},
                            const std::string& suggestion = {}) const {
@@ -615,7 +807,7 @@ private:
     }
 
     const tinygltf::Model& m;
-    const ImageLoadContext& mImageCtx;
+    ImageLoadContext& mImageCtx;  // its decoded texels move into Scene::images
     Scene& s;
     const SceneLoadOptions& mOptions;
     const std::string mFile;
@@ -741,22 +933,67 @@ std::vector<uint32_t> Importer::readIndices(int index, const std::string& where)
     return readAccessor<uint32_t>(index, where, TINYGLTF_TYPE_SCALAR);
 }
 
+/// Decodes the images the callback accepted (stb: 1-3 channel images gain channels, 16-bit images are reduced to
+/// 8 bits) and moves their texels into Scene::images. Running out of memory is an error naming the image.
 void Importer::convertImages() {
     mImageMap.assign(m.images.size(), -1);
-    for (size_t i = 0; i < m.images.size(); ++i) {
+    for (size_t i = 0; i < m.images.size() && i < mImageCtx.pending.size(); ++i) {
+        PendingImage& pending = mImageCtx.pending[i];
+        if (pending.sameAs >= 0) {
+            mImageMap[i] = mImageMap[size_t(pending.sameAs)];
+            continue;
+        }
+        if (!pending.encoded) continue;
         const tinygltf::Image& img = m.images[i];
-        if (img.image.empty() || img.width <= 0 || img.height <= 0 || img.component != 4 || img.bits != 8) continue;
+        const std::string shape = std::to_string(pending.width) + "x" + std::to_string(pending.height);
+        const auto outOfMemory = [&] {
+            fail(imageLabel(i, img),
+                 "out of memory decoding the " + shape + " texture (" +
+                     mib(uint64_t(pending.width) * pending.height * 4) + "; the scene's textures take " +
+                     mib(mImageCtx.textureBytes) + ")",
+                 "enough free memory for the scene's textures", "downscale the textures, or free memory");
+        };
         SceneImage out;
+        try {
+            int w = 0, h = 0, channels = 0;
+            std::unique_ptr<stbi_uc, void (*)(void*)> data(
+                stbi_load_from_memory(pending.encoded, int(pending.encodedSize), &w, &h, &channels, 4),
+                stbi_image_free);
+            if (!data) {
+                const char* reason = stbi_failure_reason();
+                if (reason && std::strcmp(reason, "outofmem") == 0) outOfMemory();
+                mImageCtx.failures[i] = decodeFailure(pending.encoded, pending.encodedSize);
+                continue;
+            }
+            if (uint32_t(w) != pending.width || uint32_t(h) != pending.height) {
+                mImageCtx.failures[i] = "the image decodes to " + std::to_string(w) + "x" + std::to_string(h) +
+                                        " but its header says " + shape;
+                continue;
+            }
+            const auto* first = reinterpret_cast<const glm::u8vec4*>(data.get());
+            // The one copy: a vector cannot adopt stb's buffer.
+            out.texels.assign(first, first + size_t(w) * size_t(h));
+        } catch (const std::bad_alloc&) {
+            outOfMemory();
+        }
+        pending = PendingImage{};  // the encoded copy is no longer needed
         out.name = img.name;
         if (out.name.empty()) out.name = !img.uri.empty() && img.uri.rfind("data:", 0) != 0 ? img.uri : "";
         if (out.name.empty()) out.name = "image" + std::to_string(i);
         out.width = uint32_t(img.width);
         out.height = uint32_t(img.height);
-        out.texels.resize(size_t(out.width) * out.height);
-        std::memcpy(out.texels.data(), img.image.data(), out.texels.size() * 4);
         mImageMap[i] = int(s.images.size());
         s.images.push_back(std::move(out));
     }
+}
+
+/// Why an external image file could not be read, as a texture error says it.
+std::string Importer::imageFileProblem(const std::string& uri) const {
+    const fs::path path = s.file.parent_path() / percentDecode(uri);
+    std::string problem = inputFileProblem(path, kMaxSceneFileBytes);
+    std::error_code ec;
+    if (problem.empty()) problem = fs::file_size(path, ec) == 0 && !ec ? "is an empty file" : "cannot be read";
+    return "image file '" + path.string() + "' " + problem;
 }
 
 TextureRef Importer::textureRef(const tinygltf::TextureInfo& info, const std::string& material, const char* slot) {
@@ -787,11 +1024,19 @@ TextureRef Importer::textureRef(int textureIndex, int texCoord, const tinygltf::
     ref.image = mImageMap[size_t(source)];
     if (ref.image < 0) {
         const tinygltf::Image& img = m.images[size_t(source)];
-        std::string why = size_t(source) < mImageCtx.failures.size() ? mImageCtx.failures[size_t(source)] : "";
+        size_t decoded = size_t(source);  // the image whose decoding failed (the first one naming the same file)
+        if (decoded < mImageCtx.pending.size() && mImageCtx.pending[decoded].sameAs >= 0)
+            decoded = size_t(mImageCtx.pending[decoded].sameAs);
+        std::string why = decoded < mImageCtx.failures.size() ? mImageCtx.failures[decoded] : "";
         if (why.empty())
-            why = !img.uri.empty() ? "image file '" + percentDecode(img.uri) + "' not found or unreadable"
-                                   : "the image could not be decoded";
-        warn(where + ": " + labelOf("images", size_t(source), img.name) + ": " + why + "; the texture is ignored");
+            why = !img.uri.empty() && img.uri.rfind("data:", 0) != 0 ? imageFileProblem(img.uri)
+                                                                     : "the image could not be decoded";
+        const std::string at = where + ": " + imageLabel(size_t(source), img);
+        if (!mOptions.allowMissingTextures)
+            fail(at, why, "a PNG or JPEG image Loom can read",
+                 "fix or replace the image, or load with --allow-missing-textures to render the material without "
+                 "the texture");
+        warn(at + ": " + why + "; the texture is ignored (--allow-missing-textures)");
     }
     return ref;
 }
@@ -1529,8 +1774,71 @@ void Importer::convertPointerChannel(const PointerChannel& pc, const tinygltf::A
     anim.channels.push_back(out);
 }
 
+/// A node that is its own descendant is an error naming it, before the scene's roots are worked out (a cycle has
+/// no root: otherwise the scene would only look empty).
+void Importer::checkNodeCycles() const {
+    enum : uint8_t { kNew, kOpen, kDone };
+    std::vector<uint8_t> state(m.nodes.size(), kNew);
+    std::vector<std::pair<size_t, size_t>> stack;  // (node, next child)
+    for (size_t start = 0; start < m.nodes.size(); ++start) {
+        if (state[start] != kNew) continue;
+        stack.assign(1, {start, 0});
+        state[start] = kOpen;
+        while (!stack.empty()) {
+            auto& [n, next] = stack.back();
+            const std::vector<int>& children = m.nodes[n].children;
+            if (next == children.size()) {
+                state[n] = kDone;
+                stack.pop_back();
+                continue;
+            }
+            const int c = children[next++];
+            if (c < 0 || size_t(c) >= m.nodes.size()) continue;  // reported by convertNodes
+            if (state[size_t(c)] == kOpen) {
+                std::string path;
+                bool on = false;
+                for (const auto& [k, _] : stack) {
+                    on = on || k == size_t(c);
+                    if (on) path += labelOf("nodes", k, m.nodes[k].name) + " -> ";
+                }
+                path += labelOf("nodes", size_t(c), m.nodes[size_t(c)].name);
+                fail(labelOf("nodes", size_t(c), m.nodes[size_t(c)].name), "the node hierarchy has a cycle: " + path,
+                     "a tree: no node is its own ancestor", "remove the child reference that closes the cycle");
+            }
+            if (state[size_t(c)] == kNew) {
+                state[size_t(c)] = kOpen;
+                stack.emplace_back(size_t(c), 0);
+            }
+        }
+    }
+}
+
+/// Every instance's vertices at time 0 lie within kWorldLimit, the range rays are traced in: beyond it (a node scaled
+/// by 1e30, say) positions, their derivatives and the camera that frames them overflow to Inf and NaN (motion vectors
+/// were NaN). A node scaled to 0 on some axis (hidden, Instance::visible) collapses its vertices and passes.
+void Importer::checkWorldRange() const {
+    for (const Instance& inst : s.instances) {
+        const Bounds& b = s.meshes[inst.mesh].bounds;
+        float largest = 0.f;
+        for (int corner = 0; corner < 8; ++corner) {
+            const glm::vec3 p(corner & 1 ? b.hi.x : b.lo.x, corner & 2 ? b.hi.y : b.lo.y, corner & 4 ? b.hi.z : b.lo.z);
+            const glm::vec4 w = inst.world * glm::vec4(p, 1.f);
+            for (int c = 0; c < 3; ++c) largest = std::isfinite(w[c]) ? std::max(largest, std::fabs(w[c])) : INFINITY;
+        }
+        if (largest <= kWorldLimit) continue;
+        char value[32];
+        std::snprintf(value, sizeof value, "%g", double(largest));
+        fail(labelOf("nodes", inst.node, m.nodes[inst.node].name),
+             "the node places mesh '" + s.meshes[inst.mesh].name + "' at world coordinates up to " + value +
+                 " (at time 0, its parents' transforms included)",
+             "world coordinates within +-1e8, the range Loom traces rays in",
+             "scale the scene down, or fix the node's (or a parent's) scale, translation or matrix");
+    }
+}
+
 void Importer::run() {
     checkRequiredExtensions(m.extensionsRequired, mFile);
+    checkNodeCycles();
     for (const std::string& ext : m.extensionsUsed) {
         const bool handled =
             std::find(kSupportedRequired.begin(), kSupportedRequired.end(), ext) != kSupportedRequired.end();
@@ -1591,10 +1899,16 @@ void Importer::run() {
     } catch (const Error& e) {
         throw e.withFile(mFile);
     }
+    checkWorldRange();
     if (s.triangleCount() == 0)
         fail({}, "scene has no triangles", "at least one node with a triangle mesh in the active scene",
              s.warnings.empty() ? "" : "see the warnings above for skipped primitives");
     s.update(0.0);
+}
+
+[[noreturn]] void throwOutOfMemory(const std::string& file, const std::string& doing) {
+    throwBadInput({}, "out of memory " + doing, "a scene that fits in memory",
+                  "free memory, or simplify the scene (smaller textures, fewer triangles)", file);
 }
 
 }  // namespace
@@ -1622,7 +1936,15 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
     if (!binary) {
         checkJsonText(bytes, name);
         jsonText = bytes;
-    } else if (bytes.size() >= 20) {
+    } else if (bytes.size() >= 12) {
+        uint32_t version;
+        std::memcpy(&version, bytes.data() + 4, 4);
+        // tinygltf reads a GLB of any version as glTF 2.0; version 1 is the KHR_binary_glTF container of glTF 1.0.
+        if (version != 2)
+            throwBadInput("GLB header", "GLB container version " + std::to_string(version), "version 2 (glTF 2.0)",
+                          version == 1 ? "convert the glTF 1.0 file to glTF 2.0" : "", name);
+    }
+    if (binary && bytes.size() >= 20) {
         uint32_t length, type;
         std::memcpy(&length, bytes.data() + 12, 4);
         std::memcpy(&type, bytes.data() + 16, 4);
@@ -1631,12 +1953,15 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
             checkJsonText(jsonText, name);
         }
     }
+    checkNonNegativeIndices(jsonText, name);
 
     tinygltf::Model model;
     ImageLoadContext images;
     images.model = &model;
+    images.options = &options;
+    images.file = name;
     tinygltf::TinyGLTF loader;
-    loader.SetImageLoader(&decodeImage, &images);
+    loader.SetImageLoader(&inspectImage, &images);
     loader.SetFsCallbacks(
         {&referencedFileExists, &tinygltf::ExpandFilePath, &readReferencedFile, &tinygltf::WriteWholeFile, nullptr});
     std::string err, warn;
@@ -1647,14 +1972,21 @@ std::shared_ptr<Scene> Scene::load(const std::filesystem::path& file, const Scen
                                                   reinterpret_cast<const unsigned char*>(bytes.data()),
                                                   unsigned(bytes.size()), baseDir)
                     : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), unsigned(bytes.size()), baseDir);
+    } catch (const std::bad_alloc&) {
+        if (!images.fatal) throwOutOfMemory(name, "parsing the file and its buffers");
     } catch (const std::exception& e) {
         err = e.what();  // diagnosed below with the rest
     }
+    if (images.fatal) throw *images.fatal;  // a texture limit: the image is named
     // tinygltf's warnings are about images, which are reported again per material that uses them.
     if (!warn.empty()) spdlog::debug("{}: tinygltf: {}", name, cleanTinyMessage(warn));
     if (!ok) failLoad(file, bytes, binary, err.empty() ? warn : err);
 
-    Importer(model, images, *scene, options, readPointerChannels(jsonText)).run();
+    try {
+        Importer(model, images, *scene, options, readPointerChannels(jsonText)).run();
+    } catch (const std::bad_alloc&) {
+        throwOutOfMemory(name, "converting the meshes and textures (" + mib(images.textureBytes) + " of textures)");
+    }
     return scene;
 }
 

@@ -20,6 +20,7 @@
 #include <tuple>
 #include <vector>
 
+#include "GltfBuilder.h"
 #include "loom/Camera.h"
 #include "loom/Error.h"
 #include "loom/RayScene.h"
@@ -29,112 +30,11 @@
 using namespace loom;
 namespace fs = std::filesystem;
 using json = nlohmann::json;
+using namespace loom::test;
 
 namespace {
 
-constexpr int kByte = 5121, kShort = 5123, kUInt = 5125, kFloat = 5126;
 constexpr float kPi = std::numbers::pi_v<float>;
-
-std::string base64(const std::vector<uint8_t>& data) {
-    static const char* abc = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    std::string out;
-    for (size_t i = 0; i < data.size(); i += 3) {
-        uint32_t v = uint32_t(data[i]) << 16;
-        if (i + 1 < data.size()) v |= uint32_t(data[i + 1]) << 8;
-        if (i + 2 < data.size()) v |= data[i + 2];
-        out += abc[(v >> 18) & 63];
-        out += abc[(v >> 12) & 63];
-        out += i + 1 < data.size() ? abc[(v >> 6) & 63] : '=';
-        out += i + 2 < data.size() ? abc[v & 63] : '=';
-    }
-    return out;
-}
-
-/// Builds a glTF document with one binary buffer, written either as a .gltf
-/// with a base64 data URI or as a .glb.
-struct Gltf {
-    json j = {{"asset", {{"version", "2.0"}}}};
-    std::vector<uint8_t> bin;
-
-    int view(const void* data, size_t bytes) {
-        while (bin.size() % 4) bin.push_back(0);
-        const size_t offset = bin.size();
-        bin.insert(bin.end(), static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + bytes);
-        j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bytes}});
-        return int(j["bufferViews"].size() - 1);
-    }
-    int accessor(int bufferView, int componentType, size_t count, const std::string& type) {
-        j["accessors"].push_back(
-            {{"bufferView", bufferView}, {"componentType", componentType}, {"count", count}, {"type", type}});
-        return int(j["accessors"].size() - 1);
-    }
-    int floats(const std::vector<float>& v, const std::string& type) {
-        const size_t comps = type == "SCALAR" ? 1 : type == "VEC2" ? 2 : type == "VEC3" ? 3 : 4;
-        return accessor(view(v.data(), v.size() * 4), kFloat, v.size() / comps, type);
-    }
-    template <class T>
-    int indices(const std::vector<T>& v) {
-        const int type = sizeof(T) == 1 ? kByte : sizeof(T) == 2 ? kShort : kUInt;
-        return accessor(view(v.data(), v.size() * sizeof(T)), type, v.size(), "SCALAR");
-    }
-    /// A mesh with one primitive; attributes maps names to accessors.
-    int mesh(const std::string& name, json attributes, int indexAccessor = -1, int material = -1) {
-        json prim = {{"attributes", attributes}};
-        if (indexAccessor >= 0) prim["indices"] = indexAccessor;
-        if (material >= 0) prim["material"] = material;
-        j["meshes"].push_back({{"name", name}, {"primitives", json::array({prim})}});
-        return int(j["meshes"].size() - 1);
-    }
-    int node(json n) {
-        j["nodes"].push_back(std::move(n));
-        return int(j["nodes"].size() - 1);
-    }
-    void scene(std::vector<int> roots) {
-        j["scenes"] = json::array({{{"nodes", roots}}});
-        j["scene"] = 0;
-    }
-    json document(int64_t byteLengthDelta = 0) const {
-        json d = j;
-        if (!bin.empty())
-            d["buffers"] = json::array({{{"byteLength", int64_t(bin.size()) + byteLengthDelta},
-                                         {"uri", "data:application/octet-stream;base64," + base64(bin)}}});
-        return d;
-    }
-    std::string text(int64_t byteLengthDelta = 0) const { return document(byteLengthDelta).dump(1); }
-    std::vector<uint8_t> glb() const {
-        json d = j;
-        d["buffers"] = json::array({{{"byteLength", bin.size()}}});
-        std::string js = d.dump();
-        while (js.size() % 4) js += ' ';  // the JSON chunk is padded with spaces
-        std::vector<uint8_t> b = bin;
-        while (b.size() % 4) b.push_back(0);  // the BIN chunk with zeros
-        std::vector<uint8_t> out;
-        auto u32 = [&](uint32_t v) {
-            for (int k = 0; k < 4; ++k) out.push_back(uint8_t(v >> (8 * k)));
-        };
-        u32(0x46546C67u);  // "glTF"
-        u32(2);
-        u32(uint32_t(12 + 8 + js.size() + 8 + b.size()));
-        u32(uint32_t(js.size()));
-        u32(0x4E4F534Au);  // "JSON"
-        out.insert(out.end(), js.begin(), js.end());
-        u32(uint32_t(b.size()));
-        u32(0x004E4942u);  // "BIN\0"
-        out.insert(out.end(), b.begin(), b.end());
-        return out;
-    }
-};
-
-/// One triangle (0,0,0), (1,0,0), (0,1,0): counter-clockwise seen from +Z.
-Gltf triangleScene(json nodeExtra = json::object()) {
-    Gltf g;
-    const int pos = g.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
-    const int mesh = g.mesh("Tri", {{"POSITION", pos}});
-    json n = {{"name", "TriNode"}, {"mesh", mesh}};
-    n.update(nodeExtra);
-    g.scene({g.node(n)});
-    return g;
-}
 
 /// A PNG made by hand (stored zlib block): 16-bit greyscale, one row.
 std::vector<uint8_t> png16Grey(const std::vector<uint16_t>& row) {
@@ -1174,21 +1074,27 @@ TEST_F(SceneFiles, DegenerateTrianglesAreDroppedWithAWarning) {
     EXPECT_NE(s->warnings[0].find("2 degenerate"), std::string::npos) << s->warnings[0];
 }
 
-TEST_F(SceneFiles, MissingTextureImageIsAWarning) {
+TEST_F(SceneFiles, MissingTextureImageIsAnErrorUnlessAllowed) {
     Gltf g = triangleScene();
     g.j["images"] = json::array({{{"uri", "missing.png"}}});
     g.j["textures"] = json::array({{{"source", 0}}});
     g.j["materials"] =
         json::array({{{"name", "Brick"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}});
     g.j["meshes"][0]["primitives"][0]["material"] = 0;
-    auto s = load(g);
+    const fs::path file = write("scene.gltf", g.text());
+    const std::string msg = loadError(file);
+    EXPECT_NE(msg.find("'Brick'/baseColorTexture"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("missing.png' does not exist"), std::string::npos) << msg;
+    SceneLoadOptions allow;
+    allow.allowMissingTextures = true;
+    auto s = Scene::load(file, allow);
     EXPECT_EQ(s->triangleCount(), 1u);
     EXPECT_EQ(s->materials[0].baseColorTexture.image, -1);
     EXPECT_TRUE(s->images.empty());
     EXPECT_TRUE(hasWarning(*s, "'Brick'", "missing.png")) << (s->warnings.empty() ? "" : s->warnings[0]);
 }
 
-TEST_F(SceneFiles, UndecodableTextureIsAWarning) {
+TEST_F(SceneFiles, UndecodableTextureIsAnErrorUnlessAllowed) {
     Gltf g = triangleScene();
     const std::string junk = "this is not an image";
     g.j["images"] = json::array({{{"bufferView", g.view(junk.data(), junk.size())}, {"mimeType", "image/png"}}});
@@ -1196,7 +1102,13 @@ TEST_F(SceneFiles, UndecodableTextureIsAWarning) {
     g.j["materials"] =
         json::array({{{"name", "Glow"}, {"emissiveTexture", {{"index", 0}}}, {"emissiveFactor", {1, 1, 1}}}});
     g.j["meshes"][0]["primitives"][0]["material"] = 0;
-    auto s = load(g);
+    const fs::path file = write("scene.gltf", g.text());
+    const std::string msg = loadError(file);
+    EXPECT_NE(msg.find("'Glow'/emissiveTexture"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("not a PNG or JPEG image (it starts with bytes 74 68 69 73)"), std::string::npos) << msg;
+    SceneLoadOptions allow;
+    allow.allowMissingTextures = true;
+    auto s = Scene::load(file, allow);
     EXPECT_EQ(s->materials[0].emissiveTexture.image, -1);
     EXPECT_TRUE(hasWarning(*s, "'Glow'/emissiveTexture", "decode"));
 }

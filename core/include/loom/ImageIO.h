@@ -39,6 +39,11 @@ Texture readRadianceHdr(const std::filesystem::path& path);
 void checkOutputFile(const std::filesystem::path& path, const std::string& where = {},
                      const std::vector<std::filesystem::path>& inputs = {});
 
+/// Why stb could not decode an image held in memory, for an error message: "an empty file", "a truncated or
+/// corrupt JPEG (stb: bad huffman code)", "a truncated or corrupt PNG (...)", or, when the leading bytes are
+/// neither, "not a PNG or JPEG image (it starts with bytes 47 49 46 38)". `reason`: stbi_failure_reason().
+std::string describeImageDecodeFailure(const unsigned char* bytes, size_t size, const char* reason);
+
 /// The whole file's bytes. Throws loom::Error (Runtime) when reading fails.
 std::string readFileBytes(const std::filesystem::path& path);
 

@@ -190,10 +190,27 @@ struct CameraPath {
     float amount = 0.25f;  ///< dolly: amplitude as a fraction of the distance to the target
 };
 
+/// Texture limits of Scene::load. Images are decoded to 8-bit RGBA (4 bytes a texel); the sizes are checked from the
+/// image header before anything is decoded or allocated. 16384 is the largest 2D texture llvmpipe (and most GPUs)
+/// accept, so GBufferRaster can upload any texture the loader keeps.
+inline constexpr uint32_t kMaxTextureSide = 16384;
+/// The most texels one texture may have: 2^28, a 16384 x 16384 image, 1 GiB decoded.
+inline constexpr uint64_t kMaxTextureTexels = uint64_t(1) << 28;
+/// The default budget for the decoded textures of one scene: 4 GiB.
+inline constexpr uint64_t kDefaultTextureBudget = uint64_t(4) << 30;
+
 struct SceneLoadOptions {
-    /// Warnings (degenerate triangles dropped, missing texture, ...) go to the
-    /// log and are collected in Scene::warnings.
+    /// Warnings (degenerate triangles dropped, ...) go to the log and are collected in Scene::warnings.
     bool generateTangents = true;
+    /// Largest width or height of a texture, and most texels of one: beyond either, loading fails (bad input).
+    uint32_t maxTextureSide = kMaxTextureSide;
+    uint64_t maxTextureTexels = kMaxTextureTexels;
+    /// Bytes all decoded textures of the scene may take together (images shared by several textures, or the same
+    /// file named by several images, count once); beyond it loading fails (bad input).
+    uint64_t textureBudgetBytes = kDefaultTextureBudget;
+    /// A texture whose image file is missing, empty or cannot be decoded is an error (bad input); with this set it is
+    /// dropped with a warning instead, and the material renders with its factors alone.
+    bool allowMissingTextures = false;
 };
 
 class RayScene;
@@ -206,10 +223,13 @@ public:
     Scene& operator=(const Scene&) = delete;
 
     /// Loads a .gltf or .glb. Throws loom::Error (BadInput) naming the file
-    /// and the offending mesh/accessor/material for: missing file, truncated
-    /// buffer, accessor out of range, NaN/Inf vertex data, unsupported required
-    /// extension, empty scene. Recoverable problems (degenerate triangles,
-    /// missing texture image) are warnings, and loading goes on.
+    /// and the offending mesh/accessor/material/image for: missing file, truncated
+    /// buffer, accessor out of range, negative index or offset, NaN/Inf vertex
+    /// data, unsupported required extension, node cycle, empty scene, a texture
+    /// image that is missing or cannot be decoded (unless
+    /// options.allowMissingTextures), a texture beyond the limits of `options`,
+    /// and running out of memory. Recoverable problems (degenerate triangles,
+    /// out-of-range factors) are warnings, and loading goes on.
     static std::shared_ptr<Scene> load(const std::filesystem::path& file, const SceneLoadOptions& options = {});
 
     /// Evaluates animations and the camera path at `time` (seconds): every
