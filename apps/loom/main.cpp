@@ -1,13 +1,14 @@
 // loom: render graphs headless, check them, list passes, inspect scenes, benchmark run time against error.
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
 
-#include <CLI/CLI.hpp>
-#include <spdlog/sinks/stdout_color_sinks.h>
-#include <spdlog/spdlog.h>
-
 #include "CliUtil.h"
+#include "Interrupt.h"
 #include "loom/Error.h"
 #include "loom/Log.h"
 
@@ -36,6 +37,7 @@ int main(int argc, char** argv) {
     loom::cli::addImageCommand(app);
     loom::cli::addBenchCommand(app);
     loom::cli::addViewCommand(app);
+    loom::cli::installSignalHandlers();
 
     try {
         if (argc > 1 && argv[1][0] != '-') {
@@ -47,6 +49,10 @@ int main(int argc, char** argv) {
                                     loom::didYouMean(argv[1], commands, ""));
         }
         app.parse(argc, argv);
+    } catch (const loom::cli::Interrupted& e) {
+        std::cerr << "loom: stopped by " << loom::cli::signalName(e.signal)
+                  << " before the run's results were written\n";
+        return 128 + e.signal;
     } catch (const CLI::CallForHelp& e) {
         return app.exit(e);
     } catch (const CLI::CallForAllHelp& e) {
@@ -66,5 +72,8 @@ int main(int argc, char** argv) {
         std::cerr << "error: an exception that is not a std::exception (thrown by a plugin?)\n";
         return 1;
     }
+    // A run stopped by SIGINT or SIGTERM, having written what it had: 128 + the signal's number, as a shell reports
+    // a command the signal ended.
+    if (const int signal = loom::cli::stopSignal()) return 128 + signal;
     return 0;
 }
