@@ -140,6 +140,7 @@ void Y4mWriter::finish() {
     std::error_code ec;
     if (ok) std::filesystem::rename(mPartial, mPath, ec);
     const bool renamed = ok && !ec;
+    if (!renamed) awaitEndIfEnding();  // the failure may be the removal of the file by a signal handler
     if (!renamed) std::filesystem::remove(mPartial, ec);
     mRegistration.reset();
     if (!renamed) {

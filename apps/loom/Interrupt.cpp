@@ -1,5 +1,6 @@
 #include "Interrupt.h"
 
+#include <pthread.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -23,7 +24,7 @@ void say(const char* text) {
     (void)ignored;
 }
 
-// Only async-signal-safe calls here: atomics, write(2), unlink(2) (in removePartialFiles) and _exit(2).
+// Only async-signal-safe calls here: atomics, write(2), unlink(2) (in removePartialFiles) and endBySignal's.
 extern "C" void onSignal(int signal) {
     const int savedErrno = errno;
     int none = 0;
@@ -35,7 +36,7 @@ extern "C" void onSignal(int signal) {
         return;
     }
     removePartialFiles();
-    ::_exit(128 + signal);
+    endBySignal(signal);
 }
 
 }  // namespace
@@ -52,6 +53,19 @@ void installSignalHandlers() {
         action.sa_flags = SA_RESTART;  // reads and writes interrupted by the first signal go on
         ::sigaction(signal, &action, nullptr);
     }
+}
+
+void endBySignal(int signal) {
+    struct sigaction action {};
+    action.sa_handler = SIG_DFL;
+    sigemptyset(&action.sa_mask);
+    ::sigaction(signal, &action, nullptr);
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, signal);
+    ::pthread_sigmask(SIG_UNBLOCK, &set, nullptr);  // blocked while its handler runs
+    ::raise(signal);
+    ::_exit(128 + signal);  // not reached: the default action of SIGINT and SIGTERM ends the process
 }
 
 StopOnSignal::StopOnSignal() {

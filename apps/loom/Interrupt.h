@@ -1,8 +1,10 @@
 #pragma once
 // SIGINT and SIGTERM. While a command that runs frames (render, bench, view) holds a StopOnSignal, the first signal
-// only asks it to stop: it finishes the frame it is on, writes what it has and exits with 128 + the signal's number.
-// Otherwise, and on a second signal, the process removes its partial files (loom/PartialFiles.h) and exits at once,
-// with the same code. No half-written file is left either way.
+// only asks it to stop: it finishes the frame it is on, writes what it has, and the process ends by that signal.
+// Otherwise, and on a second signal, the process removes its partial files (loom/PartialFiles.h) and ends by the
+// signal at once. No half-written file is left either way. Ending by the signal itself (its default action, after
+// the cleanup) rather than exit(128 + N) lets the parent see it: a shell still reports 128 + N (130, 143), and a
+// script that runs loom stops on Ctrl-C as it would for any other command.
 
 namespace loom::cli {
 
@@ -26,7 +28,10 @@ inline bool stopRequested() {
 /// "SIGINT", "SIGTERM" (another signal: "signal").
 const char* signalName(int signal);
 
-/// What a command throws when it stops on a signal with nothing more to write; main() exits with 128 + signal.
+/// Ends the process by `signal` with its default action (flush what must be flushed first). Async-signal-safe.
+[[noreturn]] void endBySignal(int signal);
+
+/// What a command throws when it stops on a signal with nothing more to write; main() ends by the signal.
 struct Interrupted {
     int signal;
 };

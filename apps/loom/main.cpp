@@ -11,8 +11,20 @@
 #include "Interrupt.h"
 #include "loom/Error.h"
 #include "loom/Log.h"
+#include "loom/PartialFiles.h"
 
-int main(int argc, char** argv) {
+namespace {
+
+/// A run stopped by SIGINT or SIGTERM, having written what it had, ends by that signal (Interrupt.h says why).
+[[noreturn]] void endStopped(int signal) {
+    std::cout.flush();
+    std::cerr.flush();
+    spdlog::default_logger()->flush();
+    std::fflush(nullptr);
+    loom::cli::endBySignal(signal);
+}
+
+int run(int argc, char** argv) {
     CLI::App app{"Loom: a frame-graph renderer for path tracing and denoising"};
     app.require_subcommand(1);
     app.set_version_flag("--version", std::string(loom::version()));
@@ -52,7 +64,7 @@ int main(int argc, char** argv) {
     } catch (const loom::cli::Interrupted& e) {
         std::cerr << "loom: stopped by " << loom::cli::signalName(e.signal)
                   << " before the run's results were written\n";
-        return 128 + e.signal;
+        endStopped(e.signal);
     } catch (const CLI::CallForHelp& e) {
         return app.exit(e);
     } catch (const CLI::CallForAllHelp& e) {
@@ -72,8 +84,14 @@ int main(int argc, char** argv) {
         std::cerr << "error: an exception that is not a std::exception (thrown by a plugin?)\n";
         return 1;
     }
-    // A run stopped by SIGINT or SIGTERM, having written what it had: 128 + the signal's number, as a shell reports
-    // a command the signal ended.
-    if (const int signal = loom::cli::stopSignal()) return 128 + signal;
+    if (const int signal = loom::cli::stopSignal()) endStopped(signal);
     return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    const int code = run(argc, argv);
+    loom::awaitEndIfEnding();  // a second signal's handler on another thread ends the process: its exit, not this
+    return code;
 }

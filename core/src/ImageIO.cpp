@@ -124,12 +124,15 @@ void writeAtomically(const fs::path& path, const std::function<void(std::ofstrea
                          "check that the output path is not a folder and is writable");
         }
     } catch (const Error&) {
+        awaitEndIfEnding();  // the failure may be the removal of the file by a signal handler
         removeTmp();
         throw;
     } catch (const std::exception& e) {
+        awaitEndIfEnding();
         removeTmp();
         throwRuntime(path, std::string("writing failed: ") + e.what(), "check free disk space and the output path");
     } catch (...) {
+        awaitEndIfEnding();
         removeTmp();
         throw;
     }

@@ -55,12 +55,16 @@ void release(Slot& s) noexcept {
 
 }  // namespace
 
+void awaitEndIfEnding() {
+    for (int i = 0; i < 500 && gEnding.load(); ++i) ::usleep(10000);
+}
+
 namespace {
 
 /// A file registered after removePartialFiles() began is not created: the signal handler that called it is about to
-/// end the process, so this waits for that (and gives up after a few seconds, should nothing end it).
+/// end the process.
 [[noreturn]] void refuse(const std::string& path) {
-    for (int i = 0; i < 500; ++i) ::usleep(10000);
+    awaitEndIfEnding();
     throw Error(Error::Info{ErrorKind::Runtime, path, "", "the process is ending on a signal", "", ""});
 }
 

@@ -1,5 +1,5 @@
 // SIGINT and SIGTERM: `loom render`, `loom view --record` and `loom bench` stopped at many moments of a run leave no
-// partial file, exit with 128 + the signal's number, and keep what they finished whole: every image readable, the
+// partial file, end by the signal (a shell's 128 + N), and keep what they finished whole: every image readable, the
 // --stats file listing exactly the frames whose images are written, the video holding whole frames. A second signal
 // ends the process at once, still without a partial file. The partial-file registry is also checked alone.
 #include <fcntl.h>
@@ -71,7 +71,12 @@ bool waitFor(const std::function<bool()>& ready) {
     return true;
 }
 
-/// The exit code of `pid` (-1 - signal if a signal ended it; -1000 if it did not end within kPatience: killed).
+/// What waitExit() returns for a process that `signal` ended.
+constexpr int endedBy(int signal) {
+    return -1 - signal;
+}
+
+/// The exit code of `pid` (endedBy(signal) if a signal ended it; -1000 if it did not end within kPatience: killed).
 int waitExit(pid_t pid) {
     int status = 0;
     const bool ended = waitFor([&] { return ::waitpid(pid, &status, WNOHANG) == pid; });
@@ -211,14 +216,14 @@ TEST_F(Signals, RenderStopsAfterTheFrameAndWritesWhatItHas) {
         ::kill(pid, sig);
         const int code = waitExit(pid);
         ASSERT_TRUE(started) << text(dir / "log.txt");
-        EXPECT_EQ(code, 128 + sig) << text(dir / "log.txt");
+        EXPECT_EQ(code, endedBy(sig)) << text(dir / "log.txt");
         EXPECT_EQ(partialFiles(dir), std::vector<std::string>());
         expectStoppedRender(dir, sig == SIGINT ? "SIGINT" : "SIGTERM");
     }
 }
 
 void expectSignalExit(int code, const fs::path& dir) {
-    EXPECT_TRUE(code == 128 + SIGINT || code == 128 + SIGTERM) << code << "\n" << text(dir / "log.txt");
+    EXPECT_TRUE(code == endedBy(SIGINT) || code == endedBy(SIGTERM)) << code << "\n" << text(dir / "log.txt");
 }
 
 TEST_F(Signals, SecondSignalExitsAtOnceWithoutPartialFiles) {
@@ -262,7 +267,7 @@ TEST_F(Signals, ViewRecordFinishesTheVideo) {
         ::kill(pid, SIGINT);
         const int code = waitExit(pid);
         ASSERT_TRUE(started) << text(dir / "log.txt");
-        EXPECT_EQ(code, 128 + SIGINT) << text(dir / "log.txt");
+        EXPECT_EQ(code, endedBy(SIGINT)) << text(dir / "log.txt");
         EXPECT_EQ(partialFiles(dir), std::vector<std::string>());
         EXPECT_GE(y4mFrames(text(dir / "video.y4m")), int(after[trial])) << "the video is missing or not whole";
         EXPECT_NO_THROW((void)loom::readImage(dir / "last.png"));
@@ -309,7 +314,7 @@ TEST_F(Signals, BenchStopsWithoutResultsAndKeepsTheCacheWhole) {
     ::kill(pid, SIGINT);
     const int code = waitExit(pid);
     ASSERT_TRUE(started) << text(dir / "log.txt");
-    EXPECT_EQ(code, 128 + SIGINT) << text(dir / "log.txt");
+    EXPECT_EQ(code, endedBy(SIGINT)) << text(dir / "log.txt");
     EXPECT_EQ(partialFiles(dir), std::vector<std::string>());
     EXPECT_FALSE(fs::exists(dir / "out" / "results.json")) << "a stopped bench wrote results";
     for (auto it = fs::recursive_directory_iterator(dir / "cache"); it != fs::recursive_directory_iterator(); ++it)

@@ -32,6 +32,11 @@ private:
 /// is about to create is waited for (up to a second) so that it is not created after the removal.
 void removePartialFiles() noexcept;
 
+/// When removePartialFiles() has begun (a signal handler on another thread is ending the process), waits for the end
+/// (5 s at most), so that what failed because its partial file vanished is not reported as an error, nor the process
+/// ended another way. Returns at once otherwise.
+void awaitEndIfEnding();
+
 /// Registered partial files (for tests).
 int partialFileCount() noexcept;
 
