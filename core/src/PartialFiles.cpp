@@ -22,9 +22,8 @@ enum SlotState : int { Free, Claimed, Creating, Live };
 
 struct Slot {
     std::atomic<int> state{Free};
-    std::atomic<unsigned> generation{
-        0};                      ///< counts the claims: a reader's copy of the path is whole if it is unchanged
-    std::atomic<long> owner{0};  ///< the owning thread's id while claimed, else 0
+    std::atomic<unsigned> generation{0};  ///< claims so far: a copy of the path read while it held still is whole
+    std::atomic<long> owner{0};           ///< the owning thread's id while claimed, else 0
     char path[PATH_MAX];
 };
 
