@@ -22,6 +22,7 @@
 #include "BenchLag.h"
 #include "BenchReport.h"
 #include "CliUtil.h"
+#include "Interrupt.h"
 #include "SceneSetup.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
@@ -431,6 +432,7 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
         const size_t n = size_t(width) * height * 3;
         std::vector<double> mean(n, 0.0), m2(n, 0.0);
         for (uint32_t b = 0; b < batches; ++b) {
+            throwIfStopRequested();  // between batches: a reference frame can take long
             graph->setParam(tracer, kSeedParam, kReferenceSeedBase + b, "reference");
             graph->execute(f);
             // Welford over the batch means, per pixel and channel.
@@ -547,6 +549,7 @@ std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, ReferenceFr
     p.graph->resetHistory();
     const auto start = std::chrono::steady_clock::now();
     for (uint64_t i = first; i < frames; ++i) {
+        throwIfStopRequested();
         const FrameInfo f = sceneFrame(scene, i, fps, width, height, i == first);
         const auto t0 = std::chrono::steady_clock::now();
         p.graph->execute(f);
@@ -643,6 +646,7 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
         brute.graph->setParam(tracer, kSppParam, n, "--brute-force-spp");
         brute.graph->setParam(tracer, kSeedParam, seed, "brute force");
         for (uint64_t t = 0; t < timingFrames; ++t) {
+            throwIfStopRequested();
             const FrameInfo f = sceneFrame(scene, o.warmup + t, o.fps, width, height, true);
             const auto t0 = std::chrono::steady_clock::now();
             brute.graph->execute(f);
@@ -668,6 +672,7 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
                     image = Texture();
             }
             if (image.empty()) {
+                throwIfStopRequested();
                 brute.graph->execute(sceneFrame(scene, i, o.fps, width, height, i == first));
                 image = copyTexture(*brute.graph->fieldTexture(brute.measured.str()));
                 if (k > 0) {
@@ -814,6 +819,9 @@ void runPlot(const BenchOptions& o, const std::string& script, const fs::path& o
 }
 
 void runBench(BenchOptions o) {
+    // SIGINT or SIGTERM: the frame under way finishes (its reference or brute-force image goes into the cache, where
+    // the next run finds it), then the run ends without results: a partial run has no equal-error figures.
+    const StopOnSignal stopOnSignal;
     uint32_t width, height;
     parseSize(o.size, "--size", width, height);
     if (o.scene.scene.empty())

@@ -94,8 +94,13 @@ void rgbToYCbCr(const uint8_t rgb[3], uint8_t ycc[3]) {
 }
 
 Y4mWriter::Y4mWriter(const std::filesystem::path& path, uint32_t width, uint32_t height, double fps)
-    : mPath(path), mPartial(path.string() + ".partial"), mWidth(width), mHeight(height) {
+    : mPath(path),
+      mPartial(path.string() + ".partial"),
+      mRegistration(std::make_unique<PartialFile>(mPartial.string())),
+      mWidth(width),
+      mHeight(height) {
     mFile = std::fopen(mPartial.c_str(), "wb");
+    mRegistration->created();
     if (!mFile)
         throw Error({ErrorKind::BadInput, path.string(), "--record", "cannot write the video", "a writable path",
                      "choose another --record file"});
@@ -134,8 +139,11 @@ void Y4mWriter::finish() {
     mFile = nullptr;
     std::error_code ec;
     if (ok) std::filesystem::rename(mPartial, mPath, ec);
-    if (!ok || ec) {
-        std::filesystem::remove(mPartial, ec);
+    const bool renamed = ok && !ec;
+    if (!renamed) awaitEndIfEnding();  // the failure may be the removal of the file by a signal handler
+    if (!renamed) std::filesystem::remove(mPartial, ec);
+    mRegistration.reset();
+    if (!renamed) {
         throw Error({ErrorKind::Runtime, mPath.string(), "--record", "finishing the video failed", "", "check the disk"});
     }
 }

@@ -3,9 +3,11 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "loom/PartialFiles.h"
 #include "loom/Texture.h"
 
 namespace loom::cli {
@@ -56,7 +58,8 @@ private:
 
 /// A video of displayed frames as YUV4MPEG2 (.y4m): 8-bit Y'CbCr 4:4:4, full range, BT.601 coefficients on the
 /// sRGB-encoded values; players and ffmpeg read it (`ffmpeg -i in.y4m out.mp4`). Written to PATH.partial and renamed
-/// by finish(); destroyed unfinished (an error on the way), it removes the partial file.
+/// by finish(); destroyed unfinished (an error on the way), it removes the partial file. The partial file is registered
+/// (loom/PartialFiles.h) while it exists, so a process ended by a signal removes it too.
 class Y4mWriter {
 public:
     Y4mWriter(const std::filesystem::path& path, uint32_t width, uint32_t height, double fps);
@@ -71,6 +74,7 @@ public:
 
 private:
     std::filesystem::path mPath, mPartial;
+    std::unique_ptr<PartialFile> mRegistration;  ///< of mPartial, while it exists
     std::FILE* mFile = nullptr;
     uint32_t mWidth, mHeight;
 };

@@ -12,6 +12,7 @@
 #include <regex>
 
 #include "CliUtil.h"
+#include "Interrupt.h"
 #include "SceneSetup.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
@@ -54,6 +55,8 @@ void progress(uint64_t done, uint64_t total, double msPerFrame) {
 }
 
 void runRender(const RenderOptions& o) {
+    // SIGINT or SIGTERM: the frame under way finishes, then the outputs and --stats of the frames done are written.
+    const StopOnSignal stopOnSignal;
     uint32_t width, height;
     parseSize(o.size, "--size", width, height);
     if (o.frames == 0 || o.frames > 1000000)
@@ -116,8 +119,16 @@ void runRender(const RenderOptions& o) {
     // restarts when the scene or the camera moves or an animated light changes), so a reference that cannot converge
     // does not pass silently.
     uint64_t restarts = 0;
+    uint64_t done = 0;  // frames finished
+    const auto writeOutputs = [&](uint64_t named) {
+        for (const auto& out : graph.outputs()) {
+            const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
+            writeImage(outDir / frameFileName(out.pass, out.channel, named, tex->format()), *tex);
+            ++written;
+        }
+    };
     auto start = std::chrono::steady_clock::now();
-    for (uint64_t i = 0; i < o.frames; ++i) {
+    for (uint64_t i = 0; i < o.frames && !stopRequested(); ++i) {
         const uint64_t index = o.startFrame + i;
         const FrameInfo frame = o.hold ? sceneFrameAt(scene.get(), index, heldTime, width, height, i == 0)
                                        : sceneFrame(scene.get(), index, o.fps, width, height, i == 0);
@@ -129,14 +140,7 @@ void runRender(const RenderOptions& o) {
                 return reset != pass.second.end() && reset->second != 0.0;
             });
         }
-        if (!o.hold || i + 1 == o.frames) {
-            const uint64_t named = o.hold ? o.startFrame : frame.frameIndex;
-            for (const auto& out : graph.outputs()) {
-                const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
-                writeImage(outDir / frameFileName(out.pass, out.channel, named, tex->format()), *tex);
-                ++written;
-            }
-        }
+        if (!o.hold || i + 1 == o.frames) writeOutputs(o.hold ? o.startFrame : frame.frameIndex);
         if (!o.statsFile.empty()) {
             nlohmann::json jf = {{"frame", frame.frameIndex}, {"passes", nlohmann::json::object()}};
             for (const auto& t : graph.timings()) jf["passes"][t.name]["ms"] = t.lastMs;
@@ -149,6 +153,14 @@ void runRender(const RenderOptions& o) {
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
             progress(i + 1, o.frames, elapsed / double(i + 1));
         }
+        done = i + 1;
+    }
+    const int stoppedBy = done < o.frames ? stopSignal() : 0;
+    if (stoppedBy) {
+        if (showProgress) std::fprintf(stderr, "\n");
+        // A held frame stopped early: its outputs after the iterations done (less converged, still that frame).
+        if (o.hold && done > 0) writeOutputs(o.startFrame);
+        statsJson["interrupted"] = {{"signal", signalName(stoppedBy)}, {"framesDone", done}};
     }
     if (!o.statsFile.empty()) writeFileAtomic(o.statsFile, statsJson.dump(2) + "\n");
     if (restarts > 0)
@@ -156,16 +168,19 @@ void runRender(const RenderOptions& o) {
             "an accumulation restarted on {} of the {} frames after the first, because the scene or the "
             "camera moved or an animated light changed: the images do not converge. To converge one frame "
             "K of a moving scene, hold it: --start-frame K --frames N --hold",
-            restarts, o.frames - 1);
+            restarts, done - 1);
 
+    if (stoppedBy)
+        spdlog::warn("stopped by {} after {} of {} frame(s); the outputs and statistics of those are written",
+                     signalName(stoppedBy), done, o.frames);
     if (!o.quiet) {
         if (o.hold)
             std::cout << fmt::format(
                 "Held frame {} (t = {:g} s) for {} iteration(s) at {}x{}: {} output image(s) (the last iteration's, "
                 "numbered {}), {} dump(s) in {}\n",
-                o.startFrame, heldTime, o.frames, width, height, written, o.startFrame, dumped, o.out);
+                o.startFrame, heldTime, done, width, height, written, o.startFrame, dumped, o.out);
         else
-            std::cout << fmt::format("Rendered {} frame(s) at {}x{}: {} output image(s), {} dump(s) in {}\n", o.frames,
+            std::cout << fmt::format("Rendered {} frame(s) at {}x{}: {} output image(s), {} dump(s) in {}\n", done,
                                      width, height, written, dumped, o.out);
         std::cout << fmt::format("  {:24} {:>12} {:>12}\n", "pass", "mean ms", "total ms");
         double total = 0;
@@ -174,7 +189,8 @@ void runRender(const RenderOptions& o) {
                                      t.totalMs);
             total += t.totalMs;
         }
-        std::cout << fmt::format("  {:24} {:>12.3f} {:>12.3f}\n", "all passes", total / double(o.frames), total);
+        std::cout << fmt::format("  {:24} {:>12.3f} {:>12.3f}\n", "all passes",
+                                 total / double(std::max<uint64_t>(done, 1)), total);
     }
 }
 

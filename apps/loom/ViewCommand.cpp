@@ -14,6 +14,7 @@
 
 #include "CliUtil.h"
 #include "Display.h"
+#include "Interrupt.h"
 #include "ViewSession.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
@@ -330,8 +331,11 @@ private:
 #endif  // LOOM_HAVE_VIEWER
 
 void runView(const ViewOptions& o) {
+    // SIGINT or SIGTERM: the frame under way finishes, then the session ends as when the window closes (the --record
+    // video holds the frames recorded, --screenshot is the last frame).
+    const StopOnSignal stopOnSignal;
     ViewSession session(o);  // checks the options, then limits the worker threads
-    const auto finished = [&] { return o.frames > 0 && session.frame() >= o.frames; };
+    const auto finished = [&] { return (o.frames > 0 && session.frame() >= o.frames) || stopRequested(); };
     if (o.headless) {
         while (!finished()) session.step();
     } else {
@@ -370,8 +374,9 @@ void runView(const ViewOptions& o) {
                      "install libglfw3-dev and libimgui-dev and rebuild, or use --headless"});
 #endif
     }
+    if (stopRequested()) spdlog::warn("stopped by {} after {} frame(s)", signalName(stopSignal()), session.frame());
     session.finish();
-    if (!o.screenshot.empty()) session.saveDisplay(o.screenshot);
+    if (!o.screenshot.empty() && session.frame() > 0) session.saveDisplay(o.screenshot);
 }
 
 }  // namespace

@@ -1,18 +1,31 @@
 // loom: render graphs headless, check them, list passes, inspect scenes, benchmark run time against error.
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <functional>
 #include <iostream>
 
-#include <CLI/CLI.hpp>
-#include <spdlog/sinks/stdout_color_sinks.h>
-#include <spdlog/spdlog.h>
-
 #include "CliUtil.h"
+#include "Interrupt.h"
 #include "loom/Error.h"
 #include "loom/Log.h"
+#include "loom/PartialFiles.h"
 
-int main(int argc, char** argv) {
+namespace {
+
+/// A run stopped by SIGINT or SIGTERM, having written what it had, ends by that signal (Interrupt.h says why).
+[[noreturn]] void endStopped(int signal) {
+    std::cout.flush();
+    std::cerr.flush();
+    spdlog::default_logger()->flush();
+    std::fflush(nullptr);
+    loom::cli::endBySignal(signal);
+}
+
+int run(int argc, char** argv) {
     CLI::App app{"Loom: a frame-graph renderer for path tracing and denoising"};
     app.require_subcommand(1);
     app.set_version_flag("--version", std::string(loom::version()));
@@ -52,6 +65,7 @@ int main(int argc, char** argv) {
         for (CLI::App* sub : cmd.get_subcommands({})) refuseNegatives(*sub);
     };
     refuseNegatives(app);
+    loom::cli::installSignalHandlers();
 
     try {
         if (argc > 1 && argv[1][0] != '-') {
@@ -63,6 +77,10 @@ int main(int argc, char** argv) {
                                     loom::didYouMean(argv[1], commands, ""));
         }
         app.parse(argc, argv);
+    } catch (const loom::cli::Interrupted& e) {
+        std::cerr << "loom: stopped by " << loom::cli::signalName(e.signal)
+                  << " before the run's results were written\n";
+        endStopped(e.signal);
     } catch (const CLI::CallForHelp& e) {
         return app.exit(e);
     } catch (const CLI::CallForAllHelp& e) {
@@ -82,5 +100,14 @@ int main(int argc, char** argv) {
         std::cerr << "error: an exception that is not a std::exception (thrown by a plugin?)\n";
         return 1;
     }
+    if (const int signal = loom::cli::stopSignal()) endStopped(signal);
     return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    const int code = run(argc, argv);
+    loom::awaitEndIfEnding();  // a second signal's handler on another thread ends the process: its exit, not this
+    return code;
 }

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "loom/Error.h"
+#include "loom/PartialFiles.h"
 
 namespace loom {
 
@@ -84,7 +85,8 @@ void checkNotSpecial(const fs::path& path, const std::string& where) {
 }
 
 /// Runs `write` on a temporary file next to `path`, then renames it over `path`. On any failure the temporary
-/// file is removed and the error is rethrown as a loom::Error.
+/// file is removed and the error is rethrown as a loom::Error. While it exists the temporary file is registered
+/// (PartialFiles.h), so a process ended by a signal removes it too.
 void writeAtomically(const fs::path& path, const std::function<void(std::ofstream&, const std::string&)>& write) {
     checkOutputFolder(path);
     checkNotSpecial(path, {});
@@ -99,10 +101,12 @@ void writeAtomically(const fs::path& path, const std::function<void(std::ofstrea
         std::error_code ignored;
         fs::remove(tmp, ignored);
     };
+    PartialFile partial(tmp);  // unregistered when it dies: after the rename or the removal below
     try {
         std::ofstream out;
         errno = 0;
         out.open(tmp, std::ios::binary | std::ios::trunc);
+        partial.created();
         if (!out) {
             int err = errno;
             std::string reason = err ? std::strerror(err) : "unknown error";
@@ -125,12 +129,15 @@ void writeAtomically(const fs::path& path, const std::function<void(std::ofstrea
                          "check that the output path is not a folder and is writable");
         }
     } catch (const Error&) {
+        awaitEndIfEnding();  // the failure may be the removal of the file by a signal handler
         removeTmp();
         throw;
     } catch (const std::exception& e) {
+        awaitEndIfEnding();
         removeTmp();
         throwRuntime(path, std::string("writing failed: ") + e.what(), "check free disk space and the output path");
     } catch (...) {
+        awaitEndIfEnding();
         removeTmp();
         throw;
     }
