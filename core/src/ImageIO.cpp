@@ -210,7 +210,18 @@ std::array<char, 4> leadingBytes(const fs::path& path) {
     return magic;
 }
 
+/// The largest image read: sides of 64 Ki pixels (as the Radiance reader), 2^28 pixels (4 GiB as RGBA32F). A damaged
+/// header claims any size; OpenEXR checks the sides and the tiles when it opens the file, before it allocates.
+constexpr int kMaxReadSide = 1 << 16;
+constexpr int64_t kMaxReadPixels = int64_t(1) << 28;
+
 Texture readExr(const fs::path& path) {
+    static const bool limited = [] {
+        Imf::Header::setMaxImageSize(kMaxReadSide, kMaxReadSide);
+        Imf::Header::setMaxTileSize(kMaxReadSide, kMaxReadSide);
+        return true;
+    }();
+    (void)limited;
     try {
         Imf::InputFile file(path.c_str());
         const Imf::Header& header = file.header();
@@ -219,6 +230,10 @@ Texture readExr(const fs::path& path) {
         const int64_t height = int64_t(dw.max.y) - dw.min.y + 1;
         if (width <= 0 || height <= 0) {
             throwBadInput("", "the image's data window is empty", "a non-empty image", "", path.string());
+        }
+        if (width * height > kMaxReadPixels) {
+            throwBadInput("", "image size " + std::to_string(width) + "x" + std::to_string(height) + " out of range",
+                          "at most " + std::to_string(kMaxReadPixels) + " pixels", "", path.string());
         }
 
         const Imf::ChannelList& channels = header.channels();
@@ -316,6 +331,13 @@ public:
 
     Texture read() {
         header();
+        // The smallest a row can be (flat: 4 bytes a pixel; encoded: 4 bytes, then per channel runs of at most 127
+        // pixels in 2 bytes): a damaged size line must not allocate more than the file can hold.
+        const uint64_t flat = uint64_t(mWidth) * 4, encoded = 4 + 8 * ((uint64_t(mWidth) + 126) / 127);
+        const uint64_t minRow = mWidth >= 8 && mWidth < 32768 ? std::min(flat, encoded) : flat;
+        if (minRow * mHeight > mBytes.size() - mPos)
+            fail("the file is too short for a " + std::to_string(mWidth) + "x" + std::to_string(mHeight) + " image",
+                 "a complete image", "the file is truncated, or its size line is damaged");
         Texture tex(mWidth, mHeight, Format::RGBA32F);
         std::vector<uint8_t> rgbe(size_t(mWidth) * 4);
         for (uint32_t y = 0; y < mHeight; ++y) {

@@ -529,8 +529,9 @@ std::array<float, 2 * kSsimRadius + 1> ssimWeights() {
 }
 
 /// The SSIM formula over a row of window statistics (5 rows of n: mean x, mean y, E[x^2], E[y^2],
-/// E[xy], of the values minus 0.5); writes the values and adds a third of each to the map row.
-inline void ssimRow(const float* __restrict stats, int n, float* __restrict value, float* __restrict map) {
+/// E[xy], of the values minus shiftX and shiftY); writes the values and adds a third of each to the map row.
+inline void ssimRow(const float* __restrict stats, int n, float shiftX, float shiftY, float* __restrict value,
+                    float* __restrict map) {
     const float* __restrict mx = stats;
     const float* __restrict my = mx + n;
     const float* __restrict xx = my + n;
@@ -539,7 +540,7 @@ inline void ssimRow(const float* __restrict stats, int n, float* __restrict valu
     for (int x = 0; x < n; ++x) {
         const float sx = xx[x] - mx[x] * mx[x], sy = yy[x] - my[x] * my[x];
         const float sxy = xy[x] - mx[x] * my[x];
-        const float ux = mx[x] + 0.5f, uy = my[x] + 0.5f;  // the means of the values
+        const float ux = mx[x] + shiftX, uy = my[x] + shiftY;  // the means of the values
         const float num = (2.0f * ux * uy + kSsimC1) * (2.0f * sxy + kSsimC2);
         const float den = (ux * ux + uy * uy + kSsimC1) * (sx + sy + kSsimC2);
         value[x] = num / den;
@@ -577,6 +578,11 @@ MetricValue ssim(MetricImage test, MetricImage ref, ImageView<float>* ssimImage)
         for (int c = 0; c < 3; ++c) {
             const float* pt = planes.plane[c].data();
             const float* pr = planes.plane[3 + c].data();
+            // Statistics of the values minus a value of the tile (its centre pixel's): variances are
+            // shift-invariant, and values near the local mean lose less to float rounding in E[x^2] - E[x]^2; a
+            // constant image's variances are exactly 0. The tiles do not depend on the thread count.
+            const size_t centre = size_t((tile.y0 + tile.y1) / 2) * W + (tile.x0 + tile.x1) / 2;
+            const float shiftT = pt[centre], shiftR = pr[centre];
             for (int r = 0; r < rows; ++r) {
                 const int sy = reflect101(int(tile.y0) + r - R, H);
                 const float* rowT = pt + size_t(sy) * W;
@@ -586,18 +592,16 @@ MetricValue ssim(MetricImage test, MetricImage ref, ImageView<float>* ssimImage)
                 float* __restrict p2 = p1 + padW;
                 float* __restrict p3 = p2 + padW;
                 float* __restrict p4 = p3 + padW;
-                // Statistics of the values minus 0.5: variances are shift-invariant, and the smaller
-                // squares lose less to float rounding in E[x^2] - E[x]^2.
                 if (interior) {
                     const int x0 = int(tile.x0) - R;
                     for (int i = 0; i < padW; ++i) {
-                        p0[i] = rowT[x0 + i] - 0.5f;
-                        p1[i] = rowR[x0 + i] - 0.5f;
+                        p0[i] = rowT[x0 + i] - shiftT;
+                        p1[i] = rowR[x0 + i] - shiftR;
                     }
                 } else {
                     for (int i = 0; i < padW; ++i) {
-                        p0[i] = rowT[xIndex[i]] - 0.5f;
-                        p1[i] = rowR[xIndex[i]] - 0.5f;
+                        p0[i] = rowT[xIndex[i]] - shiftT;
+                        p1[i] = rowR[xIndex[i]] - shiftR;
                     }
                 }
                 for (int i = 0; i < padW; ++i) {
@@ -613,7 +617,7 @@ MetricValue ssim(MetricImage test, MetricImage ref, ImageView<float>* ssimImage)
                 for (int q = 0; q < 5; ++q)
                     convolveColumn(hbuf.data() + (size_t(q) * rows + y) * tw, size_t(tw), w.data(), K, tw,
                                    v.data() + size_t(q) * tw);
-                ssimRow(v.data(), tw, valueRow, mapRow.data() + size_t(y) * tw);
+                ssimRow(v.data(), tw, shiftT, shiftR, valueRow, mapRow.data() + size_t(y) * tw);
                 float rowSum = 0.0f;
                 for (int x = 0; x < tw; ++x) rowSum += valueRow[x];
                 sum += rowSum;

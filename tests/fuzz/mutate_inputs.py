@@ -5,7 +5,10 @@ Mutations (seeded, so a run is reproducible): values, deletions and truncation o
 graphs, degenerate node transforms (scales of 0, far translations), edges and outputs between the fields of their
 passes, out-of-range --set values, damaged Radiance .hdr environment maps (written here), and `loom view --headless`
 scripts (fields switched, parameters set, the camera moved by 1e30 or turned by thousands of degrees, saves and a
-video recorded, now and then a malformed line). Each run must
+video recorded, now and then a malformed line). Byte-level damage too: binary glTF (.glb, built here from the shipped
+scenes with the buffer and the PNG images embedded), EXR environment maps (written here) and the PNG and EXR inputs
+of `loom image montage` get bit flips, truncation, inserted and deleted bytes, and finite-but-extreme floats (1e30,
+3e38, denormals, -0) written into their float data. Each run must
 
   - exit with 0, or with 2 and one message that starts with "error:" (a crash, a hang past --timeout or exit code 1
     fail the run);
@@ -17,6 +20,7 @@ Usage: mutate_inputs.py --loom build/release/bin/loom --source . [--seed 1] [--r
 Prints each failing run with its command; exit code 1 when any failed.
 """
 import argparse
+import base64
 import copy
 import json
 import math
@@ -142,7 +146,106 @@ def write_hdr(path, width, height, rng):
     return data, len(header)
 
 
+# ---- binary glTF and EXR written here ---------------------------------------------------------------------------
+
+def make_glb(doc):
+    """A .glb of a shipped scene: its JSON and one BIN chunk holding the buffer and, as bufferViews, the data-URI
+    images. Returns (bytes, float ranges: [begin, end) of the float accessors' bufferViews, image ranges)."""
+    d = copy.deepcopy(doc)
+    uri = d["buffers"][0].pop("uri")
+    bin_ = bytearray(base64.b64decode(uri[uri.index(",") + 1:]))
+    images = []
+    for image in d.get("images", []):
+        uri = image.get("uri", "")
+        if not uri.startswith("data:"):
+            continue
+        data = base64.b64decode(uri[uri.index(",") + 1:])
+        bin_ += b"\0" * (-len(bin_) % 4)
+        images.append((len(bin_), len(bin_) + len(data)))
+        d["bufferViews"].append({"buffer": 0, "byteOffset": len(bin_), "byteLength": len(data)})
+        bin_ += data
+        del image["uri"]
+        image["bufferView"] = len(d["bufferViews"]) - 1
+        image["mimeType"] = uri[5:uri.index(";")]
+    bin_ += b"\0" * (-len(bin_) % 4)
+    d["buffers"][0]["byteLength"] = len(bin_)
+    text = json.dumps(d).encode()
+    text += b" " * (-len(text) % 4)
+    start = 12 + 8 + len(text) + 8
+    data = (b"glTF" + struct.pack("<II", 2, start + len(bin_)) + struct.pack("<I", len(text)) + b"JSON" + text +
+            struct.pack("<I", len(bin_)) + b"BIN\0" + bytes(bin_))
+    floats = []
+    for acc in d["accessors"]:
+        if acc.get("componentType") == 5126 and "bufferView" in acc:
+            view = d["bufferViews"][acc["bufferView"]]
+            floats.append((start + view.get("byteOffset", 0), start + view.get("byteOffset", 0) + view["byteLength"]))
+    return data, floats, [(start + a, start + b) for a, b in images]
+
+
+def write_exr(width, height, rng):
+    """An uncompressed scanline EXR of FLOAT channels A, B, G, R (radiances up to 50). Returns (bytes, the float
+    range: [begin, end) of the pixel data)."""
+    def attr(name, kind, value):
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+    channels = b"".join(c.encode() + b"\0" + struct.pack("<iBBBBii", 2, 0, 0, 0, 0, 1, 1) for c in "ABGR") + b"\0"
+    window = struct.pack("<4i", 0, 0, width - 1, height - 1)
+    header = (struct.pack("<ii", 20000630, 2) + attr("channels", "chlist", channels) +
+              attr("compression", "compression", b"\0") + attr("dataWindow", "box2i", window) +
+              attr("displayWindow", "box2i", window) + attr("lineOrder", "lineOrder", b"\0") +
+              attr("pixelAspectRatio", "float", struct.pack("<f", 1)) +
+              attr("screenWindowCenter", "v2f", struct.pack("<ff", 0, 0)) +
+              attr("screenWindowWidth", "float", struct.pack("<f", 1)) + b"\0")
+    line_size = 4 * 4 * width
+    first = len(header) + 8 * height
+    offsets = b"".join(struct.pack("<Q", first + y * (8 + line_size)) for y in range(height))
+    lines = b""
+    for y in range(height):
+        values = [1.0] * width + [rng.uniform(0, 50) for _ in range(3 * width)]
+        lines += struct.pack("<ii", y, line_size) + struct.pack("<%df" % (4 * width), *values)
+    return header + offsets + lines, (first, first + len(lines))
+
+
 # ---- mutations ------------------------------------------------------------------------------------------------
+
+EXTREME_FLOATS = [1e30, -1e30, 3e38, -3.4e38, 3.4028234e38, 1.1754944e-38, 1e-45, -1e-45, 1e-40, -0.0, 1e-30]
+
+
+def mutate_bytes(data, floats, images, rng):
+    """One to four byte-level mutations: bit flips, truncation, inserted or deleted bytes, a 32-bit count set to an
+    extreme, finite-but-extreme floats into a float range, or damage inside an embedded image."""
+    b = bytearray(data)
+    for _ in range(rng.randint(1, 4)):
+        op = rng.choice(["flip", "truncate", "insert", "delete", "count", "float", "float", "image"])
+        if not b:
+            b.append(rng.randrange(256))
+        elif op == "flip":
+            for _ in range(rng.randint(1, 8)):
+                b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
+        elif op == "truncate":
+            b = b[:rng.randrange(len(b))]
+        elif op == "insert":
+            at = rng.randrange(len(b) + 1)
+            b[at:at] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 16)))
+        elif op == "delete":
+            at = rng.randrange(len(b))
+            del b[at:at + rng.randint(1, 16)]
+        elif op == "count" and len(b) >= 4:
+            at = rng.randrange(len(b) // 4) * 4
+            b[at:at + 4] = struct.pack("<i", rng.choice([0, -1, 2**31 - 1, -2**31, 65536, 255]))
+        elif op == "float" and floats:
+            begin, end = rng.choice(floats)
+            for _ in range(rng.randint(1, 6)):
+                at = begin + rng.randrange((end - begin) // 4) * 4
+                if at + 4 <= len(b):
+                    b[at:at + 4] = struct.pack("<f", rng.choice(EXTREME_FLOATS))
+        elif op == "image" and images:
+            begin, end = rng.choice(images)
+            for _ in range(rng.randint(1, 4)):
+                at = rng.randrange(begin, end)
+                if at < len(b):
+                    b[at] = rng.randrange(256)
+    return bytes(b)
+
 
 def json_paths(node, prefix=()):
     yield prefix
@@ -363,6 +466,35 @@ def main():
             f.write(b)
         run("env map %d (%s)" % (i, kind), ["render", "--graph", os.path.join(graphs_dir, "PathTracerRaw.json"),
                                             "--scene", dynamic, "--env", path, "--size", "32x24", "--dump", "*"])
+    # Byte-level damage: binary glTF scenes, EXR environment maps, and the PNG and EXR inputs of a montage.
+    glbs = [make_glb(json.load(open(os.path.join(scenes_dir, f)))) for f in scenes]
+    for i in range(o.runs):
+        data, floats, images = rng.choice(glbs)
+        path = os.path.join(work, "scene%d.glb" % i)
+        with open(path, "wb") as f:
+            f.write(mutate_bytes(data, floats, images, rng))
+        run("glb %d" % i, ["render", "--graph", os.path.join(graphs_dir, rng.choice(shipped)), "--scene", path] +
+            small)
+    exr, exr_floats = write_exr(16, 8, rng)
+    for i in range(o.runs):
+        path = os.path.join(work, "sky%d.exr" % i)
+        with open(path, "wb") as f:
+            f.write(mutate_bytes(exr, [exr_floats], [], rng))
+        run("env map exr %d" % i, ["render", "--graph", os.path.join(graphs_dir, "PathTracerRaw.json"), "--scene",
+                                   dynamic, "--env", path, "--size", "32x24", "--dump", "*"])
+    png = base64.b64decode(next(im["uri"] for im in json.load(open(os.path.join(scenes_dir, "materials.gltf")))
+                                ["images"]).split(",", 1)[1])
+    for i in range(o.runs):
+        kind = rng.choice(["png", "exr"])
+        path = os.path.join(work, "image%d.%s" % (i, kind))
+        with open(path, "wb") as f:
+            f.write(mutate_bytes(png, [], [(8, len(png))], rng) if kind == "png"
+                    else mutate_bytes(exr, [exr_floats], [], rng))
+        good = os.path.join(work, "good%d.%s" % (i, kind))
+        with open(good, "wb") as f:
+            f.write(png if kind == "png" else exr)
+        run("montage %d (%s)" % (i, kind), ["image", "montage", good, path],
+            ["--out", os.path.join(out, "montage.png")])
     shown = {"PathTracerSVGFTAA.json": ["SVGF.variance", "SVGF.moments", "TAA.colorHistory", "GBuffer.meshId",
                                      "GBuffer.mvec", "ToneMap.dst", "PathTracer.color", "GBuffer.vbuffer"],
              "GBufferRaster.json": ["GBuffer.mvec", "GBuffer.linearZ", "GBuffer.meshId", "GBuffer.normW"],
