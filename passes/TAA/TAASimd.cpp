@@ -6,6 +6,8 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <mutex>
+#include <vector>
 
 #ifndef LOOM_TAA_SIMD_SHARED
 #define LOOM_TAA_SIMD_SHARED
@@ -30,10 +32,38 @@ struct TileScratch {
     bool anyHistory[kW];  // per vector (indexed by its first pixel): a lane resolves against the history
 };
 
-TileScratch& scratch() {
-    thread_local std::unique_ptr<TileScratch> s = std::make_unique<TileScratch>();
-    return *s;
-}
+/// A tile's scratch, borrowed from a pool for the tile's duration and returned after (each tile overwrites what it
+/// reads). Not thread_local: LeakSanitizer's scan of a dlopen'ed plugin's dynamic TLS crashes at exit.
+class ScratchLease {
+public:
+    ScratchLease() {
+        std::lock_guard lock(mutex());
+        if (!pool().empty()) {
+            mScratch = std::move(pool().back());
+            pool().pop_back();
+        } else {
+            mScratch = std::make_unique<TileScratch>();
+        }
+    }
+    ~ScratchLease() {
+        std::lock_guard lock(mutex());
+        pool().push_back(std::move(mScratch));
+    }
+    ScratchLease(const ScratchLease&) = delete;
+    ScratchLease& operator=(const ScratchLease&) = delete;
+    TileScratch& operator*() const { return *mScratch; }
+
+private:
+    static std::mutex& mutex() {
+        static std::mutex m;
+        return m;
+    }
+    static std::vector<std::unique_ptr<TileScratch>>& pool() {
+        static std::vector<std::unique_ptr<TileScratch>> p;
+        return p;
+    }
+    std::unique_ptr<TileScratch> mScratch;
+};
 
 uint32_t clampIndex(int v, uint32_t size) {
     return uint32_t(std::clamp(v, 0, int(size) - 1));
@@ -449,7 +479,8 @@ HWY_INLINE bool resolveOneColourTile(const TaaInputs& in, const Tile& t, const I
 void ResolveTileTarget(const TaaInputs& in, const TaaParams& p, const Tile& t, const ImageView<glm::vec4>& out,
                        const ImageView<glm::vec4>& history, Counts& counts) {
     if (resolveOneColourTile(in, t, out, history, counts)) return;
-    TileScratch& s = scratch();
+    const ScratchLease lease;
+    TileScratch& s = *lease;
     const FloatTag d;
     const uint32_t N = kLanes;
     const uint32_t w = t.x1 - t.x0, h = t.y1 - t.y0;
