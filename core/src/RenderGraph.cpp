@@ -1,6 +1,7 @@
 #include "loom/RenderGraph.h"
 
 #include <fnmatch.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -10,8 +11,6 @@
 #include <set>
 #include <sstream>
 #include <unordered_map>
-
-#include <spdlog/spdlog.h>
 
 #include "loom/Error.h"
 #include "loom/GraphPlanner.h"
@@ -49,7 +48,9 @@ private:
     PageMemory mMemory;
 };
 
-std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }
+std::string fieldKey(const std::string& pass, const std::string& field) {
+    return pass + "." + field;
+}
 
 std::string bytesText(size_t bytes) {
     if (bytes >= (size_t(1) << 20)) return fmt::format("{:.2f} MiB", bytes / double(1 << 20));
@@ -114,6 +115,8 @@ struct RenderGraph::Impl {
         return out;
     }
     std::unique_ptr<PassNode> makeNode(const PassDesc& pd, size_t index) const;
+    void allocate(const CompiledPlan& plan, const std::string& file);
+    void bind(GraphPlan& plan);
 };
 
 std::unique_ptr<PassNode> RenderGraph::Impl::makeNode(const PassDesc& pd, size_t index) const {
@@ -140,6 +143,106 @@ std::unique_ptr<PassNode> RenderGraph::Impl::makeNode(const PassDesc& pd, size_t
     n->timing.name = pd.name;
     if (scene) n->pass->setScene(scene);
     return n;
+}
+
+/// The arena for the plan's transients, and its history pairs (kept when their declaration is unchanged).
+void RenderGraph::Impl::allocate(const CompiledPlan& plan, const std::string& file) {
+    transients.clear();
+    fieldTextures.clear();
+    if (!arena.reserve(plan.transientPeakBytes))
+        throw Error(Error::Info{ErrorKind::Runtime,
+                                file,
+                                {},
+                                "out of memory for " + bytesText(plan.transientPeakBytes) + " of frame data",
+                                {},
+                                "render at a smaller size"});
+    std::set<std::string> historyKeys;
+    for (const ResourceInfo& r : plan.resources) {
+        if (r.kind == ResourceKind::Transient) {
+            auto tex = std::make_unique<Texture>(Texture::wrap(arena.data() + r.offset, r.width, r.height, r.format));
+            fieldTextures[r.name] = tex.get();
+            transients.push_back(std::move(tex));
+        } else {
+            historyKeys.insert(r.name);
+        }
+    }
+    for (auto it = history.begin(); it != history.end();) {
+        if (!historyKeys.count(it->first)) {
+            it = history.erase(it);
+        } else {
+            ++it;
+        }
+    }
+    for (const ResourceInfo& r : plan.resources) {
+        if (r.kind != ResourceKind::History) continue;
+        const std::string& type = desc.passes[r.pass].type;
+        auto& entry = history[r.name];
+        if (!entry || entry->passType != type || entry->format != r.format || entry->width != r.width ||
+            entry->height != r.height) {
+            entry = std::make_unique<HistoryEntry>();
+            entry->key = r.name;
+            entry->passType = type;
+            entry->format = r.format;
+            entry->width = r.width;
+            entry->height = r.height;
+            entry->cur = Texture(r.width, r.height, r.format);
+            entry->prev = Texture(r.width, r.height, r.format);
+        }
+        fieldTextures[r.name] = &entry->cur;
+    }
+}
+
+/// Binds each live pass's context to the plan's textures, and compiles the pass.
+void RenderGraph::Impl::bind(GraphPlan& plan) {
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        PassNode& n = *nodes[i];
+        PassPlan& pp = plan.passes[i];
+        n.ctx = PassContext();
+        n.observeBefore.clear();
+        n.observeAfter.clear();
+        n.poisonAtStart.clear();
+        n.validFlags.clear();
+        n.live = pp.live;
+        n.position = pp.position;
+        n.refl = std::move(pp.reflection);
+        if (!n.live) continue;
+        n.ctx.mPassName = n.desc.name;
+        n.ctx.mStats = &n.stats;
+        const std::set<std::string> observed(pp.observed.begin(), pp.observed.end());
+        for (const auto& f : n.refl.fields()) {
+            const std::string key = fieldKey(n.desc.name, f.name);
+            BoundField b{f.name, f.kind};
+            if (f.kind == FieldKind::Input) {
+                auto in = std::find_if(pp.inputs.begin(), pp.inputs.end(),
+                                       [&](const PlannedInput& p) { return p.field == f.name; });
+                if (in != pp.inputs.end()) {
+                    const std::string srcKey = fieldKey(desc.passes[in->srcPass].name, in->srcField);
+                    if (in->prev) {
+                        HistoryEntry& e = *history.at(srcKey);
+                        b.cur = &e.prev;
+                        b.valid = &e.valid;
+                        n.validFlags.push_back(&e.valid);
+                    } else {
+                        b.cur = fieldTextures.at(srcKey);
+                    }
+                }
+            } else if (f.kind == FieldKind::History || (f.kind == FieldKind::Output && history.count(key))) {
+                HistoryEntry& e = *history.at(key);
+                b.cur = &e.cur;
+                b.prev = &e.prev;
+                b.valid = &e.valid;
+                if (f.kind == FieldKind::History) n.validFlags.push_back(&e.valid);
+            } else if (auto it = fieldTextures.find(key); it != fieldTextures.end()) {
+                b.cur = it->second;
+                n.poisonAtStart.push_back(it->second);
+            }
+            if (observed.count(f.name) && b.cur)
+                (f.kind == FieldKind::Input ? n.observeBefore : n.observeAfter).push_back(f.name);
+            n.ctx.mFields.push_back(b);
+        }
+        n.info = pp.info;
+        n.pass->compile(n.info);
+    }
 }
 
 RenderGraph::RenderGraph(GraphDesc desc, PluginRegistry& registry)
@@ -248,103 +351,12 @@ void RenderGraph::compile(const CompileOptions& options) {
     GraphPlan graphPlan = planGraph(input);
     planResources(graphPlan, m.desc);
     CompiledPlan& plan = graphPlan.summary;
-    const size_t peak = plan.transientPeakBytes;
 
-    // Allocate: arena, then history (kept when its declaration is unchanged). The old plan's memory is released
-    // here, so until this compile succeeds there is no plan to execute.
+    // The old plan's memory is released first, so until this compile succeeds there is no plan to execute.
     mCompiled = false;
     m.order.clear();
-    m.transients.clear();
-    m.fieldTextures.clear();
-    if (!m.arena.reserve(peak))
-        throw Error(Error::Info{ErrorKind::Runtime, file, {}, "out of memory for " + bytesText(peak) + " of frame data",
-                                {}, "render at a smaller size"});
-    std::set<std::string> historyKeys;
-    for (const ResourceInfo& r : plan.resources) {
-        if (r.kind == ResourceKind::Transient) {
-            auto tex = std::make_unique<Texture>(Texture::wrap(m.arena.data() + r.offset, r.width, r.height, r.format));
-            m.fieldTextures[r.name] = tex.get();
-            m.transients.push_back(std::move(tex));
-        } else {
-            historyKeys.insert(r.name);
-        }
-    }
-    for (auto it = m.history.begin(); it != m.history.end();) {
-        if (!historyKeys.count(it->first)) {
-            it = m.history.erase(it);
-        } else {
-            ++it;
-        }
-    }
-    for (const ResourceInfo& r : plan.resources) {
-        if (r.kind != ResourceKind::History) continue;
-        const std::string& type = m.desc.passes[r.pass].type;
-        auto& entry = m.history[r.name];
-        if (!entry || entry->passType != type || entry->format != r.format || entry->width != r.width ||
-            entry->height != r.height) {
-            entry = std::make_unique<HistoryEntry>();
-            entry->key = r.name;
-            entry->passType = type;
-            entry->format = r.format;
-            entry->width = r.width;
-            entry->height = r.height;
-            entry->cur = Texture(r.width, r.height, r.format);
-            entry->prev = Texture(r.width, r.height, r.format);
-        }
-        m.fieldTextures[r.name] = &entry->cur;
-    }
-
-    // Bind each live pass's context and compile it.
-    for (size_t i = 0; i < m.nodes.size(); ++i) {
-        PassNode& n = *m.nodes[i];
-        PassPlan& pp = graphPlan.passes[i];
-        n.ctx = PassContext();
-        n.observeBefore.clear();
-        n.observeAfter.clear();
-        n.poisonAtStart.clear();
-        n.validFlags.clear();
-        n.live = pp.live;
-        n.position = pp.position;
-        n.refl = std::move(pp.reflection);
-        if (!n.live) continue;
-        n.ctx.mPassName = n.desc.name;
-        n.ctx.mStats = &n.stats;
-        const std::set<std::string> observed(pp.observed.begin(), pp.observed.end());
-        for (const auto& f : n.refl.fields()) {
-            const std::string key = fieldKey(n.desc.name, f.name);
-            BoundField b{f.name, f.kind};
-            if (f.kind == FieldKind::Input) {
-                auto in = std::find_if(pp.inputs.begin(), pp.inputs.end(),
-                                       [&](const PlannedInput& p) { return p.field == f.name; });
-                if (in != pp.inputs.end()) {
-                    const std::string srcKey = fieldKey(m.desc.passes[in->srcPass].name, in->srcField);
-                    if (in->prev) {
-                        HistoryEntry& e = *m.history.at(srcKey);
-                        b.cur = &e.prev;
-                        b.valid = &e.valid;
-                        n.validFlags.push_back(&e.valid);
-                    } else {
-                        b.cur = m.fieldTextures.at(srcKey);
-                    }
-                }
-            } else if (f.kind == FieldKind::History || (f.kind == FieldKind::Output && m.history.count(key))) {
-                HistoryEntry& e = *m.history.at(key);
-                b.cur = &e.cur;
-                b.prev = &e.prev;
-                b.valid = &e.valid;
-                if (f.kind == FieldKind::History) n.validFlags.push_back(&e.valid);
-            } else if (auto it = m.fieldTextures.find(key); it != m.fieldTextures.end()) {
-                b.cur = it->second;
-                n.poisonAtStart.push_back(it->second);
-            }
-            if (observed.count(f.name) && b.cur)
-                (f.kind == FieldKind::Input ? n.observeBefore : n.observeAfter).push_back(f.name);
-            n.ctx.mFields.push_back(b);
-        }
-        n.info = pp.info;
-        n.pass->compile(n.info);
-    }
-
+    m.allocate(plan, file);
+    m.bind(graphPlan);
     for (uint32_t p : graphPlan.order) m.order.push_back(m.nodes[p].get());
     mPlan = std::move(plan);
     mOptions = options;
@@ -386,12 +398,15 @@ void RenderGraph::execute(const FrameInfo& frame) {
         } catch (const std::bad_alloc&) {
             throw;
         } catch (const std::exception& e) {
-            throw Error(Error::Info{ErrorKind::Runtime, {}, n->desc.name, std::string("pass failed: ") + e.what(), {},
-                                    {}});
+            throw Error(
+                Error::Info{ErrorKind::Runtime, {}, n->desc.name, std::string("pass failed: ") + e.what(), {}, {}});
         } catch (...) {
             // A plugin may throw anything; it must not abort the process.
-            throw Error(Error::Info{ErrorKind::Runtime, {}, n->desc.name,
-                                    "pass failed with an exception that is not a std::exception", {},
+            throw Error(Error::Info{ErrorKind::Runtime,
+                                    {},
+                                    n->desc.name,
+                                    "pass failed with an exception that is not a std::exception",
+                                    {},
                                     "report it to the plugin's author"});
         }
         auto t1 = std::chrono::steady_clock::now();
