@@ -777,6 +777,10 @@ private:
     void convertMaterials();
     void convertMeshes();
     std::optional<Mesh> convertPrimitive(size_t meshIndex, size_t primIndex);
+    std::vector<uint32_t> triangleList(const tinygltf::Primitive& prim, int mode, size_t vertexCount,
+                                       const std::string& label);
+    void setNormals(Mesh& mesh, const std::vector<float>& nrm, const std::vector<float>& tng, const std::string& label);
+    void setTangents(Mesh& mesh);
     void convertCameras();
     void convertNodes(const std::vector<int>& roots);
     void convertAnimations();
@@ -1254,59 +1258,10 @@ void Importer::readIorAndSpecular(const tinygltf::Material& src, const std::stri
             warn(label + ": KHR_materials_specular " + texture + " is not supported; the factor alone is used");
 }
 
-std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primIndex) {
-    const tinygltf::Primitive& prim = m.meshes[meshIndex].primitives[primIndex];
-    const std::string label = meshLabel(meshIndex) + "/primitives[" + std::to_string(primIndex) + "]";
-    const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
-    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
-        static const char* names[] = {"points", "lines", "line loop", "line strip"};
-        warn(label + ": primitive mode " + (mode >= 0 && mode < 4 ? names[mode] : std::to_string(mode)) +
-             " is not made of triangles; the primitive is skipped");
-        return std::nullopt;
-    }
-    auto attribute = [&](const char* name) {
-        auto it = prim.attributes.find(name);
-        return it == prim.attributes.end() ? -1 : it->second;
-    };
-    const int posAcc = attribute("POSITION");
-    if (posAcc < 0) {
-        warn(label + ": no POSITION attribute; the primitive is skipped");
-        return std::nullopt;
-    }
-
-    Mesh mesh;
-    const std::string& gltfName = m.meshes[meshIndex].name;
-    mesh.name = (gltfName.empty() ? "mesh" + std::to_string(meshIndex) : gltfName) + "/" + std::to_string(primIndex);
-
-    const std::vector<float> pos = readAccessor<float>(posAcc, label + "/POSITION", TINYGLTF_TYPE_VEC3);
-    const size_t vertexCount = pos.size() / 3;
-    if (vertexCount == 0) {
-        warn(label + ": POSITION has no vertices; the primitive is skipped");
-        return std::nullopt;
-    }
-    mesh.positions.resize(vertexCount);
-    std::memcpy(mesh.positions.data(), pos.data(), pos.size() * sizeof(float));
-
-    auto readMatching = [&](const char* name, int type, size_t comps) -> std::vector<float> {
-        const int acc = attribute(name);
-        if (acc < 0) return {};
-        std::vector<float> v = readAccessor<float>(acc, label + "/" + name, type);
-        if (v.size() / comps != vertexCount)
-            fail(
-                label + "/" + name + " (accessors[" + std::to_string(acc) + "])",
-                "has " + std::to_string(v.size() / comps) + " elements but POSITION has " + std::to_string(vertexCount),
-                "one element per vertex");
-        return v;
-    };
-    const std::vector<float> nrm = readMatching("NORMAL", TINYGLTF_TYPE_VEC3, 3);
-    const std::vector<float> tng = readMatching("TANGENT", TINYGLTF_TYPE_VEC4, 4);
-    const std::vector<float> uv = readMatching("TEXCOORD_0", TINYGLTF_TYPE_VEC2, 2);
-    if (attribute("COLOR_0") >= 0) warn(label + ": vertex colours (COLOR_0) are not supported and are ignored");
-    if (!prim.targets.empty()) warn(label + ": morph targets are not supported; the base shape is used");
-
-    mesh.uvs.assign(vertexCount, glm::vec2(0.f));
-    if (!uv.empty()) std::memcpy(mesh.uvs.data(), uv.data(), uv.size() * sizeof(float));
-
+/// The primitive's triangles as a list of vertex indices: its indices (checked against the vertex count) or the
+/// vertices in order, strips and fans unrolled keeping glTF's winding, trailing indices dropped.
+std::vector<uint32_t> Importer::triangleList(const tinygltf::Primitive& prim, int mode, size_t vertexCount,
+                                             const std::string& label) {
     std::vector<uint32_t> idx;
     if (prim.indices >= 0) {
         idx = readIndices(prim.indices, label + "/indices");
@@ -1338,23 +1293,14 @@ std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primInde
         idx.resize(idx.size() - idx.size() % 3);
     }
 
-    // Degenerate triangles have no face normal and no area to hit: drop them.
-    size_t degenerate = 0;
-    for (size_t t = 0; t < idx.size(); t += 3) {
-        if (isDegenerate(mesh.positions[idx[t]], mesh.positions[idx[t + 1]], mesh.positions[idx[t + 2]])) {
-            ++degenerate;
-            continue;
-        }
-        mesh.indices.insert(mesh.indices.end(), {idx[t], idx[t + 1], idx[t + 2]});
-    }
-    if (degenerate > 0)
-        warn(label + ": " + std::to_string(degenerate) + " degenerate (zero-area) triangle" +
-             (degenerate > 1 ? "s" : "") + " dropped");
-    if (mesh.indices.empty()) {
-        warn(label + ": no triangles left; the primitive is skipped");
-        return std::nullopt;
-    }
+    return idx;
+}
 
+/// The mesh's normals: the file's (zero-length ones replaced by the adjacent faces' normal) with its tangents, or
+/// flat normals when the file has none (every triangle then gets its own three vertices).
+void Importer::setNormals(Mesh& mesh, const std::vector<float>& nrm, const std::vector<float>& tng,
+                          const std::string& label) {
+    const size_t vertexCount = mesh.positions.size();
     if (nrm.empty()) {
         // glTF 2.0 section 3.7.2.1: without normals, flat normals. Every triangle gets its own three
         // vertices, so the normal is constant over it.
@@ -1413,7 +1359,11 @@ std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primInde
             for (size_t v = 0; v < vertexCount; ++v) mesh.tangents[v] = glm::make_vec4(&tng[4 * v]);
         }
     }
+}
 
+/// Tangents for every vertex: generated (or any perpendicular) when the file gives none, else the file's made unit,
+/// orthogonal to the normal and with w exactly +-1, as the shading code assumes.
+void Importer::setTangents(Mesh& mesh) {
     if (mesh.tangents.empty()) {
         if (mOptions.generateTangents) {
             generateTangents(mesh);
@@ -1433,6 +1383,82 @@ std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primInde
             mesh.tangents[v] = glm::vec4(t, mesh.tangents[v].w < 0.f ? -1.f : 1.f);
         }
     }
+}
+
+std::optional<Mesh> Importer::convertPrimitive(size_t meshIndex, size_t primIndex) {
+    const tinygltf::Primitive& prim = m.meshes[meshIndex].primitives[primIndex];
+    const std::string label = meshLabel(meshIndex) + "/primitives[" + std::to_string(primIndex) + "]";
+    const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        static const char* names[] = {"points", "lines", "line loop", "line strip"};
+        warn(label + ": primitive mode " + (mode >= 0 && mode < 4 ? names[mode] : std::to_string(mode)) +
+             " is not made of triangles; the primitive is skipped");
+        return std::nullopt;
+    }
+    auto attribute = [&](const char* name) {
+        auto it = prim.attributes.find(name);
+        return it == prim.attributes.end() ? -1 : it->second;
+    };
+    const int posAcc = attribute("POSITION");
+    if (posAcc < 0) {
+        warn(label + ": no POSITION attribute; the primitive is skipped");
+        return std::nullopt;
+    }
+
+    Mesh mesh;
+    const std::string& gltfName = m.meshes[meshIndex].name;
+    mesh.name = (gltfName.empty() ? "mesh" + std::to_string(meshIndex) : gltfName) + "/" + std::to_string(primIndex);
+
+    const std::vector<float> pos = readAccessor<float>(posAcc, label + "/POSITION", TINYGLTF_TYPE_VEC3);
+    const size_t vertexCount = pos.size() / 3;
+    if (vertexCount == 0) {
+        warn(label + ": POSITION has no vertices; the primitive is skipped");
+        return std::nullopt;
+    }
+    mesh.positions.resize(vertexCount);
+    std::memcpy(mesh.positions.data(), pos.data(), pos.size() * sizeof(float));
+
+    auto readMatching = [&](const char* name, int type, size_t comps) -> std::vector<float> {
+        const int acc = attribute(name);
+        if (acc < 0) return {};
+        std::vector<float> v = readAccessor<float>(acc, label + "/" + name, type);
+        if (v.size() / comps != vertexCount)
+            fail(
+                label + "/" + name + " (accessors[" + std::to_string(acc) + "])",
+                "has " + std::to_string(v.size() / comps) + " elements but POSITION has " + std::to_string(vertexCount),
+                "one element per vertex");
+        return v;
+    };
+    const std::vector<float> nrm = readMatching("NORMAL", TINYGLTF_TYPE_VEC3, 3);
+    const std::vector<float> tng = readMatching("TANGENT", TINYGLTF_TYPE_VEC4, 4);
+    const std::vector<float> uv = readMatching("TEXCOORD_0", TINYGLTF_TYPE_VEC2, 2);
+    if (attribute("COLOR_0") >= 0) warn(label + ": vertex colours (COLOR_0) are not supported and are ignored");
+    if (!prim.targets.empty()) warn(label + ": morph targets are not supported; the base shape is used");
+
+    mesh.uvs.assign(vertexCount, glm::vec2(0.f));
+    if (!uv.empty()) std::memcpy(mesh.uvs.data(), uv.data(), uv.size() * sizeof(float));
+
+    std::vector<uint32_t> idx = triangleList(prim, mode, vertexCount, label);
+
+    // Degenerate triangles have no face normal and no area to hit: drop them.
+    size_t degenerate = 0;
+    for (size_t t = 0; t < idx.size(); t += 3) {
+        if (isDegenerate(mesh.positions[idx[t]], mesh.positions[idx[t + 1]], mesh.positions[idx[t + 2]])) {
+            ++degenerate;
+            continue;
+        }
+        mesh.indices.insert(mesh.indices.end(), {idx[t], idx[t + 1], idx[t + 2]});
+    }
+    if (degenerate > 0)
+        warn(label + ": " + std::to_string(degenerate) + " degenerate (zero-area) triangle" +
+             (degenerate > 1 ? "s" : "") + " dropped");
+    if (mesh.indices.empty()) {
+        warn(label + ": no triangles left; the primitive is skipped");
+        return std::nullopt;
+    }
+
+    setNormals(mesh, nrm, tng, label);
+    setTangents(mesh);
 
     if (prim.material >= 0 && size_t(prim.material) < m.materials.size()) {
         mesh.material = uint32_t(prim.material);
