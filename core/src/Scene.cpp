@@ -279,7 +279,9 @@ void Scene::updateWorldTransforms() {
     }
 }
 
-void Scene::finalize() {
+/// Parents from the children lists, checked to form a forest (a node with two parents, or a cycle, would make
+/// world transforms ambiguous), and the roots when the scene names none.
+void Scene::linkHierarchy() {
     // Parents follow from the children lists; a node with two parents or a cycle
     // would make world transforms ambiguous, so both are rejected.
     for (Node& n : nodes) n.parent = -1;
@@ -314,6 +316,44 @@ void Scene::finalize() {
     if (roots.empty())
         for (size_t i = 0; i < nodes.size(); ++i)
             if (nodes[i].parent < 0) roots.push_back(int(i));
+}
+
+/// The render camera: the chosen glTF camera when it hangs in the hierarchy, else one framing the rest bounds.
+void Scene::chooseCamera() {
+    if (activeCamera < 0 || size_t(activeCamera) >= cameras.size() || cameraNode(nodes, activeCamera) < 0) {
+        activeCamera = -1;
+        for (size_t c = 0; c < cameras.size(); ++c) {
+            if (cameraNode(nodes, int(c)) >= 0) {
+                activeCamera = int(c);
+                break;
+            }
+        }
+    }
+    mCameraAnimated = false;
+    if (activeCamera >= 0) {
+        camera = cameras[size_t(activeCamera)];
+        // Animated when a channel targets the camera's node or any of its ancestors.
+        for (int n = cameraNode(nodes, activeCamera); n >= 0 && !mCameraAnimated; n = nodes[size_t(n)].parent)
+            for (const Animation& a : animations)
+                for (const AnimationChannel& ch : a.channels)
+                    if (ch.node == n) mCameraAnimated = true;
+    } else {
+        camera = Camera{};
+        camera.name = "default";
+        const glm::vec3 center = mRestBounds.valid() ? mRestBounds.center() : glm::vec3(0.f);
+        const float radius = mRestBounds.valid() ? std::max(0.5f * glm::length(mRestBounds.extent()), 1e-3f) : 1.f;
+        // The bounding sphere fits the vertical field of view exactly.
+        const float distance = radius / std::sin(0.5f * camera.fovY);
+        camera.world = glm::translate(glm::mat4(1.f), center + glm::vec3(0.f, 0.f, distance));
+        camera.nearZ = 1e-2f * radius;
+        camera.farZ = 10.f * (distance + radius);
+    }
+    camera.prevWorld = camera.world;
+    mCameraBase = camera.world;
+}
+
+void Scene::finalize() {
+    linkHierarchy();
 
     for (size_t m = 0; m < meshes.size(); ++m) {
         Mesh& mesh = meshes[m];
@@ -364,37 +404,7 @@ void Scene::finalize() {
         for (uint32_t t = 0; t < mesh.triangleCount(); ++t) emissiveTriangles.push_back({uint32_t(i), t});
     }
 
-    // The render camera: the chosen glTF camera when it hangs in the hierarchy, else one framing the bounds.
-    if (activeCamera < 0 || size_t(activeCamera) >= cameras.size() || cameraNode(nodes, activeCamera) < 0) {
-        activeCamera = -1;
-        for (size_t c = 0; c < cameras.size(); ++c) {
-            if (cameraNode(nodes, int(c)) >= 0) {
-                activeCamera = int(c);
-                break;
-            }
-        }
-    }
-    mCameraAnimated = false;
-    if (activeCamera >= 0) {
-        camera = cameras[size_t(activeCamera)];
-        // Animated when a channel targets the camera's node or any of its ancestors.
-        for (int n = cameraNode(nodes, activeCamera); n >= 0 && !mCameraAnimated; n = nodes[size_t(n)].parent)
-            for (const Animation& a : animations)
-                for (const AnimationChannel& ch : a.channels)
-                    if (ch.node == n) mCameraAnimated = true;
-    } else {
-        camera = Camera{};
-        camera.name = "default";
-        const glm::vec3 center = mRestBounds.valid() ? mRestBounds.center() : glm::vec3(0.f);
-        const float radius = mRestBounds.valid() ? std::max(0.5f * glm::length(mRestBounds.extent()), 1e-3f) : 1.f;
-        // The bounding sphere fits the vertical field of view exactly.
-        const float distance = radius / std::sin(0.5f * camera.fovY);
-        camera.world = glm::translate(glm::mat4(1.f), center + glm::vec3(0.f, 0.f, distance));
-        camera.nearZ = 1e-2f * radius;
-        camera.farZ = 10.f * (distance + radius);
-    }
-    camera.prevWorld = camera.world;
-    mCameraBase = camera.world;
+    chooseCamera();
 
     mRayScene = std::make_unique<RayScene>(*this);
     mUpdated = false;

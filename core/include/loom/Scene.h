@@ -296,6 +296,8 @@ public:
     void loadEnvironmentMap(const std::filesystem::path& file);
 
 private:
+    void linkHierarchy();
+    void chooseCamera();
     void updateWorldTransforms();
     void rebuildView();
     std::vector<float> lightState() const;
