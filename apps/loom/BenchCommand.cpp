@@ -24,6 +24,7 @@
 #include "CliUtil.h"
 #include "Interrupt.h"
 #include "SceneSetup.h"
+#include "loom/Channels.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
 #include "loom/Log.h"
@@ -41,13 +42,11 @@ using bench::FrameMetrics;
 using bench::FrameResult;
 using bench::Run;
 
-// Pass types and parameters the command relies on.
+// Pass types and parameters the command relies on. The path tracer is the pass whose parameters declare a sample
+// count (ParamRole::SampleCount), the reference's accumulator the pass that declares ParamRole::AutoReset.
 const char kToneMapType[] = "ToneMap";
 const char kToneMapInput[] = "src";
-const char kAccumulateType[] = "AccumulatePass";
 const char kAccumulateFramesStat[] = "frames";
-const char kSppParam[] = "samplesPerPixel";
-const char kSeedParam[] = "seed";
 
 /// Reference batches use PathTracer seeds from here on, so their samples are independent of every graph's and of
 /// the brute-force runs (which use seed 0 unless --set says otherwise).
@@ -63,7 +62,7 @@ constexpr double kNoiseMargin = 10.0;
 const char kMaxBouncesParam[] = "maxBounces";
 const char kRrStartParam[] = "rrStartBounce";
 const char kPixelFilterParam[] = "pixelFilter";
-const char kColorField[] = "color";
+const char* const kColorField = channel::kColor;
 
 struct BenchOptions {
     SceneOptions scene;
@@ -343,12 +342,34 @@ double noiseRelMSE(const Texture& ref, const Texture& variance) {
     return n ? sum / double(n) : 0.0;
 }
 
-/// The path tracer of a graph description (the last pass of type PathTracer or CUDAPathTracer), or "".
-std::string tracerOf(const GraphDesc& desc) {
-    std::string tracer;
-    for (const PassDesc& p : desc.passes)
-        if (p.type == "PathTracer" || p.type == "CUDAPathTracer") tracer = p.name;
-    return tracer;
+/// A pass of a graph description and its parameter that plays a role.
+struct RoleParam {
+    std::string pass, param;  ///< both empty when no pass declares the role
+};
+
+/// The last pass of a graph description whose parameters declare `role`. Types the registry does not know are
+/// skipped: building the graph reports them.
+RoleParam findRole(const GraphDesc& desc, PluginRegistry& registry, ParamRole role) {
+    RoleParam out;
+    for (const PassDesc& p : desc.passes) {
+        if (!registry.knows(p.type)) continue;
+        if (const ParamDecl* d = registry.create(p.type)->params().findRole(role)) out = {p.name, d->name};
+    }
+    return out;
+}
+
+/// The path tracer of a graph description (the last pass that declares a sample count per pixel), or "".
+std::string tracerOf(const GraphDesc& desc, PluginRegistry& registry) {
+    return findRole(desc, registry, ParamRole::SampleCount).pass;
+}
+
+/// The name of the parameter of a built graph's pass that plays `role`.
+std::string roleParam(const RenderGraph& graph, const std::string& pass, ParamRole role) {
+    const ParamDecl* d = graph.pass(pass)->params().findRole(role);
+    if (!d)
+        throwBadInput(pass, fmt::format("pass '{}' declares no {} parameter", pass, paramRoleName(role)),
+                      "a path tracer whose parameters declare a sample count and a seed");
+    return d->name;
 }
 
 /// A parameter's current value (defaults included) of a pass of a built graph.
@@ -369,16 +390,13 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
     out.shared = shared;
     const GraphDesc desc = loadGraph(o.referenceGraph);  // checked before its bytes are hashed
 
-    std::string tracer, accumulate;
+    const RoleParam spp = findRole(desc, registry, ParamRole::SampleCount);
+    const RoleParam reset = findRole(desc, registry, ParamRole::AutoReset);
+    const std::string &tracer = spp.pass, &accumulate = reset.pass;
     uint32_t batchSpp = 1;
-    for (const PassDesc& p : desc.passes) {
-        if (p.params.contains(kSppParam) || p.type == "PathTracer" || p.type == "CUDAPathTracer") {
-            tracer = p.name;
-            if (p.params.contains(kSppParam) && p.params[kSppParam].is_number_unsigned())
-                batchSpp = p.params[kSppParam].get<uint32_t>();
-        }
-        if (p.type == kAccumulateType) accumulate = p.name;
-    }
+    if (const PassDesc* p = desc.findPass(tracer);
+        p && p->params.contains(spp.param) && p->params[spp.param].is_number_unsigned())
+        batchSpp = p->params[spp.param].get<uint32_t>();
     if (tracer.empty() || accumulate.empty())
         throwBadInput("--reference-graph", "the reference graph needs a path tracer and an AccumulatePass",
                       "a graph like graphs/Reference.json", "", o.referenceGraph);
@@ -397,7 +415,8 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
 
     auto graph = std::make_unique<RenderGraph>(desc, registry);
     graph->setScene(scene);
-    graph->setParam(tracer, kSppParam, batchSpp, "--reference-spp");
+    graph->setParam(tracer, spp.param, batchSpp, "--reference-spp");
+    const std::string seedParam = roleParam(*graph, tracer, ParamRole::Seed);
     if (spec.maxBounces) graph->setParam(tracer, kMaxBouncesParam, *spec.maxBounces, "--reference-bounces");
     graph->setParam(tracer, kPixelFilterParam, spec.pixelFilter, "reference pixel filter");
     CompileOptions copts;
@@ -433,7 +452,7 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
         std::vector<double> mean(n, 0.0), m2(n, 0.0);
         for (uint32_t b = 0; b < batches; ++b) {
             throwIfStopRequested();  // between batches: a reference frame can take long
-            graph->setParam(tracer, kSeedParam, kReferenceSeedBase + b, "reference");
+            graph->setParam(tracer, seedParam, kReferenceSeedBase + b, "reference");
             graph->execute(f);
             // Welford over the batch means, per pixel and channel.
             const auto c = graph->fieldTexture(tracer + "." + kColorField)->view<glm::vec4>();
@@ -453,7 +472,9 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
             throw Error({ErrorKind::Runtime, o.referenceGraph, accumulate,
                          fmt::format("the reference accumulated {} of {} batches (it restarted)",
                                      acc->second.at(kAccumulateFramesStat), batches),
-                         "", "set autoReset false on the reference graph's AccumulatePass"});
+                         "",
+                         fmt::format("set {} false on the reference graph's {}", reset.param,
+                                     desc.findPass(accumulate)->type)});
         if (batches >= 2) {
             variance = Texture(width, height, Format::RGBA32F);
             auto v = variance.view<glm::vec4>();
@@ -618,7 +639,9 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
     ensureWritableDir(entry.string(), "--cache");
     writeFileAtomic(entry / "key.txt", bruteKey);
     out.cache = entry.string();
-    const uint32_t seed = uint32_t(intParam(*brute.graph, tracer, kSeedParam));
+    const std::string sppParam = roleParam(*brute.graph, tracer, ParamRole::SampleCount);
+    const std::string seedParam = roleParam(*brute.graph, tracer, ParamRole::Seed);
+    const uint32_t seed = uint32_t(intParam(*brute.graph, tracer, seedParam.c_str()));
     // Brute force has no history: of the warm-up frames it runs only the last one (which gives the first measured
     // frame its temporal predecessor).
     const uint64_t first = o.warmup > 0 ? o.warmup - 1 : 0;
@@ -636,15 +659,15 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
         r.bruteForce = true;
         r.graph = brute.graph->desc().name;
         r.graphFile = o.bruteForceGraph;
-        r.params = fmt::format("{}.{}={}", tracer, kSppParam, n);
+        r.params = fmt::format("{}.{}={}", tracer, sppParam, n);
         r.spp = n;
         r.measured = brute.measured.str();
         const auto start = std::chrono::steady_clock::now();
 
         // Times: frames rendered directly at n spp.
         std::vector<std::pair<double, std::vector<std::pair<std::string, double>>>> times;
-        brute.graph->setParam(tracer, kSppParam, n, "--brute-force-spp");
-        brute.graph->setParam(tracer, kSeedParam, seed, "brute force");
+        brute.graph->setParam(tracer, sppParam, n, "--brute-force-spp");
+        brute.graph->setParam(tracer, seedParam, seed, "brute force");
         for (uint64_t t = 0; t < timingFrames; ++t) {
             throwIfStopRequested();
             const FrameInfo f = sceneFrame(scene, o.warmup + t, o.fps, width, height, true);
@@ -657,8 +680,8 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
         }
 
         // Images: the cached mean of the previous point plus a new batch.
-        brute.graph->setParam(tracer, kSppParam, batch, "--brute-force-spp");
-        brute.graph->setParam(tracer, kSeedParam, k == 0 ? seed : kBruteForceSeedBase + seed + uint32_t(k),
+        brute.graph->setParam(tracer, sppParam, batch, "--brute-force-spp");
+        brute.graph->setParam(tracer, seedParam, k == 0 ? seed : kBruteForceSeedBase + seed + uint32_t(k),
                               "brute force");
         FlickerAccumulator flickerAcc;
         Texture prevImage;
@@ -907,7 +930,7 @@ void runBench(BenchOptions o) {
     for (const Variant& v : vars) {
         PreparedGraph p =
             prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height);
-        const std::string tracer = tracerOf(v.desc);
+        const std::string tracer = tracerOf(v.desc, registry);
         if (!tracer.empty())
             bounces.emplace_back(v.desc.name + (v.sweep ? " " + v.label() : ""),
                                  std::make_pair(intParam(*p.graph, tracer, kMaxBouncesParam),
@@ -916,7 +939,7 @@ void runBench(BenchOptions o) {
     const GraphDesc bruteDesc = loadGraph(o.bruteForceGraph);
     PreparedGraph brute =
         prepareGraph(bruteDesc, o.bruteForceGraph, registry, scene, o.set, true, {}, "", width, height);
-    const std::string bruteTracer = tracerOf(bruteDesc);
+    const std::string bruteTracer = tracerOf(bruteDesc, registry);
     if (bruteTracer.empty())
         throwBadInput("--brute-force-graph", "the brute-force graph has no path tracer",
                       "a graph like graphs/PathTracer.json", "", o.bruteForceGraph);
@@ -992,7 +1015,7 @@ void runBench(BenchOptions o) {
         const ReferenceSet fullSet = [&] {
             const GraphDesc refDesc = loadGraph(o.referenceGraph);
             RenderGraph g(refDesc, registry);
-            const std::string t = tracerOf(refDesc);
+            const std::string t = tracerOf(refDesc, registry);
             if (!t.empty() && intParam(g, t, kMaxBouncesParam) == refSet.maxBounces) return ReferenceSet{};
             return references(o, registry, scene, width, height, full);
         }();
@@ -1048,8 +1071,9 @@ void runBench(BenchOptions o) {
                                                         fs::path(o.bruteForceGraph).filename().string(),
                                                         fnv1a(readBytes(o.bruteForceGraph)), o.fps);
     for (const PassDesc& p : brute.graph->desc().passes) {
-        nlohmann::json params = brute.graph->pass(p.name)->params().toJson(false);
-        params.erase(kSppParam);  // the curve sets it
+        const ParamList& declared = brute.graph->pass(p.name)->params();
+        nlohmann::json params = declared.toJson(false);
+        if (const ParamDecl* d = declared.findRole(ParamRole::SampleCount)) params.erase(d->name);  // the curve sets it
         bruteKey += "pass " + p.name + " " + params.dump() + "\n";
     }
     BruteForceCurve bf = bruteForceCurve(o, brute, bruteTracer, bruteKey, *scene, refs, spps, o.bruteForceSpp.empty(),

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "loom/Channels.h"
 #include "loom/Metrics.h"
 #include "loom/RenderGraph.h"
 
@@ -13,11 +14,10 @@ namespace loom::cli::bench {
 
 namespace {
 
-// Pass types and channels of the G-buffer the age tracker reads (docs/BENCH.md, "Lag").
-const char* const kGBufferTypes[] = {"GBufferRaster", "GBufferRT"};
-const char kLinearZ[] = "linearZ";
-const char kMvec[] = "mvec";
-const char kMeshId[] = "meshId";
+// The standard channels of the G-buffer the age tracker reads (docs/BENCH.md, "Lag").
+using channel::kLinearZ;
+using channel::kMeshId;
+using channel::kMvec;
 
 double meanOf(const std::vector<double>& v, size_t begin, size_t end) {
     double sum = 0.0;
@@ -177,13 +177,17 @@ void DisocclusionTracker::addFrame(const AgeGBuffer& gbuffer, const Texture& tes
 }
 
 std::vector<std::string> ageGBufferFields(const RenderGraph& graph) {
-    const GraphDesc desc = graph.desc();
-    const auto& order = graph.plan().order;
-    for (const std::string& name : order) {
-        const PassDesc* p = desc.findPass(name);
-        if (!p || std::find(std::begin(kGBufferTypes), std::end(kGBufferTypes), p->type) == std::end(kGBufferTypes))
-            continue;
-        return {name + "." + kLinearZ, name + "." + kMvec, name + "." + kMeshId};
+    const auto outputs = [](const Reflection& r, const char* name) {
+        const FieldDesc* f = r.find(name);
+        return f && f->kind == FieldKind::Output;
+    };
+    for (const std::string& name : graph.plan().order) {
+        const RenderPass* pass = graph.pass(name);
+        if (!pass) continue;
+        Reflection r;
+        pass->reflect(r, CompileInfo{});  // unwired: every field the pass can declare
+        if (outputs(r, kLinearZ) && outputs(r, kMvec) && outputs(r, kMeshId))
+            return {name + "." + kLinearZ, name + "." + kMvec, name + "." + kMeshId};
     }
     return {};
 }

@@ -106,8 +106,8 @@ private:
     AgeBuckets mBuckets;
 };
 
-/// The "Pass.field" names of a compiled graph's G-buffer (a live GBufferRaster or GBufferRT pass) that the age
-/// tracker reads (linearZ, mvec, meshId); empty when the graph has none.
+/// The "Pass.field" names of a compiled graph's G-buffer (the first live pass that outputs the standard channels
+/// linearZ, mvec and meshId) that the age tracker reads; empty when the graph has none.
 std::vector<std::string> ageGBufferFields(const RenderGraph& graph);
 
 /// Views of those fields after a frame; nullopt when one is missing or of another format.

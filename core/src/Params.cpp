@@ -27,6 +27,16 @@ const char* paramTypeName(ParamType t) {
     return "?";
 }
 
+const char* paramRoleName(ParamRole r) {
+    switch (r) {
+        case ParamRole::None: return "";
+        case ParamRole::SampleCount: return "sampleCount";
+        case ParamRole::Seed: return "seed";
+        case ParamRole::AutoReset: return "autoReset";
+    }
+    return "?";
+}
+
 ParamDecl& ParamList::push(std::string name, ParamType type) {
     ParamDecl d;
     d.name = std::move(name);
@@ -116,6 +126,12 @@ ParamBuilder ParamList::addEnumImpl(std::string name, std::function<int()> get, 
 const ParamDecl* ParamList::find(const std::string& name) const {
     for (const auto& d : mDecls)
         if (d.name == name) return &d;
+    return nullptr;
+}
+
+const ParamDecl* ParamList::findRole(ParamRole role) const {
+    for (const auto& d : mDecls)
+        if (role != ParamRole::None && d.role == role) return &d;
     return nullptr;
 }
 
@@ -234,6 +250,15 @@ std::string ParamList::declarationProblem() const {
             if (std::set<std::string>(d.enumValues.begin(), d.enumValues.end()).size() != d.enumValues.size())
                 return name + " lists an enum value twice";
             if (!d.defaultValue().is_string()) return name + " has a default outside its enum values";
+        }
+        if (d.role != ParamRole::None) {
+            const ParamType wanted = d.role == ParamRole::AutoReset ? ParamType::Bool : ParamType::Int;
+            if (d.type != wanted)
+                return fmt::format("{} plays the role {}, which needs a parameter of type {}", name,
+                                   paramRoleName(d.role), paramTypeName(wanted));
+            if (const ParamDecl* first = findRole(d.role); first != &d)
+                return fmt::format("{} plays the role {}, which parameter '{}' already plays", name,
+                                   paramRoleName(d.role), printable(first->name));
         }
         if (!numeric) continue;
         const json def = d.defaultValue();

@@ -117,6 +117,7 @@ void AccumulatePass::declareParams(ParamList& p) {
             "stop after this many frames and keep their mean (0 = never stop); lowering it below the frames "
             "already accumulated restarts");
     p.add("autoReset", &mAutoReset, true)
+        .role(ParamRole::AutoReset)
         .doc(
             "restart when the camera or a scene instance moved, or an animated light changed, in this frame (jitter "
             "alone does not restart); "

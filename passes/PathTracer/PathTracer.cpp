@@ -12,6 +12,7 @@
 #include "ShadeSimd.h"
 #include "loom/CameraKernels.h"
 #include "loom/CameraRays.h"
+#include "loom/Channels.h"
 #include "loom/EmbreeRays.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
@@ -21,20 +22,18 @@
 namespace loom {
 
 namespace {
-const char kVBuffer[] = "vbuffer";
-const char kColor[] = "color";
-const char kAlbedo[] = "albedo";
-const char kSpecAlbedo[] = "specAlbedo";
-const char kEmission[] = "emission";
-const char kDirect[] = "direct";
-const char kIndirect[] = "indirect";
-const char kGradient[] = "gradient";
+using channel::kAlbedo;
+using channel::kColor;
+using channel::kDirect;
+using channel::kEmission;
+using channel::kGradient;
+using channel::kGradientBlock;
+using channel::kIndirect;
+using channel::kSpecAlbedo;
+using channel::kVBuffer;
 // History of the temporal gradients: the primary hit and luminance of each 3x3 block's sample of the frame.
 const char kGradientHits[] = "gradientHits";
 const char kGradientLuminance[] = "gradientLuminance";
-
-/// Side of the square blocks of pixels that each give one temporal-gradient sample (A-SVGF's strata).
-constexpr uint32_t kGradientBlock = 3;
 
 /// The pixel of block (bx, by) whose sample frame `frameIndex` keeps for the next frame's temporal gradient: one
 /// of the block's pixels at random (a hash of block and frame), so the samples do not form a fixed pattern.
@@ -232,7 +231,10 @@ void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
 
 void PathTracer::declareParams(ParamList& p) {
     p.add("maxBounces", &mMaxBounces, 3).range(0, 64).doc("scattering events per path (0: emission seen directly)");
-    p.add("samplesPerPixel", &mSamplesPerPixel, 1).range(1, 4096).doc("paths per pixel per frame");
+    p.add("samplesPerPixel", &mSamplesPerPixel, 1)
+        .range(1, 4096)
+        .role(ParamRole::SampleCount)
+        .doc("paths per pixel per frame");
     p.add("rrStartBounce", &mRrStartBounce, 2).range(0, 64).doc("Russian roulette from this bounce on");
     p.addEnum("lightSampling", &mLightSampling, LightSamplingMode::Mis, {"mis", "nee", "bsdf"})
         .doc("direct light by MIS of light and BRDF sampling, light sampling only, or BRDF sampling only");
@@ -248,7 +250,7 @@ void PathTracer::declareParams(ParamList& p) {
             "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
     p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda"})
         .doc("where to run; without a usable CUDA device, auto and cuda run on the CPU");
-    p.add("seed", &mSeed, 0).range(0, 1 << 30).doc("decorrelates runs that share frame indices");
+    p.add("seed", &mSeed, 0).range(0, 1 << 30).role(ParamRole::Seed).doc("decorrelates runs that share frame indices");
     p.addEnum("emissionWeights", &mEmissionWeights, EmissionWeights::Texture, {"texture", "area"})
         .doc(
             "light selection: emissive triangles by area times their emission's mean over the triangle (an emissive "

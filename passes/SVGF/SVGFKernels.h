@@ -19,6 +19,7 @@
 #include <glm/glm.hpp>
 
 #include "AtrousKernels.h"
+#include "loom/Channels.h"
 #include "loom/Kernel.h"
 #include "loom/Texture.h"
 
@@ -299,8 +300,8 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 /// path tracer's `gradient` channel holds, on last frame's pixel grid, for one sample of each 3x3 block (replicated
 /// over the block) the luminance of that sample re-shaded this frame with the same surface point and random numbers,
 /// and its luminance last frame. Where nothing changed the two are equal. The change of a block comes from the
-/// samples of the 3x3 blocks around it (antilagChange).
-inline constexpr uint32_t kGradientBlock = 3;  ///< side of the blocks of the gradient channel (its contract)
+/// samples of the 3x3 blocks around it (antilagChange). The block side is the channel's contract (loom/Channels.h).
+using channel::kGradientBlock;
 
 inline constexpr float kAntilagMaxRatio = 16.f;  ///< bound of the history's rescaling (either way)
 

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "loom/Camera.h"
+#include "loom/Channels.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 
@@ -16,17 +17,17 @@ using namespace svgf;
 namespace {
 
 // Inputs (standard channel names, so they wire by name from the G-buffer and the path tracer).
-const char kColor[] = "color";
-const char kDirect[] = "direct";
-const char kIndirect[] = "indirect";
-const char kAlbedo[] = "albedo";
-const char kSpecAlbedo[] = "specAlbedo";
-const char kEmission[] = "emission";
-const char kLinearZ[] = "linearZ";
-const char kNormW[] = "normW";
-const char kMvec[] = "mvec";
-const char kMeshId[] = "meshId";
-const char kGradient[] = "gradient";
+using channel::kAlbedo;
+using channel::kColor;
+using channel::kDirect;
+using channel::kEmission;
+using channel::kGradient;
+using channel::kIndirect;
+using channel::kLinearZ;
+using channel::kMeshId;
+using channel::kMvec;
+using channel::kNormW;
+using channel::kSpecAlbedo;
 // Last frame's guides from the G-buffer's @prev edges (optional: without them SVGF keeps its own copies).
 const char kLinearZPrev[] = "linearZPrev";
 const char kNormWPrev[] = "normWPrev";

@@ -4,6 +4,7 @@
 #include <atomic>
 
 #include "TAASimd.h"
+#include "loom/Channels.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 
@@ -17,7 +18,7 @@ using taa::TaaInputs;
 namespace {
 
 const char kColorIn[] = "colorIn";
-const char kMvec[] = "mvec";
+using channel::kMvec;
 const char kColorOut[] = "colorOut";
 const char kColorHistory[] = "colorHistory";
 

@@ -2,6 +2,7 @@
 // Typed parameter declarations: declared once per pass, bound to the pass's
 // own members. They are the single source of truth for JSON parsing,
 // validation, the viewer's UI and the generated pass reference.
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
@@ -17,6 +18,19 @@ enum class ParamType { Bool, Int, Float, Enum, String, Vec3, Vec4 };
 
 const char* paramTypeName(ParamType t);
 
+/// A standard meaning a parameter can declare, so a tool that drives passes it does not know (`loom bench`) asks
+/// for "the parameter that plays this role" instead of a pass type and a parameter name. A pass gives a role to
+/// at most one of its parameters.
+enum class ParamRole : uint8_t {
+    None,
+    SampleCount,  ///< int >= 1: samples per pixel per frame; the output is their mean
+    Seed,         ///< int: decorrelates the random numbers of runs that share frame indices
+    AutoReset,    ///< bool, of a pass that accumulates frames: true restarts the running mean when the view changes
+};
+
+/// "sampleCount", "seed", "autoReset" ("" for None).
+const char* paramRoleName(ParamRole r);
+
 struct ParamDecl {
     std::string name;
     ParamType type = ParamType::Float;
@@ -28,6 +42,8 @@ struct ParamDecl {
     std::function<nlohmann::json()> get;
     std::function<void(const nlohmann::json&)> set;
     std::function<nlohmann::json()> defaultValue;
+
+    ParamRole role = ParamRole::None;  ///< the standard meaning it declares, if any
 };
 
 /// Chained setters on a declaration.
@@ -37,6 +53,7 @@ public:
     ParamBuilder& range(double lo, double hi) { mDecl.min = lo; mDecl.max = hi; return *this; }
     ParamBuilder& min(double lo) { mDecl.min = lo; return *this; }
     ParamBuilder& doc(std::string text) { mDecl.doc = std::move(text); return *this; }
+    ParamBuilder& role(ParamRole r) { mDecl.role = r; return *this; }
 
 private:
     ParamDecl& mDecl;
@@ -62,6 +79,8 @@ public:
 
     const std::vector<ParamDecl>& decls() const { return mDecls; }
     const ParamDecl* find(const std::string& name) const;
+    /// The parameter that plays `role`, or nullptr.
+    const ParamDecl* findRole(ParamRole role) const;
 
     /// Validates and assigns. Throws loom::Error (BadInput) naming `where`
     /// (e.g. "/passes/1/params/alpha" or "SVGF.alpha") for an unknown name
@@ -73,7 +92,8 @@ public:
     /// All values (or only those that differ from their default) as a JSON object.
     nlohmann::json toJson(bool onlyNonDefault) const;
     /// What is wrong with the declarations themselves, or empty: a name that is not plain, a name declared twice,
-    /// an empty or non-finite range, an enum without values, a default outside its own range or values.
+    /// an empty or non-finite range, an enum without values, a default outside its own range or values, a role
+    /// given twice or to a parameter of another type than the role's.
     std::string declarationProblem() const;
 
 private:

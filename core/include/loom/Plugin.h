@@ -11,8 +11,8 @@
 
 #include "loom/RenderPass.h"
 
-/// Bumped whenever RenderPass, PassContext or the registrar change layout.
-#define LOOM_PLUGIN_ABI_VERSION 3
+/// Bumped whenever RenderPass, PassContext or the registrar change layout (4: ParamDecl::role).
+#define LOOM_PLUGIN_ABI_VERSION 4
 
 #if defined(_WIN32)
 #define LOOM_PLUGIN_EXPORT extern "C" __declspec(dllexport)
