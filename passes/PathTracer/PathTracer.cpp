@@ -48,10 +48,6 @@ float gradientLuminance(glm::vec3 c) {
     return luminance(c);
 }
 
-bool finite(glm::vec3 v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
 /// Mixed into a path's key for its point in the pixel under pixelFilter "box".
 constexpr uint64_t kPixelSampleKey = 0x5851F42D4C957F2Dull;
 
@@ -193,7 +189,7 @@ struct PixelSum {
     uint32_t kept = 0;
     /// Adds one path's result; false when it was dropped.
     bool add(const pt::PathResult& r) {
-        if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) return false;
+        if (!isFinite(r.color) || !isFinite(r.direct) || !isFinite(r.indirect)) return false;
         sum += glm::dvec3(r.color);
         direct += glm::dvec3(r.direct);
         indirect += glm::dvec3(r.indirect);
