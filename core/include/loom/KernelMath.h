@@ -8,7 +8,9 @@
 // and kernels with a vector twin reproduce each other bit for bit. Each function here is therefore spelt in the one
 // order its callers rely on; a caller that needs another order calls the variant named for it. luminance() is
 // written without FMAs: a translation unit built with -ffp-contract=off evaluates it as three products and two sums
-// (the vector luminanceSum), one built with GCC's default contraction as luminanceFma (the vector luminanceFma).
+// (the vector luminanceSum); one built with GCC's default contraction gets the FMAs the compiler picks (GCC 12:
+// fma(B, b, fma(R, r, G g))), so code that must match a vector twin either turns contraction off or calls
+// luminanceFma, whose FMAs are explicit.
 #include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>
@@ -20,8 +22,7 @@ namespace loom {
 // ---------------------------------------------------------------------------------------------------------------------
 // Luminance
 
-/// The Rec. 709 luminance weights, Y = 0.2126 R + 0.7152 G + 0.0722 B of linear RGB (ITU-R BT.709 item 3.3), in
-/// double: the precision of the metrics.
+/// The Rec. 709 luminance weights of linear R, G and B (ITU-R BT.709), in double: the precision of the metrics.
 inline constexpr double kRec709R = 0.2126, kRec709G = 0.7152, kRec709B = 0.0722;
 /// The same weights in float, for the kernels (each the float nearest the decimal).
 inline constexpr float kLuminanceR = float(kRec709R), kLuminanceG = float(kRec709G), kLuminanceB = float(kRec709B);
@@ -31,8 +32,8 @@ LOOM_HD inline float luminance(const glm::vec3& c) {
     return kLuminanceR * c.r + kLuminanceG * c.g + kLuminanceB * c.b;
 }
 
-/// luminance() with explicit FMAs, fma(B, b, fma(G, g, R r)): what a contracting compiler makes of luminance(), on
-/// every compiler and with any flags.
+/// Rec. 709 luminance with explicit FMAs, fma(B, b, fma(G, g, R r)): the same bits on every compiler, with any
+/// flags, and in the vector form of the same name.
 LOOM_HD inline float luminanceFma(float r, float g, float b) {
     return fmaf(kLuminanceB, b, fmaf(kLuminanceG, g, kLuminanceR * r));
 }

@@ -28,7 +28,7 @@ HWY_INLINE V luminanceSum(D d, V r, V g, V b) {
                    hn::Mul(hn::Set(d, kLuminanceB), b));
 }
 
-/// Rec. 709 luminance as fma(B, b, fma(G, g, R r)): luminanceFma(), and luminance() where the compiler contracts.
+/// Rec. 709 luminance as fma(B, b, fma(G, g, R r)): luminanceFma() lane-wise.
 template <class D, class V>
 HWY_INLINE V luminanceFma(D d, V r, V g, V b) {
     return hn::MulAdd(hn::Set(d, kLuminanceB), b,
