@@ -17,6 +17,7 @@
 #include "hwy/contrib/math/math-inl.h"
 #include "hwy/highway.h"
 #include "loom/Error.h"
+#include "loom/KernelMath.h"
 #include "loom/Parallel.h"
 
 namespace loom {
@@ -1032,7 +1033,7 @@ void FlickerAccumulator::add(MetricImage frame) {
             const glm::vec4* row = frame.row(y);
             for (uint32_t x = tile.x0; x < tile.x1; ++x) {
                 const size_t i = size_t(y) * mWidth + x;
-                const double l = 0.2126 * row[x].x + 0.7152 * row[x].y + 0.0722 * row[x].z;
+                const double l = kRec709R * row[x].x + kRec709G * row[x].y + kRec709B * row[x].z;
                 if (!std::isfinite(l)) {
                     mHadNonFinite[i] = 1;
                     continue;

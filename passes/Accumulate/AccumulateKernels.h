@@ -20,6 +20,7 @@
 #include <glm/glm.hpp>
 
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 
 namespace loom::accumulate {
 
@@ -34,17 +35,6 @@ struct PixelState {
     glm::dvec4 sumDouble{0.0};
     uint32_t count = 0;  ///< finite samples in the sum
 };
-
-/// True unless the float is a NaN or an infinity (all exponent bits set). A
-/// bit test rather than std::isfinite, so it holds under any math flags and
-/// in device code.
-LOOM_HD inline bool isFinite(float v) {
-    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
-}
-
-LOOM_HD inline bool isFinite(const glm::vec4& v) {
-    return isFinite(v.x) && isFinite(v.y) && isFinite(v.z) && isFinite(v.w);
-}
 
 /// sum + compensation accumulates x with the rounding error of the float
 /// addition carried in compensation (Neumaier). The error term is exact: for

@@ -45,6 +45,7 @@
 
 #include "BrdfTables.h"
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 #include "loom/SurfaceKernels.h"
 
 namespace loom::pt {
@@ -59,17 +60,6 @@ inline constexpr float kDielectricF0 = 0.04f;
 /// would give 0/0 in the pdf; alpha = 1e-3 is a mirror for any practical purpose (lobe about 0.1 degree wide) while
 /// D's peak 1 / (pi alpha^2) ~ 3e5 stays far from float overflow.
 inline constexpr float kMinAlpha = 1e-3f;
-
-/// max(x, lo) with std::fmax's answer lo for a NaN x, as a compare and select: GCC keeps std::fmax a libm call
-/// (fmaxf) unless NaN and signed-zero rules are relaxed for the whole file.
-LOOM_HD inline float maxOr(float x, float lo) {
-    return x > lo ? x : lo;
-}
-
-/// Luminance of linear sRGB / Rec. 709 primaries (ITU-R BT.709, Y coefficients).
-LOOM_HD inline float luminance(glm::vec3 c) {
-    return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b;
-}
 
 // ---------------------------------------------------------------------------------------------------------------------
 // Local frame
@@ -139,7 +129,7 @@ LOOM_HD inline glm::vec2 sampleConcentricDisk(glm::vec2 u) {
 /// et al., "Physically Based Rendering"). pdf = cos(theta) / pi.
 LOOM_HD inline glm::vec3 sampleCosineHemisphere(glm::vec2 u) {
     const glm::vec2 d = sampleConcentricDisk(u);
-    return glm::vec3(d.x, d.y, std::sqrt(maxOr(1.f - d.x * d.x - d.y * d.y, 0.f)));
+    return glm::vec3(d.x, d.y, std::sqrt(maxf(1.f - d.x * d.x - d.y * d.y, 0.f)));
 }
 
 /// Solid-angle pdf of sampleCosineHemisphere() for a direction with n.w = cosTheta.
@@ -153,7 +143,7 @@ LOOM_HD inline float cosineHemispherePdf(float cosTheta) {
 /// GGX alpha from glTF perceptual roughness: alpha = roughness^2 (glTF Appendix B, "Specular BRDF"), clamped to
 /// kMinAlpha.
 LOOM_HD inline float alphaFromRoughness(float roughness) {
-    return maxOr(roughness * roughness, kMinAlpha);
+    return maxf(roughness * roughness, kMinAlpha);
 }
 
 /// GGX normal distribution D(h) for a unit local half vector (Walter et al. 2007, eq. 33), written as
@@ -212,9 +202,9 @@ LOOM_HD inline glm::vec3 sampleGgxVndf(glm::vec3 wo, float alpha, glm::vec2 u) {
     const glm::vec2 cs = cosSinTurn(u.y);  // phi = 2 pi u.y
     const float p1 = r * cs.x;
     const float s = 0.5f * (1.f + vh.z);
-    const float p2 = (1.f - s) * std::sqrt(maxOr(1.f - p1 * p1, 0.f)) + s * r * cs.y;
-    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(maxOr(1.f - p1 * p1 - p2 * p2, 0.f)) * vh;
-    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, maxOr(nh.z, 0.f)));
+    const float p2 = (1.f - s) * std::sqrt(maxf(1.f - p1 * p1, 0.f)) + s * r * cs.y;
+    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(maxf(1.f - p1 * p1 - p2 * p2, 0.f)) * vh;
+    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, maxf(nh.z, 0.f)));
 }
 
 /// Solid-angle density of wi = reflect(-wo, h) for h drawn by sampleGgxVndf(): D_wo(h) / (4 wo.h) (Heitz 2018; the
@@ -286,7 +276,7 @@ struct GgxAlbedo {
 /// E and Es at (mu = n.wo, roughness), bilinear in (sqrt(mu), roughness).
 LOOM_HD inline GgxAlbedo ggxAlbedo(float mu, float roughness) {
     float fx, fy;
-    const int x = tableCell(std::sqrt(maxOr(mu, 0.f)), fx), y = tableCell(roughness, fy);
+    const int x = tableCell(std::sqrt(maxf(mu, 0.f)), fx), y = tableCell(roughness, fy);
     const float* r0 = ggxAlbedoTable() + 2 * (y * kBrdfTableSize + x);
     const float* r1 = r0 + 2 * kBrdfTableSize;
     const float e0 = r0[0] + (r0[2] - r0[0]) * fx, e1 = r1[0] + (r1[2] - r1[0]) * fx;

@@ -9,8 +9,9 @@
 #include <cstdint>
 #include <glm/glm.hpp>
 
-#include "BRDF.h"  // kPi, kInvPi, luminance
+#include "BRDF.h"  // kPi, kInvPi
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 #include "loom/SceneView.h"
 #include "loom/SurfaceKernels.h"
 

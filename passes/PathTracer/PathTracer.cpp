@@ -44,11 +44,7 @@ glm::uvec2 gradientPixel(uint32_t bx, uint32_t by, uint64_t frameIndex, uint32_t
 
 /// Rec. 709 luminance, what the temporal gradients compare.
 float gradientLuminance(glm::vec3 c) {
-    return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b;
-}
-
-bool finite(glm::vec3 v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+    return luminance(c);
 }
 
 /// Mixed into a path's key for its point in the pixel under pixelFilter "box".
@@ -192,7 +188,7 @@ struct PixelSum {
     uint32_t kept = 0;
     /// Adds one path's result; false when it was dropped.
     bool add(const pt::PathResult& r) {
-        if (!finite(r.color) || !finite(r.direct) || !finite(r.indirect)) return false;
+        if (!isFinite(r.color) || !isFinite(r.direct) || !isFinite(r.indirect)) return false;
         sum += glm::dvec3(r.color);
         direct += glm::dvec3(r.direct);
         indirect += glm::dvec3(r.indirect);
@@ -313,7 +309,7 @@ void PathTracer::buildEnvironment(const Scene& scene) {
             float* row = &mEnvConditional[size_t(y) * (env.width + 1)];
             row[0] = 0.f;
             for (uint32_t x = 0; x < env.width; ++x) {
-                acc += double(pt::luminance(env.texels[size_t(y) * env.width + x])) * sinTheta;
+                acc += double(luminance(env.texels[size_t(y) * env.width + x])) * sinTheta;
                 row[x + 1] = float(acc);
             }
             for (uint32_t x = 1; x <= env.width; ++x)
@@ -334,7 +330,7 @@ void PathTracer::buildEnvironment(const Scene& scene) {
         v.weightSum = float(total);
         mLights.hasEnv = total > 0.0;
     } else {
-        mLights.hasEnv = pt::luminance(env.color * env.intensity) > 0.f;
+        mLights.hasEnv = luminance(env.color * env.intensity) > 0.f;
     }
     mEnvSource = &scene;
 }
@@ -388,7 +384,7 @@ const std::vector<float>& PathTracer::triangleEmission(const Scene& scene, uint3
     }
     means.resize(n);
     const SceneView& view = scene.view();
-    const float unresolved = kUnresolvedEmissionWeight * pt::luminance(mat.emissiveFactor);
+    const float unresolved = kUnresolvedEmissionWeight * luminance(mat.emissiveFactor);
     // Triangles are independent: the means do not depend on the thread count.
     parallelFor2D(
         n, 1,
@@ -416,7 +412,7 @@ void PathTracer::buildLights(const Scene& scene) {
         const bool textured = mat.emissiveTexture.image >= 0;
         const bool perTriangle = textured && mEmissionWeights == EmissionWeights::Texture;
         const std::vector<float>* means = perTriangle ? &triangleEmission(scene, i) : nullptr;
-        const float lum = pt::luminance(mat.emissiveFactor);
+        const float lum = luminance(mat.emissiveFactor);
         for (uint32_t t = 0; t < mesh.triangleCount(); ++t) {
             const glm::vec3 a = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t]], 1.f));
             const glm::vec3 b = glm::vec3(inst.world * glm::vec4(mesh.positions[mesh.indices[3 * t + 1]], 1.f));
@@ -452,7 +448,7 @@ void PathTracer::buildLights(const Scene& scene) {
         p.cosInner = std::cos(l.innerConeAngle);
         p.cosOuter = std::cos(l.outerConeAngle);
         p.range = l.range;
-        if (pt::luminance(p.intensity) > 0.f) mPunctual.push_back(p);
+        if (luminance(p.intensity) > 0.f) mPunctual.push_back(p);
     }
 
     pt::LightsView& L = mLights;

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include "loom/simd/KernelMath-inl.h"
+
 namespace loom::pt {
 
 namespace hn = hwy::HWY_NAMESPACE;
@@ -52,7 +54,7 @@ HWY_INLINE M nonZero(D d, const V3& a) {
     return hn::Or(hn::Or(hn::Ne(a.x, z), hn::Ne(a.y, z)), hn::Ne(a.z, z));
 }
 HWY_INLINE V luminance(D d, const V3& c) {
-    return hn::MulAdd(hn::Set(d, 0.2126f), c.x, hn::MulAdd(hn::Set(d, 0.7152f), c.y, hn::Set(d, 0.0722f) * c.z));
+    return simd::HWY_NAMESPACE::luminanceFmaBlueFirst(d, c.x, c.y, c.z);
 }
 HWY_INLINE V clamp01(D d, V v) {
     return hn::Min(hn::Max(v, hn::Zero(d)), hn::Set(d, 1.f));

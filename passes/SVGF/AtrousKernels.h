@@ -21,6 +21,7 @@
 #include <glm/glm.hpp>
 
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 #include "loom/Texture.h"
 
 namespace loom::svgf {
@@ -38,9 +39,6 @@ inline constexpr float kAtrousEpsilon = 1e-10f;
 inline constexpr float kAtrousMaxCosine = 1.01f;
 /// The largest normal weight: its square, summed over 25 taps, stays finite.
 inline constexpr float kAtrousMaxNormalWeight = 1e15f;
-
-/// Rec. 709 luminance.
-LOOM_HD inline float luminance(const glm::vec3& c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
 
 /// 3x3 Gaussian of the variance (alpha) around (x, y) at unit spacing, over the in-frame, non-miss pixels.
 LOOM_HD inline float blurredVariance(ImageView<const glm::vec4> illum, ImageView<const glm::vec2> linearZ, int x,

@@ -57,6 +57,7 @@ inline LevelConstants makeConstants(int step, const AtrousParams& p) {
 #include <hwy/cache_control.h>
 #include <hwy/contrib/math/math-inl.h>
 #include "SimdCommon-inl.h"
+#include "loom/simd/KernelMath-inl.h"
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
@@ -69,14 +70,9 @@ using D = hn::ScalableTag<float>;
 using DI = hn::RebindToSigned<D>;
 using V = hn::Vec<D>;
 
-/// q(g) ~ 2^g on [0, 1): exp2NonPositive's polynomial, sqrt(2) p(g - 1/2) for the degree-4 minimax p of 2^f on
-/// [-0.5, 0.5] (kWeightExp2C*) expanded in powers of g, so its relative error is p's (<= 2.7e-6 in float).
-HWY_INLINE V exp2Fraction(D d, V g) {
-    V q = hn::MulAdd(hn::Set(d, 0.013534167781472206f), g, hn::Set(d, 0.052011460065841675f));
-    q = hn::MulAdd(q, g, hn::Set(d, 0.2414427548646927f));
-    q = hn::MulAdd(q, g, hn::Set(d, 0.6930038332939148f));
-    return hn::MulAdd(q, g, hn::Set(d, 1.0000026226043701f));
-}
+/// q(g) ~ 2^g on [0, 1) (loom/KernelMath.h): sqrt(2) p(g - 1/2) for the degree-4 minimax p of 2^f on [-0.5, 0.5]
+/// that varianceExp2Neg uses, expanded in powers of g, so its relative error is p's (<= 2.7e-6 in float).
+using ::loom::simd::HWY_NAMESPACE::exp2Unit;
 
 /// 2^u for u <= 0 where `use`, exactly 0 elsewhere: 2^floor(u) q(u - floor(u)), u clamped to -kWeightMaxExponent
 /// (a weight stays a normal float, >= 2^-100). The exponent is accumulated negative (every scale and constant of
@@ -89,11 +85,11 @@ HWY_INLINE V maskedExp2(D d, hn::Mask<D> use, V u) {
     u = hn::Max(u, hn::Set(d, -kWeightMaxExponent));
 #if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
     const V g{_mm512_reduce_ps(u.raw, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC)};
-    return V{_mm512_maskz_scalef_ps(use.raw, exp2Fraction(d, g).raw, u.raw)};
+    return V{_mm512_maskz_scalef_ps(use.raw, exp2Unit(d, g).raw, u.raw)};
 #else
     const DI di;
     const V n = hn::Floor(u);
-    const V q = exp2Fraction(d, hn::Sub(u, n));
+    const V q = exp2Unit(d, hn::Sub(u, n));
     const auto e = hn::ShiftLeft<23>(hn::ConvertTo(di, n));  // 2^n: n added to q's exponent field
     return hn::IfThenElseZero(use, hn::BitCast(d, hn::Add(hn::BitCast(di, q), e)));
 #endif
@@ -361,7 +357,7 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
                 hn::StoreU(g, d, out.planes.g + o);
                 hn::StoreU(b, d, out.planes.b + o);
                 hn::StoreU(v, d, out.planes.v + o);
-                hn::StoreU(luminanceOf(d, r, g, b), d, out.planes.l + o);
+                hn::StoreU(luminanceFma(d, r, g, b), d, out.planes.l + o);
             }
             const uint32_t count = std::min<uint32_t>(uint32_t(N), t.x1 - x0);
             if (out.modulate.views.dst.data) remodulateStore(d, out.modulate, x0, y, count, r, g, b);

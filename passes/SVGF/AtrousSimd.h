@@ -31,16 +31,14 @@
 
 #include "AtrousKernels.h"
 #include "SVGFKernels.h"
+#include "loom/KernelMath.h"
 #include "loom/Texture.h"
 
 namespace loom::svgf::simd {
 
-/// Widest vector the planes are padded for (AVX-512: 16 floats).
-inline constexpr uint32_t kMaxLanes = 16;
-
 /// Shape of every plane: pixel (x, y) at y * stride + margin + x. The margin (left; the right one is margin +
-/// kMaxLanes) covers taps up to `margin` columns off-frame; taps further out are off-frame for every pixel of the
-/// row and are skipped.
+/// kMaxLanes, the widest vector: loom/KernelMath.h) covers taps up to `margin` columns off-frame; taps further out
+/// are off-frame for every pixel of the row and are skipped.
 struct PlaneLayout {
     uint32_t width = 0, height = 0;
     uint32_t margin = 0;
@@ -97,7 +95,7 @@ inline void packSignalPixel(const PlaneLayout& L, const SignalPlanes& S, uint32_
     S.g[o] = sanitiseScalar(p.g);
     S.b[o] = sanitiseScalar(p.b);
     S.v[o] = sanitiseScalar(p.a);
-    S.l[o] = std::fma(0.0722f, S.b[o], std::fma(0.7152f, S.g[o], 0.2126f * S.r[o]));
+    S.l[o] = luminanceFma(S.r[o], S.g[o], S.b[o]);
 }
 
 /// Writes the guide planes' interior from linearZ (x: depth, y: derivative) and normal (xyz).

@@ -21,6 +21,7 @@
 #include "AtrousKernels.h"
 #include "loom/Channels.h"
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 #include "loom/Texture.h"
 
 namespace loom::svgf {
@@ -41,29 +42,9 @@ inline constexpr float kNormalThreshold = 0.9f;
 /// Bilinear footprints whose valid weights sum below this fall back to the 3x3 search (Falcor).
 inline constexpr float kMinBilinearWeight = 0.01f;
 
-/// max and min that compile to one instruction (fmaxf/fminf stay library calls without -ffinite-math-only, for
-/// their NaN rules). maxf(NaN, b) and minf(NaN, b) are b.
-LOOM_HD inline float maxf(float a, float b) {
-    return a > b ? a : b;
-}
-LOOM_HD inline float minf(float a, float b) {
-    return a < b ? a : b;
-}
-
-/// True unless the float is a NaN or an infinity (a bit test: holds under any math flags and on devices).
-LOOM_HD inline bool isFiniteBits(float v) {
-    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
-}
-LOOM_HD inline bool isFinite3(const glm::vec3& v) {
-    return isFiniteBits(v.x) && isFiniteBits(v.y) && isFiniteBits(v.z);
-}
-LOOM_HD inline bool isFinite4(const glm::vec4& v) {
-    return isFinite3(glm::vec3(v)) && isFiniteBits(v.w);
-}
-
 /// Non-finite channels become 0.
 LOOM_HD inline glm::vec3 finiteOrZero(const glm::vec3& v) {
-    return glm::vec3(isFiniteBits(v.x) ? v.x : 0.f, isFiniteBits(v.y) ? v.y : 0.f, isFiniteBits(v.z) ? v.z : 0.f);
+    return glm::vec3(isFinite(v.x) ? v.x : 0.f, isFinite(v.y) ? v.y : 0.f, isFinite(v.z) ? v.z : 0.f);
 }
 
 /// The albedo demodulation divides by (and remodulation multiplies with).
@@ -172,7 +153,7 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, const TemporalParam
     Reprojected r;
     if (v.prevChange.data) r.change = glm::vec2(0.f);  // summed over the taps below
     const glm::vec2 mv = v.mvec.at(x, y);
-    if (!isFiniteBits(mv.x) || !isFiniteBits(mv.y)) return r;
+    if (!isFinite(mv.x) || !isFinite(mv.y)) return r;
     // uvPrev = uv + mvec with uv = (x + 0.5) / width: the previous pixel centre coordinate is (uv + mvec) size - 0.5.
     const float w = float(v.color.width), h = float(v.color.height);
     const float px = float(x) + mv.x * w + p.jitterDelta.x, py = float(y) + mv.y * h + p.jitterDelta.y;
@@ -210,8 +191,8 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, const TemporalParam
     r.length *= inv;
     if (v.prevChange.data) r.change *= inv;
     // History that is not finite (it never should be) counts as disoccluded, so it cannot persist.
-    r.valid = isFinite4(r.illum0) && isFinite4(r.illum1) && isFinite4(r.moments) && isFiniteBits(r.length) &&
-              isFiniteBits(r.change.x) && isFiniteBits(r.change.y);
+    r.valid = isFinite(r.illum0) && isFinite(r.illum1) && isFinite(r.moments) && isFinite(r.length) &&
+              isFinite(r.change.x) && isFinite(r.change.y);
     if (!r.valid) r = Reprojected{};
     return r;
 }
@@ -230,7 +211,7 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
 
     const glm::vec4 c0 = p.split ? v.direct.at(x, y) : v.color.at(x, y);
     const glm::vec4 c1 = p.split ? v.indirect.at(x, y) : glm::vec4(0.f);
-    const bool sampleFinite = isFinite3(glm::vec3(c0)) && isFinite3(glm::vec3(c1));
+    const bool sampleFinite = isFinite(glm::vec3(c0)) && isFinite(glm::vec3(c1));
     if (!(z.x >= 0.f)) {
         // Miss: passed through by the modulation stage; no history.
         v.integrated0.at(x, y) = glm::vec4(0.f);
@@ -340,17 +321,13 @@ LOOM_HD inline glm::vec2 antilagChange(const glm::vec2* samples, int count) {
 /// - the normal power, for phiNormal >= kWeightSeriesMinPhi, as exp(-phi (d + d^2/2 + d^3/3 + d^4/4)) with
 ///   d = 1 - n.n' in [0, 1) (the first terms of -ln(1 - d); absolute error <= 3.2e-6 for phi >= 32); below that,
 ///   powf;
-/// - 2^-t = 2^-round(t) p(t - round(t)), p a degree-4 fit of 2^f on [-0.5, 0.5] (relative error <= 2.6e-6), t
-///   clamped to 100 (weights below 2^-100 stay there).
+/// - 2^-t = 2^-round(t) p(round(t) - t), p a degree-4 fit of 2^f on [-0.5, 0.5] (exp2Neg of loom/KernelMath.h,
+///   relative error <= 2.6e-6), t clamped to 100 (weights below 2^-100 stay there).
 /// The à-trous fast path (AtrousSimd.cpp) uses the same normal series and clamp, its exponential the same
 /// polynomial shifted to [0, 1).
 inline constexpr float kWeightSeriesMinPhi = 32.f;
 inline constexpr float kWeightLog2e = 1.44269504088896341f;
 inline constexpr float kWeightMaxExponent = 100.f;
-/// p(f), lowest degree first (scalars, not an array: device code reads them as constants).
-inline constexpr float kWeightExp2C0 = 0.9999992614457146f, kWeightExp2C1 = 0.6931218147367706f,
-                       kWeightExp2C2 = 0.2402474482794381f, kWeightExp2C3 = 0.05591786031930501f,
-                       kWeightExp2C4 = 0.009570101908089415f;
 
 /// 1 / |(i, j)| for tap (i, j) of the 7x7 footprint (|i|, |j| <= 3); 0 for the centre, whose depth term is 0.
 LOOM_HD inline float varianceInvDistance(int i, int j) {
@@ -380,15 +357,7 @@ LOOM_HD inline float varianceInvDistance(int i, int j) {
 
 /// 2^-t for t >= 0 (see above): the operations of the vector stage, lane for lane.
 LOOM_HD inline float varianceExp2Neg(float t) {
-    const float magic = 12582912.f;  // 1.5 * 2^23: adding it rounds to an integer in the low mantissa bits
-    t = minf(t, kWeightMaxExponent);
-    const float r = t + magic;
-    const float f = (r - magic) - t;  // in [-0.5, 0.5]
-    float q = kWeightExp2C4 * f + kWeightExp2C3;
-    q = q * f + kWeightExp2C2;
-    q = q * f + kWeightExp2C1;
-    q = q * f + kWeightExp2C0;
-    return bitsToFloat(floatBits(q) - (floatBits(r) << 23));
+    return exp2Neg(minf(t, kWeightMaxExponent));
 }
 
 /// What every tap of a centre shares: the scales of the luminance term and of the normal series.
@@ -474,7 +443,7 @@ LOOM_HD inline void varianceEstimatePixel(const VarianceViews& v, uint32_t x, ui
             const int qx = int(x) + i;
             if (qx < 0 || qx >= w) continue;
             const glm::vec2 zq = v.linearZ.at(uint32_t(qx), uint32_t(qy));
-            if (!(zq.x >= 0.f) || !isFiniteBits(zq.x)) continue;  // misses and non-finite depths
+            if (!(zq.x >= 0.f) || !isFinite(zq.x)) continue;  // misses and non-finite depths
             const glm::vec3 nq = finiteOrZero(glm::vec3(v.normW.at(uint32_t(qx), uint32_t(qy))));
             const glm::vec4 q0 = v.integrated0.at(uint32_t(qx), uint32_t(qy));
             const glm::vec4 mq = momentsAt(v.moments0, v.moments1, uint32_t(qx), uint32_t(qy));
@@ -526,7 +495,7 @@ struct ModulateViews {
 /// channels as 0). The alpha channel is the input colour's.
 LOOM_HD inline glm::vec4 remodulate(const glm::vec3& illum, const glm::vec4& color, const glm::vec4& albedo,
                                     const glm::vec3& emission, float z) {
-    const float alpha = isFiniteBits(color.a) ? color.a : 1.f;
+    const float alpha = isFinite(color.a) ? color.a : 1.f;
     if (!(z >= 0.f)) return glm::vec4(finiteOrZero(glm::vec3(color)), alpha);
     return glm::vec4(illum * guardedAlbedo(albedo) + finiteOrZero(emission), alpha);
 }

@@ -235,7 +235,7 @@ void SVGFPass::passThrough(PassContext& ctx) const {
     const auto dst = ctx.output(kFiltered)->view<glm::vec4>();
     parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) {
         const glm::vec4 c = color.at(x, y);
-        dst.at(x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), isFiniteBits(c.a) ? c.a : 1.f);
+        dst.at(x, y) = glm::vec4(finiteOrZero(glm::vec3(c)), isFinite(c.a) ? c.a : 1.f);
     });
     if (Texture* t = ctx.output(kVariance)) t->clear();
     if (Texture* t = ctx.output(kHistoryLength)) t->clear();

@@ -13,13 +13,18 @@
 #include <hwy/highway.h>
 #include <hwy/cache_control.h>
 #include "SimdCommon-inl.h"
-#include "../common/LaneIndex-inl.h"
+#include "loom/simd/KernelMath-inl.h"
+#include "loom/simd/LaneIndex-inl.h"
+#include "loom/simd/Stream-inl.h"
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
 namespace loom::svgf::simd::HWY_NAMESPACE {
 
 namespace hn = hwy::HWY_NAMESPACE;
+using ::loom::simd::HWY_NAMESPACE::firstPlusLane;
+using ::loom::simd::HWY_NAMESPACE::luminanceSum;
+using ::loom::simd::HWY_NAMESPACE::streamCopy;
 
 using D = hn::ScalableTag<float>;
 using DI = hn::RebindToSigned<D>;
@@ -38,12 +43,6 @@ HWY_INLINE V minOf(V a, V b) {
 /// a * (1 - t) + b * t, as glm::mix.
 HWY_INLINE V mixOf(D d, V a, V b, V t) {
     return hn::Add(hn::Mul(a, hn::Sub(hn::Set(d, 1.f), t)), hn::Mul(b, t));
-}
-
-/// luminance() lane-wise (the same operations).
-HWY_INLINE V luminanceExact(D d, V r, V g, V b) {
-    return hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
-                   hn::Mul(hn::Set(d, 0.0722f), b));
 }
 
 /// needsSpatialVariance lane-wise: a hit whose history is shorter than kSpatialVarianceFrames.
@@ -215,7 +214,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         hn::LoadInterleaved2(d, &v.mvec.at(x, y).x, mx, my);
         if (!hn::AllTrue(d, hn::And(hn::IsFinite(mx), hn::IsFinite(my)))) return kEveryLane;
         const float W = float(v.color.width), H = float(v.color.height);
-        const V xf = lanes::HWY_NAMESPACE::firstPlusLane(d, float(x)), yf = hn::Set(d, float(y));
+        const V xf = firstPlusLane(d, float(x)), yf = hn::Set(d, float(y));
         const V px = hn::Add(hn::Add(xf, hn::Mul(mx, hn::Set(d, W))), hn::Set(d, p.jitterDelta.x));
         const V py = hn::Add(hn::Add(yf, hn::Mul(my, hn::Set(d, H))), hn::Set(d, p.jitterDelta.y));
         const V fx0 = hn::Floor(px), fy0 = hn::Floor(py);
@@ -354,14 +353,14 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         return minOf(maxOf(hn::Div(hn::Sub(c, e), a), zero), maxIllum);
     };
     const V lr = demodulate(cr, er, ar), lg = demodulate(cg, eg, ag), lb = demodulate(cb, eb, ab);
-    const V lum = luminanceExact(d, lr, lg, lb);
+    const V lum = luminanceSum(d, lr, lg, lb);
     // Signal 1 (split): divided by the albedo, no emission (that is part of direct). Unsplit it is zero throughout.
     V kr = zero, kg = zero, kb = zero, lum1 = zero;
     if (split) {
         kr = demodulate(dr, zero, ar);
         kg = demodulate(dg, zero, ag);
         kb = demodulate(db, zero, ab);
-        lum1 = luminanceExact(d, kr, kg, kb);
+        lum1 = luminanceSum(d, kr, kg, kb);
     }
     const V moments[4] = {lum, hn::Mul(lum, lum), lum1, hn::Mul(lum1, lum1)};
     const int momentCount = split ? 4 : 2;
@@ -485,16 +484,7 @@ TemporalCounts TemporalFusedTarget(const TemporalViews& v, const TemporalParams&
 
 /// varianceExp2Neg lane-wise (the same operations).
 HWY_INLINE V exp2NegOf(D d, V t) {
-    const DI di;
-    const V magic = hn::Set(d, 12582912.f);
-    t = minOf(t, hn::Set(d, kWeightMaxExponent));
-    const V r = hn::Add(t, magic);
-    const V f = hn::Sub(hn::Sub(r, magic), t);
-    V q = hn::Add(hn::Mul(hn::Set(d, kWeightExp2C4), f), hn::Set(d, kWeightExp2C3));
-    q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C2));
-    q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C1));
-    q = hn::Add(hn::Mul(q, f), hn::Set(d, kWeightExp2C0));
-    return hn::BitCast(d, hn::Sub(hn::BitCast(di, q), hn::ShiftLeft<23>(hn::BitCast(di, r))));
+    return ::loom::simd::HWY_NAMESPACE::exp2Neg(d, minOf(t, hn::Set(d, kWeightMaxExponent)));
 }
 
 struct VarianceJob {
@@ -554,7 +544,7 @@ size_t varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
     V ir, ig, ib, ia, kr = zero, kg = zero, kb = zero, ka = zero;
     hn::LoadInterleaved4(d, &v.integrated0.at(x, y).x, ir, ig, ib, ia);
     if constexpr (kSplit) hn::LoadInterleaved4(d, &v.integrated1.at(x, y).x, kr, kg, kb, ka);
-    const V lc0 = luminanceExact(d, ir, ig, ib), lc1 = kSplit ? luminanceExact(d, kr, kg, kb) : zero;
+    const V lc0 = luminanceSum(d, ir, ig, ib), lc1 = kSplit ? luminanceSum(d, kr, kg, kb) : zero;
     const V invPhiDepth = hn::Div(one, hn::Mul(maxOf(dzc, hn::Set(d, 1e-8f)), hn::Set(d, 3.f)));
     const V invPhiL = hn::Set(d, j.s.invPhiL), log2e = hn::Set(d, kWeightLog2e);
     const V t0 = hn::Set(d, j.s.terms[0]), t1 = hn::Set(d, j.s.terms[1]), t2 = hn::Set(d, j.s.terms[2]),
@@ -586,7 +576,7 @@ size_t varianceVector(const VarianceJob& j, uint32_t x, uint32_t y) {
             auto accumulate = [&](const SignalPlanes& P, V lc, V ma, V mb, VarianceSums& s) HWY_ATTR {
                 const V rq = hn::LoadU(d, P.r + q), gq = hn::LoadU(d, P.g + q), bq = hn::LoadU(d, P.b + q);
                 const V linear =
-                    hn::Add(hn::Mul(hn::Abs(hn::Sub(lc, luminanceExact(d, rq, gq, bq))), invPhiL), depthTerm);
+                    hn::Add(hn::Mul(hn::Abs(hn::Sub(lc, luminanceSum(d, rq, gq, bq))), invPhiL), depthTerm);
                 const V w = hn::IfThenElseZero(use, exp2NegOf(d, hn::Add(hn::Mul(linear, log2e), normal)));
                 s.r = hn::Add(s.r, hn::Mul(w, rq));
                 s.g = hn::Add(s.g, hn::Mul(w, gq));

@@ -52,6 +52,7 @@
 #include <glm/glm.hpp>
 
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 
 namespace loom::taa {
 
@@ -82,16 +83,6 @@ struct TaaInputs {
     bool historyValid = false;
     bool compress = false;  ///< resolve in compressColor() space: every current colour is compressed as it is read
 };
-
-LOOM_HD inline bool isFinite(float v) {
-    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
-}
-LOOM_HD inline bool isFinite(const glm::vec2& v) {
-    return isFinite(v.x) && isFinite(v.y);
-}
-LOOM_HD inline bool isFinite(const glm::vec4& v) {
-    return isFinite(v.x) && isFinite(v.y) && isFinite(v.z) && isFinite(v.w);
-}
 
 /// RGB + alpha to YCoCg + alpha (Malvar & Sullivan 2003): Y = R/4 + G/2 + B/4,
 /// Co = (R - B)/2, Cg = -R/4 + G/2 - B/4.

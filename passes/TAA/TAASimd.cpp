@@ -78,14 +78,14 @@ uint32_t clampIndex(int v, uint32_t size) {
 #include <hwy/foreach_target.h>  // must come first: it includes this file once per target
 #include <hwy/highway.h>
 #include <hwy/cache_control.h>
-#include "../common/LaneIndex-inl.h"
+#include "loom/simd/LaneIndex-inl.h"
 // clang-format on
 
 HWY_BEFORE_NAMESPACE();
 namespace loom::taa::HWY_NAMESPACE {
 
 using namespace detail;
-using lanes::HWY_NAMESPACE::firstPlusLane;
+using ::loom::simd::HWY_NAMESPACE::firstPlusLane;
 
 namespace hn = hwy::HWY_NAMESPACE;
 using FloatTag = hn::ScalableTag<float>;

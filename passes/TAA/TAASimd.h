@@ -5,13 +5,11 @@
 #include <cstdint>
 
 #include "TAAKernels.h"
+#include "loom/KernelMath.h"
 #include "loom/Parallel.h"
 #include "loom/Texture.h"
 
 namespace loom::taa {
-
-/// The most floats one vector of a compiled target holds (AVX-512).
-inline constexpr uint32_t kMaxLanes = 16;
 
 // Tiles of 128 x 16 pixels: rows long enough (2 KiB of colour) for the hardware prefetchers to stream, few enough
 // rows that the tile's scratch stays in L2.

@@ -10,6 +10,7 @@
 
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
+#include "loom/simd/KernelMath-inl.h"
 
 namespace loom {
 
@@ -124,8 +125,7 @@ HWY_INLINE void logLuminanceVec(FloatTag d, FloatVec r, FloatVec g, FloatVec b, 
     r = exposeVec(d, r, one);
     g = exposeVec(d, g, one);
     b = exposeVec(d, b, one);
-    const FloatVec lum = hn::Add(hn::Add(hn::Mul(hn::Set(d, 0.2126f), r), hn::Mul(hn::Set(d, 0.7152f), g)),
-                                 hn::Mul(hn::Set(d, 0.0722f), b));
+    const FloatVec lum = simd::HWY_NAMESPACE::luminanceSum(d, r, g, b);
     const FloatVec v = hn::Add(hn::Set(d, tonemap::kLogEpsilon), lum);
     // fastLog2, lane-wise.
     const IntVec bits = hn::BitCast(di, v);
@@ -239,8 +239,7 @@ uint64_t mapRow(const ToneMapParams& p, const SrgbEncodeTable& table, const glm:
     scalar.op = Op;
     for (; x < x1; ++x) {
         const glm::vec4 c = in[x];
-        nonFinite +=
-            !tonemap::isFinite(c.x) || !tonemap::isFinite(c.y) || !tonemap::isFinite(c.z) || !tonemap::isFinite(c.w);
+        nonFinite += !isFinite(c.x) || !isFinite(c.y) || !isFinite(c.z) || !isFinite(c.w);
         const glm::vec4 mapped = tonemap::toneMapPixel(scalar, c);
         out[x] = tonemap::packSrgb8(table, mapped);
         if (outFloat) outFloat[x] = mapped;
@@ -254,8 +253,7 @@ uint64_t mapRowReference(const ToneMapParams& p, const SrgbEncodeTable& table, c
     uint64_t nonFinite = 0;
     for (uint32_t x = x0; x < x1; ++x) {
         const glm::vec4 c = in[x];
-        nonFinite +=
-            !tonemap::isFinite(c.x) || !tonemap::isFinite(c.y) || !tonemap::isFinite(c.z) || !tonemap::isFinite(c.w);
+        nonFinite += !isFinite(c.x) || !isFinite(c.y) || !isFinite(c.z) || !isFinite(c.w);
         const glm::vec4 mapped = tonemap::toneMapPixel(p, c);
         out[x] = tonemap::packSrgb8(table, mapped);
         if (outFloat) outFloat[x] = mapped;
@@ -423,7 +421,7 @@ void ToneMapPass::execute(PassContext& ctx) {
     bool measureWhileMapping = false;
     double dt = 0.0;
     if (mAutoExposure) {
-        const bool prevUsable = ctx.historyValid() && prevState.x > 0.f && tonemap::isFinite(prevState.x);
+        const bool prevUsable = ctx.historyValid() && prevState.x > 0.f && isFinite(prevState.x);
         dt = time - (double(prevState.z) + double(prevState.w));
         measureWhileMapping = prevUsable && dt >= 0.0 && mAdaptationTime > 0.f;
         if (measureWhileMapping) {

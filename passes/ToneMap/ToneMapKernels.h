@@ -24,6 +24,7 @@
 #include <glm/glm.hpp>
 
 #include "loom/Kernel.h"
+#include "loom/KernelMath.h"
 #include "loom/SrgbEncode.h"
 
 namespace loom::tonemap {
@@ -53,12 +54,6 @@ struct ToneMapParams {
     float invWhiteSquared = 1.f;  ///< modified Reinhard: 1 / whitePoint^2
     float hableInvWhite = 1.f;    ///< Hable: 1 / hableCurve(kHableWhite)
 };
-
-/// True unless the float is a NaN or an infinity (a bit test: holds under any
-/// math flags and in device code).
-LOOM_HD inline bool isFinite(float v) {
-    return (floatBits(v) & 0x7F800000u) != 0x7F800000u;
-}
 
 /// Hable's curve before white normalisation.
 LOOM_HD inline float hableCurve(float x) {
@@ -128,11 +123,6 @@ LOOM_HD inline uint32_t packSrgb8(const SrgbEncodeTable& t, const glm::vec4& c) 
 
 // ---------------------------------------------------------------------------
 // Auto exposure
-
-/// Rec. 709 luminance.
-LOOM_HD inline float luminance(const glm::vec3& c) {
-    return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
-}
 
 /// log2 of a positive normal float, |error| < 1e-8 + float rounding: the
 /// exponent, and for the mantissa m in [sqrt(1/2), sqrt(2)) the series

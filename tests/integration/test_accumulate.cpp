@@ -602,13 +602,13 @@ TEST(AccumulateKernels, NeumaierSumKeepsWhatFloatLoses) {
 
 TEST(AccumulateKernels, NonFiniteSamplesAreRejectedWhole) {
     const float inf = std::numeric_limits<float>::infinity();
-    EXPECT_FALSE(accumulate::isFinite(std::numeric_limits<float>::quiet_NaN()));
-    EXPECT_FALSE(accumulate::isFinite(-std::numeric_limits<float>::signaling_NaN()));
-    EXPECT_FALSE(accumulate::isFinite(inf));
-    EXPECT_FALSE(accumulate::isFinite(-inf));
-    EXPECT_TRUE(accumulate::isFinite(std::numeric_limits<float>::max()));
-    EXPECT_TRUE(accumulate::isFinite(std::numeric_limits<float>::denorm_min()));
-    EXPECT_TRUE(accumulate::isFinite(-0.f));
+    EXPECT_FALSE(isFinite(std::numeric_limits<float>::quiet_NaN()));
+    EXPECT_FALSE(isFinite(-std::numeric_limits<float>::signaling_NaN()));
+    EXPECT_FALSE(isFinite(inf));
+    EXPECT_FALSE(isFinite(-inf));
+    EXPECT_TRUE(isFinite(std::numeric_limits<float>::max()));
+    EXPECT_TRUE(isFinite(std::numeric_limits<float>::denorm_min()));
+    EXPECT_TRUE(isFinite(-0.f));
 
     for (auto precision : {accumulate::Precision::Float, accumulate::Precision::Kahan, accumulate::Precision::Double}) {
         accumulate::PixelState s;
@@ -633,8 +633,8 @@ TEST(AccumulateKernels, HugeSamplesNeverMakeTheMeanNonFinite) {
         uint32_t kept = 0;
         for (int i = 0; i < 5; ++i) kept += accumulate::addSample(precision, s, glm::vec4(big, 1.f, -big, 0.f)) ? 1 : 0;
         const glm::vec4 m = accumulate::mean(precision, s);
-        EXPECT_TRUE(accumulate::isFinite(m)) << int(precision);
-        EXPECT_TRUE(accumulate::isFinite(accumulate::sumAsFloat(precision, s))) << int(precision);
+        EXPECT_TRUE(isFinite(m)) << int(precision);
+        EXPECT_TRUE(isFinite(accumulate::sumAsFloat(precision, s))) << int(precision);
         EXPECT_EQ(m, glm::vec4(big, 1.f, -big, 0.f)) << int(precision);
         EXPECT_EQ(kept, precision == accumulate::Precision::Double ? 5u : 1u) << int(precision);
     }

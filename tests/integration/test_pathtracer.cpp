@@ -22,6 +22,7 @@
 #include "TestUtil.h"
 #include "loom/CameraKernels.h"
 #include "loom/Graph.h"
+#include "loom/KernelMath.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 #include "loom/RenderGraph.h"
@@ -144,7 +145,7 @@ void lookAt(Scene& s, glm::vec3 eye, glm::vec3 target, float fovY) {
 
 double meanLuminance(const std::vector<glm::dvec3>& img) {
     double sum = 0.0;
-    for (const auto& v : img) sum += 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
+    for (const auto& v : img) sum += kRec709R * v.x + kRec709G * v.y + kRec709B * v.z;
     return sum / double(img.size());
 }
 
@@ -164,7 +165,7 @@ BlockEstimate estimateBlocks(RenderGraph& g, Scene& scene, uint32_t W, uint32_t 
         for (uint32_t y = 0; y < H; ++y)
             for (uint32_t x = 0; x < W; ++x) {
                 const glm::dvec3 v = img[size_t(y) * W + x];
-                const double lum = 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
+                const double lum = kRec709R * v.x + kRec709G * v.y + kRec709B * v.z;
                 m[(y / B) * (W / B) + x / B] += lum / double(B * B);
                 m[blocks - 1] += lum / double(W * H);
                 pixSum[y * W + x] += lum;

@@ -17,6 +17,7 @@
 #include "../../passes/ToneMap/ToneMapKernels.h"
 #include "TestUtil.h"
 #include "loom/Graph.h"
+#include "loom/KernelMath.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 #include "loom/RenderGraph.h"
@@ -54,7 +55,7 @@ double closedForm(const std::string& op, double v, double white = 4.0) {
     return std::clamp(r, 0.0, 1.0);
 }
 double rec709(const glm::vec4& c) {
-    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+    return kRec709R * c.x + kRec709G * c.y + kRec709B * c.z;
 }
 
 std::unique_ptr<Texture> copyOf(const Texture& t) {

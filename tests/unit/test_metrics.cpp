@@ -9,6 +9,7 @@
 #include <random>
 
 #include "TestUtil.h"
+#include "loom/KernelMath.h"
 #include "loom/Metrics.h"
 #include "loom/Parallel.h"
 
@@ -310,7 +311,7 @@ TEST(Metrics, FlickerOfAlternatingFramesIsHalfTheSwing) {
     const Texture lo = constantImage(40, 24, {0.2f, 0.2f, 0.2f, 1}), hi = constantImage(40, 24, {0.6f, 0.6f, 0.6f, 1});
     for (int i = 0; i < 10; ++i) acc.add(i % 2 ? hi : lo);
     EXPECT_EQ(acc.frames(), 10u);
-    const double lumaLo = 0.2 * (0.2126 + 0.7152 + 0.0722), lumaHi = 0.6 * (0.2126 + 0.7152 + 0.0722);
+    const double lumaLo = 0.2 * (kRec709R + kRec709G + kRec709B), lumaHi = 0.6 * (kRec709R + kRec709G + kRec709B);
     EXPECT_NEAR(acc.value().value, (lumaHi - lumaLo) / 2.0, 1e-7);
     // A NaN frame is skipped per pixel and reported.
     Texture bad = constantImage(40, 24, {0.2f, 0.2f, 0.2f, 1});

@@ -135,8 +135,8 @@ MetricValue temporalError(MetricImage test, MetricImage testPrev, MetricImage re
 MetricValue temporalError(const Texture& test, const Texture& testPrev, const Texture& ref, const Texture& refPrev);
 
 /// Static-camera flicker: takes frames one by one and reports the mean over pixels of the
-/// temporal standard deviation (population form, divide by n) of the luminance
-/// Y = 0.2126 R + 0.7152 G + 0.0722 B (linear, no tone map). A pixel's non-finite samples are
+/// temporal standard deviation (population form, divide by n) of the Rec. 709 luminance Y
+/// (linear, no tone map; in double, kRec709R/G/B of KernelMath.h). A pixel's non-finite samples are
 /// skipped; `nonFinite` counts the pixels that had at least one. Pixels with fewer than two finite
 /// samples are left out of the mean. Running sums are kept per pixel in double (Welford), so the
 /// result is independent of the thread count.

@@ -1,10 +1,11 @@
-// Lane-index vectors for the Highway translation units of the passes (TAASimd.cpp, TemporalSimd.cpp). Included once
-// per target inside each unit's foreach_target loop, hence the toggling include guard Highway's -inl headers use.
-#if defined(LOOM_PASSES_LANE_INDEX_INL_H_) == defined(HWY_TARGET_TOGGLE)
-#ifdef LOOM_PASSES_LANE_INDEX_INL_H_
-#undef LOOM_PASSES_LANE_INDEX_INL_H_
+// Lane-index vectors for the Highway translation units. Include it after <hwy/highway.h>; in a unit compiled once
+// per target (foreach_target) it is included once per target, hence the toggling include guard of Highway's -inl
+// headers.
+#if defined(LOOM_SIMD_LANE_INDEX_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef LOOM_SIMD_LANE_INDEX_INL_H_
+#undef LOOM_SIMD_LANE_INDEX_INL_H_
 #else
-#define LOOM_PASSES_LANE_INDEX_INL_H_
+#define LOOM_SIMD_LANE_INDEX_INL_H_
 #endif
 
 #include <hwy/highway.h>
@@ -12,7 +13,7 @@
 #include <cstdint>
 
 HWY_BEFORE_NAMESPACE();
-namespace loom::lanes::HWY_NAMESPACE {
+namespace loom::simd::HWY_NAMESPACE {
 
 namespace hn = hwy::HWY_NAMESPACE;
 
@@ -32,7 +33,7 @@ HWY_INLINE hn::Vec<D> firstPlusLane(D d, T first) {
         return hn::Add(lane, hn::Set(d, hn::TFromD<D>(first)));
 }
 
-}  // namespace loom::lanes::HWY_NAMESPACE
+}  // namespace loom::simd::HWY_NAMESPACE
 HWY_AFTER_NAMESPACE();
 
-#endif  // LOOM_PASSES_LANE_INDEX_INL_H_
+#endif  // LOOM_SIMD_LANE_INDEX_INL_H_
