@@ -852,6 +852,77 @@ FlipSetup makeFlipSetup(double ppd) {
     }
 }
 
+/// Values per pixel and image after FLIP's vertical filtering: filtered Yy, Cx, Cz, edge x, edge y, point x, point y.
+constexpr int kFlipPlanes = 7;
+
+/// FLIP's per-pixel combination over one tile, from the vertically filtered planes (kFlipPlanes per image, tw x th
+/// each): the colour difference (HyAB of the Hunt-adjusted L*a*b*), the feature difference, and the error per
+/// pixel, written to errorImage when given. Returns the tile's sum.
+Sums flipCombineTile(const FlipSetup& f, const LdrPlanes& planes, const Tile& tile, uint32_t W, const float* vbuf,
+                     int tw, int th, ImageView<float>* errorImage) {
+    constexpr int kV = kFlipPlanes;
+    // Per-pixel combination, in stages over a row so each loop vectorises (the powers go through
+    // Highway's Exp and Log).
+    Sums part;
+    constexpr float invSqrt2 = 0.70710678118654752f;
+    std::vector<float>& rowBuf = scratch(3, size_t(22) * tw);
+    float* xyzn = rowBuf.data();          // 6 rows: X/Xw, Y/Yw, Z/Zw of both images
+    float* cube = xyzn + size_t(6) * tw;  // 6 rows: their cube roots
+    float* lab = cube + size_t(6) * tw;   // 6 rows: L, a', b' of both images
+    float* feat = lab + size_t(6) * tw;   // 4 rows: edge, point of both images
+    std::vector<float>& rowBuf2 = scratch(1, size_t(6) * tw);
+    float* hy = rowBuf2.data();
+    float* expo = hy + tw;
+    float* colour = expo + tw;
+    float* err = colour + tw;
+    float* thirds = err + tw;
+    float* qcs = thirds + tw;
+    for (int x = 0; x < tw; ++x) {
+        thirds[x] = 1.0f / 3.0f;
+        qcs[x] = kQc;
+    }
+    const float pcm = kPc * f.cmax;
+    for (int y = 0; y < th; ++y) {
+        const float* vb[2][kV];
+        for (int img = 0; img < 2; ++img)
+            for (int q = 0; q < kV; ++q) vb[img][q] = vbuf + ((size_t(img) * kV + q) * th + y) * tw;
+        for (int img = 0; img < 2; ++img) {
+            filteredToXyzRow(f, vb[img][0], vb[img][1], vb[img][2], tw, xyzn + size_t(3 * img) * tw);
+            for (int k = 0; k < 3; ++k)
+                powRow(xyzn + size_t(3 * img + k) * tw, thirds, cube + size_t(3 * img + k) * tw, tw);
+            huntLabRow(xyzn + size_t(3 * img) * tw, cube + size_t(3 * img) * tw, tw, lab + size_t(3 * img) * tw);
+            featureRow(vb[img][3], vb[img][4], vb[img][5], vb[img][6], tw, feat + size_t(2 * img) * tw,
+                       feat + size_t(2 * img + 1) * tw);
+        }
+        const float* l0 = lab;
+        const float* l1 = lab + size_t(3) * tw;
+        for (int x = 0; x < tw; ++x) {
+            const float dl = l0[x] - l1[x], da = l0[tw + x] - l1[tw + x], db = l0[2 * tw + x] - l1[2 * tw + x];
+            hy[x] = std::abs(dl) + std::sqrt(da * da + db * db);  // HyAB
+            // Features of Y/Yw = (Yy + 16) / 116 (the derivative kernels sum to 0, so only the scale).
+            const float de = std::abs(feat[x] - feat[size_t(2) * tw + x]);
+            const float dp = std::abs(feat[tw + x] - feat[size_t(3) * tw + x]);
+            const float fd = std::min(1.0f, invSqrt2 * (1.0f / 116.0f) * std::max(de, dp));
+            expo[x] = 1.0f - std::sqrt(fd);  // 1 - dE_f, qf = 0.5
+        }
+        powRow(hy, qcs, err, tw);  // dE_c = HyAB^qc
+        for (int x = 0; x < tw; ++x) {
+            const float dc = err[x];
+            colour[x] = std::min(1.0f, dc < pcm ? (kPt / pcm) * dc : kPt + (dc - pcm) / (f.cmax - pcm) * (1.0f - kPt));
+        }
+        powRow(colour, expo, err, tw);
+        const size_t rowBase = size_t(tile.y0 + uint32_t(y)) * W + tile.x0;
+        const uint8_t* bad = planes.nonFinite.data() + rowBase;
+        for (int x = 0; x < tw; ++x) err[x] = bad[x] ? 1.0f : err[x];
+        double rowSum = 0.0;
+        for (int x = 0; x < tw; ++x) rowSum += err[x];
+        part.sum += rowSum;
+        if (errorImage) std::copy_n(err, tw, errorImage->row(tile.y0 + uint32_t(y)) + tile.x0);
+    }
+    part.count = uint64_t(tw) * uint64_t(th);
+    return part;
+}
+
 }  // namespace
 
 MetricValue flip(MetricImage test, MetricImage ref, ImageView<float>* errorImage, const FlipViewing& viewing) {
@@ -872,7 +943,7 @@ MetricValue flip(MetricImage test, MetricImage ref, ImageView<float>* errorImage
     // Per image the horizontal pass makes 7 rows per source row: CSF Yy, Cx, Cz (two Gaussians), and
     // the feature g, g', g'' of Yy. The vertical pass makes 7 values per pixel: filtered Yy, Cx, Cz,
     // edge x, edge y, point x, point y.
-    constexpr int kH = 7, kV = 7;
+    constexpr int kH = 7, kV = kFlipPlanes;
     const Sums s = reduceTiles(test.width, test.height, kFilterTile, [&](const Tile& tile) {
         const int tw = int(tile.x1 - tile.x0), th = int(tile.y1 - tile.y0);
         const int rows = th + 2 * halo, padW = tw + 2 * halo;
@@ -923,67 +994,7 @@ MetricValue flip(MetricImage test, MetricImage ref, ImageView<float>* errorImage
                 convolveColumn(hcol(4, fo), tw, f.g2.data(), featTaps, tw, vrow(6));  // point y: g(x) g''(y)
             }
         }
-        // Per-pixel combination, in stages over a row so each loop vectorises (the powers go through
-        // Highway's Exp and Log).
-        Sums part;
-        constexpr float invSqrt2 = 0.70710678118654752f;
-        std::vector<float>& rowBuf = scratch(3, size_t(22) * tw);
-        float* xyzn = rowBuf.data();          // 6 rows: X/Xw, Y/Yw, Z/Zw of both images
-        float* cube = xyzn + size_t(6) * tw;  // 6 rows: their cube roots
-        float* lab = cube + size_t(6) * tw;   // 6 rows: L, a', b' of both images
-        float* feat = lab + size_t(6) * tw;   // 4 rows: edge, point of both images
-        std::vector<float>& rowBuf2 = scratch(1, size_t(6) * tw);
-        float* hy = rowBuf2.data();
-        float* expo = hy + tw;
-        float* colour = expo + tw;
-        float* err = colour + tw;
-        float* thirds = err + tw;
-        float* qcs = thirds + tw;
-        for (int x = 0; x < tw; ++x) {
-            thirds[x] = 1.0f / 3.0f;
-            qcs[x] = kQc;
-        }
-        const float pcm = kPc * f.cmax;
-        for (int y = 0; y < th; ++y) {
-            const float* vb[2][kV];
-            for (int img = 0; img < 2; ++img)
-                for (int q = 0; q < kV; ++q) vb[img][q] = vbuf.data() + ((size_t(img) * kV + q) * th + y) * tw;
-            for (int img = 0; img < 2; ++img) {
-                filteredToXyzRow(f, vb[img][0], vb[img][1], vb[img][2], tw, xyzn + size_t(3 * img) * tw);
-                for (int k = 0; k < 3; ++k)
-                    powRow(xyzn + size_t(3 * img + k) * tw, thirds, cube + size_t(3 * img + k) * tw, tw);
-                huntLabRow(xyzn + size_t(3 * img) * tw, cube + size_t(3 * img) * tw, tw, lab + size_t(3 * img) * tw);
-                featureRow(vb[img][3], vb[img][4], vb[img][5], vb[img][6], tw, feat + size_t(2 * img) * tw,
-                           feat + size_t(2 * img + 1) * tw);
-            }
-            const float* l0 = lab;
-            const float* l1 = lab + size_t(3) * tw;
-            for (int x = 0; x < tw; ++x) {
-                const float dl = l0[x] - l1[x], da = l0[tw + x] - l1[tw + x], db = l0[2 * tw + x] - l1[2 * tw + x];
-                hy[x] = std::abs(dl) + std::sqrt(da * da + db * db);  // HyAB
-                // Features of Y/Yw = (Yy + 16) / 116 (the derivative kernels sum to 0, so only the scale).
-                const float de = std::abs(feat[x] - feat[size_t(2) * tw + x]);
-                const float dp = std::abs(feat[tw + x] - feat[size_t(3) * tw + x]);
-                const float fd = std::min(1.0f, invSqrt2 * (1.0f / 116.0f) * std::max(de, dp));
-                expo[x] = 1.0f - std::sqrt(fd);  // 1 - dE_f, qf = 0.5
-            }
-            powRow(hy, qcs, err, tw);  // dE_c = HyAB^qc
-            for (int x = 0; x < tw; ++x) {
-                const float dc = err[x];
-                colour[x] =
-                    std::min(1.0f, dc < pcm ? (kPt / pcm) * dc : kPt + (dc - pcm) / (f.cmax - pcm) * (1.0f - kPt));
-            }
-            powRow(colour, expo, err, tw);
-            const size_t rowBase = size_t(tile.y0 + uint32_t(y)) * W + tile.x0;
-            const uint8_t* bad = planes.nonFinite.data() + rowBase;
-            for (int x = 0; x < tw; ++x) err[x] = bad[x] ? 1.0f : err[x];
-            double rowSum = 0.0;
-            for (int x = 0; x < tw; ++x) rowSum += err[x];
-            part.sum += rowSum;
-            if (errorImage) std::copy_n(err, tw, errorImage->row(tile.y0 + uint32_t(y)) + tile.x0);
-        }
-        part.count = uint64_t(tw) * uint64_t(th);
-        return part;
+        return flipCombineTile(f, planes, tile, uint32_t(W), vbuf.data(), tw, th, errorImage);
     });
     return {meanOf(s, 1.0), planes.nonFiniteCount};
 }

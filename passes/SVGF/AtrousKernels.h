@@ -26,7 +26,8 @@
 
 namespace loom::svgf {
 
-/// Edge-stopping parameters (the paper's).
+/// Edge-stopping parameters (the paper's). SVGFPass binds its phiColor, phiNormal and phiDepth to this struct, so these
+/// are the pass's defaults too.
 struct AtrousParams {
     float phiColor = 4.f;
     float phiNormal = 128.f;

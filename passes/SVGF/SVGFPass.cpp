@@ -206,11 +206,12 @@ void SVGFPass::declareParams(ParamList& p) {
     p.add("momentsAlpha", &mMomentsAlpha, 0.2f)
         .range(0.0, 1.0)
         .doc("temporal blend factor of the luminance moments (at least 1 / history)");
-    p.add("phiColor", &mPhiColor, 4.f).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
+    const svgf::AtrousParams defaults;
+    p.add("phiColor", &mEdgeStopping.phiColor, defaults.phiColor).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
     // Bounded: a normal's dot product with itself is 1 only to a few units in the last place, so past about 1e8
     // even a pixel's own weight vanishes, and with it the variance's (sum of weights)^2.
-    p.add("phiNormal", &mPhiNormal, 128.f).range(0.0, 1e5).doc("normal edge-stopping exponent (eq. 4)");
-    p.add("phiDepth", &mPhiDepth, 1.f).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
+    p.add("phiNormal", &mEdgeStopping.phiNormal, defaults.phiNormal).range(0.0, 1e5).doc("normal edge-stopping exponent (eq. 4)");
+    p.add("phiDepth", &mEdgeStopping.phiDepth, defaults.phiDepth).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
     p.add("meanVariance", &mMeanVariance, true)
         .doc(
             "true: the a-trous levels get the variance of the accumulated mean (the per-sample variance times the sum "
@@ -341,9 +342,7 @@ void SVGFPass::bindFrame(Frame& f) {
     f.split = splitSignals(connected);
     f.w = ctx.output(kFiltered)->width();
     f.h = ctx.output(kFiltered)->height();
-    f.ap.phiColor = mPhiColor;
-    f.ap.phiNormal = mPhiNormal;
-    f.ap.phiDepth = mPhiDepth;
+    f.ap = mEdgeStopping;
     f.scales = varianceScales(f.ap);
     f.pipe = choosePipeline(f.scales);
     f.referencePixels = uint64_t(f.w) * f.h;

@@ -60,9 +60,7 @@ private:
     int mFeedbackTap = -1;
     float mAlpha = 0.2f;
     float mMomentsAlpha = 0.2f;
-    float mPhiColor = 4.f;
-    float mPhiNormal = 128.f;
-    float mPhiDepth = 1.f;
+    svgf::AtrousParams mEdgeStopping;  ///< phiColor, phiNormal, phiDepth: the kernel's struct holds the defaults
     bool mMeanVariance = true;
     int mMaxHistory = 32;
     bool mReferenceAtrous = false;
