@@ -17,10 +17,6 @@ namespace loom {
 
 namespace {
 
-std::string fieldKey(const std::string& pass, const std::string& field) {
-    return pass + "." + field;
-}
-
 /// A pass's reflection must name each field once, with a plain name ("Pass.field" references and dump file names
 /// are made of it).
 void checkFields(const Reflection& r, const PassDesc& pass) {

@@ -48,10 +48,6 @@ private:
     PageMemory mMemory;
 };
 
-std::string fieldKey(const std::string& pass, const std::string& field) {
-    return pass + "." + field;
-}
-
 std::string bytesText(size_t bytes) {
     if (bytes >= (size_t(1) << 20)) return fmt::format("{:.2f} MiB", bytes / double(1 << 20));
     if (bytes >= 1024) return fmt::format("{:.1f} KiB", bytes / 1024.0);

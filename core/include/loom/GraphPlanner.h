@@ -14,6 +14,9 @@
 
 namespace loom {
 
+/// "Pass.field": how fields are named in references, resources, globs and dump files.
+inline std::string fieldKey(const std::string& pass, const std::string& field) { return pass + "." + field; }
+
 /// What the planner reads. `reflections` holds one first reflection per pass of `desc`, in description order.
 struct PlannerInput {
     const GraphDesc* desc = nullptr;
