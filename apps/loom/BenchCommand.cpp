@@ -26,6 +26,7 @@
 #include "SceneSetup.h"
 #include "loom/Channels.h"
 #include "loom/Error.h"
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 #include "loom/Log.h"
 #include "loom/Metrics.h"

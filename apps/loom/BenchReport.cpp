@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 
 namespace loom::cli::bench {

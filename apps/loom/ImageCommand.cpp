@@ -12,6 +12,7 @@
 #include "CliUtil.h"
 #include "Display.h"
 #include "loom/Error.h"
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 
 namespace loom::cli {

@@ -10,6 +10,7 @@
 #include "CliUtil.h"
 #include "loom/Channels.h"
 #include "loom/Error.h"
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 #include "loom/RenderGraph.h"
 
@@ -83,7 +84,7 @@ std::string standardChannelsMarkdown() {
     s << "## Standard channels\n\n"
       << "Passes name the fields they exchange with these names, so an input with no edge finds its producer by\n"
       << "name (docs/GRAPHS.md); a pass that declares one of them declares it with this format. From\n"
-      << "`core/include/loom/Channels.h`; the `gradient` channel holds one sample per block of "
+      << "`core/graph/include/loom/Channels.h`; the `gradient` channel holds one sample per block of "
       << channel::kGradientBlock << "x" << channel::kGradientBlock << " pixels\n"
       << "(`loom::channel::kGradientBlock`).\n\n"
       << "| channel | format | meaning |\n|---|---|---|\n";

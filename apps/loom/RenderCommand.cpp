@@ -15,6 +15,7 @@
 #include "Interrupt.h"
 #include "SceneSetup.h"
 #include "loom/Error.h"
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 #include "loom/Parallel.h"
 #include "loom/RenderGraph.h"

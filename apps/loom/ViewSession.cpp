@@ -11,6 +11,7 @@
 #include "CliUtil.h"
 #include "Display.h"
 #include "loom/Error.h"
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 #include "loom/InputFile.h"
 

@@ -430,7 +430,12 @@ TEST_F(View, TheWindowZoomsAboutTheMousePansOnDragAndClosesOnEscape) {
                           "wait $pid\n");
     const std::string cmd = "cd " + shellQuoted(mDir.string()) +
                             " && timeout 60 xvfb-run -a -n 250 -s '-screen 0 1024x768x24' bash input.sh > input.log 2>&1";
-    const int status = std::system(cmd.c_str());
+    // A loaded machine can leave the fresh X server unready when the window opens ("no display"): that is the
+    // test bed, not loom, so such a start is tried again.
+    int status = std::system(cmd.c_str());
+    for (int retry = 0;
+         retry < 2 && status != 0 && fileBytes(mDir / "window.log").find("no display") != std::string::npos; ++retry)
+        status = std::system(cmd.c_str());
     ASSERT_EQ(status, 0) << fileBytes(mDir / "input.log") << fileBytes(mDir / "window.log");
     const loom::Texture whole = loom::readImage(mDir / "whole.png");
     const loom::Texture shown = loom::readImage(mDir / "headless.png");

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "loom/Error.h"
+#include "loom/Files.h"
 #include "loom/Graph.h"
 
 using namespace loom;

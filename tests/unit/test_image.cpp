@@ -19,6 +19,7 @@
 
 #include "loom/Error.h"
 #include "loom/Format.h"
+#include "loom/Files.h"
 #include "loom/ImageIO.h"
 #include "loom/Texture.h"
 

@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "loom/Error.h"
-#include "loom/ImageIO.h"
+#include "loom/Files.h"
 #include "loom/InputFile.h"
 
 namespace loom {
@@ -22,18 +22,6 @@ const PassDesc* GraphDesc::findPass(const std::string& n) const {
     return nullptr;
 }
 
-void lineColumn(std::string_view text, size_t offset, size_t& line, size_t& column) {
-    line = 1;
-    column = 1;
-    for (size_t i = 0; i < offset && i < text.size(); ++i) {
-        if (text[i] == '\n') {
-            ++line;
-            column = 1;
-        } else {
-            ++column;
-        }
-    }
-}
 
 ChannelRef parseChannelRef(const std::string& text, const std::string& where, const std::string& file) {
     ChannelRef r;

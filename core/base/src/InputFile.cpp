@@ -11,8 +11,7 @@
 #include <vector>
 
 #include "loom/Error.h"
-#include "loom/Graph.h"
-#include "loom/ImageIO.h"
+#include "loom/Files.h"
 
 namespace loom {
 

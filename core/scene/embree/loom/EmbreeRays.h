@@ -1,8 +1,8 @@
 #pragma once
 // Single rays against an Embree scene, inline so that hot loops (the path
-// tracer's) avoid a call into libloom_core per ray. RayScene uses the same
+// tracer's) avoid a call into libloom_scene per ray. RayScene uses the same
 // functions, so both give identical hits. Including this header needs
-// Embree 3's headers (link the `embree` target).
+// Embree 3's headers: link the `loom_embree_rays` target, which carries them.
 #include <embree3/rtcore.h>
 
 #include <glm/glm.hpp>

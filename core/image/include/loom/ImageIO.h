@@ -1,7 +1,7 @@
 #pragma once
 // Reading and writing images: EXR for float and uint formats (OpenEXR), PNG
-// for 8-bit formats (stb). Writes are atomic: a temporary file in the same
-// folder, then a rename, so a reader never sees a half-written image.
+// for 8-bit formats (stb). Writes are atomic (loom/Files.h), so a reader
+// never sees a half-written image.
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -32,22 +32,9 @@ Texture readImage(const std::filesystem::path& path);
 /// another format, or a damaged or truncated one.
 Texture readRadianceHdr(const std::filesystem::path& path);
 
-/// Checks that a file can be written at `path`: its folder exists and is writable (as writeImage and
-/// writeFileAtomic check first), and the path is not a folder. Throws loom::Error (BadInput, at `where`: the
-/// option that named the file) otherwise, so a command can check its output files before it spends time on their
-/// contents. An empty path, and a path that is one of `inputs` (the command's input files), are bad input too.
-void checkOutputFile(const std::filesystem::path& path, const std::string& where = {},
-                     const std::vector<std::filesystem::path>& inputs = {});
-
 /// Why stb could not decode an image held in memory, for an error message: "an empty file", "a truncated or
 /// corrupt JPEG (stb: bad huffman code)", "a truncated or corrupt PNG (...)", or, when the leading bytes are
 /// neither, "not a PNG or JPEG image (it starts with bytes 47 49 46 38)". `reason`: stbi_failure_reason().
 std::string describeImageDecodeFailure(const unsigned char* bytes, size_t size, const char* reason);
-
-/// The whole file's bytes. Throws loom::Error (Runtime) when reading fails.
-std::string readFileBytes(const std::filesystem::path& path);
-
-/// Writes bytes to a file atomically (temporary + rename). Throws loom::Error.
-void writeFileAtomic(const std::filesystem::path& path, const std::string& bytes);
 
 }  // namespace loom

@@ -63,7 +63,4 @@ nlohmann::json graphToJson(const GraphDesc& g);
 /// Writes a graph file atomically.
 void saveGraph(const GraphDesc& g, const std::filesystem::path& path);
 
-/// Line and column (1-based) of a byte offset in text.
-void lineColumn(std::string_view text, size_t offset, size_t& line, size_t& column);
-
 }  // namespace loom
