@@ -3,7 +3,7 @@
 # Usage: scripts/test.sh [preset]     every test of a preset (release, debug or asan; default release)
 #        scripts/test.sh --sanitize   the asan preset (Debug, AddressSanitizer + UBSan + LeakSanitizer, their options
 #                                     and tests/sanitizers/lsan.supp set by CTest): the tests labelled "sanitize"
-#                                     (those of tests/unit/ and the seeded fuzz samples)
+#                                     (those of tests/unit/ and passes/*/tests/, and the seeded fuzz samples)
 #        scripts/test.sh --sanitize --all   every test of the asan preset
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -1,5 +1,5 @@
 // Compile-only check (nvcc -x cu): the SVGF stage kernels (SVGFKernels.h) are device code.
-#include "SVGFKernels.h"
+#include "../SVGFKernels.h"
 
 __global__ void svgfTemporal(loom::svgf::TemporalViews tv, loom::svgf::TemporalParams tp, int* rejected) {
     if (loom::svgf::temporalPixel(tv, threadIdx.x, blockIdx.x, tp)) atomicAdd(rejected, 1);

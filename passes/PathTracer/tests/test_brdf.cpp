@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "../../passes/PathTracer/BRDF.h"
+#include "../BRDF.h"
 
 using namespace loom;
 using namespace loom::pt;

@@ -1,5 +1,5 @@
 // Compile-only check (nvcc -x cu): the accumulation kernel header is device code.
-#include "AccumulateKernels.h"
+#include "../AccumulateKernels.h"
 
 __global__ void accumulate(loom::accumulate::PixelState* states, const glm::vec4* samples, glm::vec4* out) {
     using namespace loom::accumulate;

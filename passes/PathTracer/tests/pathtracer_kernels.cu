@@ -1,6 +1,6 @@
 // Compile-only check (nvcc -x cu): the path tracer's kernel headers are device code.
-#include "BRDF.h"
-#include "PathTracerKernels.h"
+#include "../BRDF.h"
+#include "../PathTracerKernels.h"
 
 namespace {
 struct DeviceTracer {

@@ -1,8 +1,7 @@
 // Compile-only check (nvcc -x cu): the tone-mapping kernel header is device code.
-#include "ToneMapKernels.h"
+#include "../ToneMapKernels.h"
 
-__global__ void toneMap(const loom::SrgbEncodeTable* table, const glm::vec4* src, uint32_t* dst,
-                        float* logLum) {
+__global__ void toneMap(const loom::SrgbEncodeTable* table, const glm::vec4* src, uint32_t* dst, float* logLum) {
     using namespace loom::tonemap;
     ToneMapParams p;
     p.op = Operator::Hable;

@@ -14,8 +14,8 @@
 #include <stdexcept>
 #include <vector>
 
-#include "../../passes/SVGF/Atrous.h"
-#include "../../passes/SVGF/AtrousSimd.h"
+#include "../Atrous.h"
+#include "../AtrousSimd.h"
 #include "loom/Parallel.h"
 #include "loom/Texture.h"
 

@@ -1,5 +1,5 @@
 // Compile-only check (nvcc -x cu): the TAA kernel header is device code.
-#include "TAAKernels.h"
+#include "../TAAKernels.h"
 
 __global__ void resolve(loom::taa::TaaInputs in, loom::taa::TaaParams p, glm::vec4* out) {
     uint32_t flags = 0;
