@@ -123,6 +123,10 @@ public:
     /// Forget any state carried from previous frames (graph history is
     /// reset by the graph itself).
     virtual void resetHistory() {}
+    /// Work this pass leaves out for the current scene and parameters, one line each, "what: why" (for example
+    /// "emissive-triangle sampling: the scene has no emissive triangles"). `loom check` lists them; the graph
+    /// never calls it while rendering. Called after setScene and compile.
+    virtual std::vector<std::string> skippedWork() const { return {}; }
 
     ParamList& params() { return mParams; }
     const ParamList& params() const { return mParams; }
