@@ -91,6 +91,30 @@ AtrousFilter::FramePlanes AtrousFilter::preparePlanes(ImageView<const glm::vec2>
     return {&mLayout, mGuide, mSignal[0][0], signals >= 2 ? mSignal[1][0] : simd::SignalPlanes{}};
 }
 
+uint32_t AtrousFilter::classifyTiles(ImageView<const glm::vec4> src, const AtrousParams& params) {
+    mSkipTilesPerRow = (mWidth + kSkipTile - 1) / kSkipTile;
+    const uint32_t rows = (mHeight + kSkipTile - 1) / kSkipTile;
+    mSkipTiles.assign(size_t(mSkipTilesPerRow) * rows, 0);
+    const float limit = params.skipRelVariance;
+    if (!(limit > 0.f)) return 0;
+    // One tile per task: each writes its own flag, so the result does not depend on the threads.
+    parallelFor2D(
+        mWidth, mHeight,
+        [&](const Tile& t) {
+            for (uint32_t y = t.y0; y < t.y1; ++y)
+                for (uint32_t x = t.x0; x < t.x1; ++x) {
+                    if (!(mLinearZ.at(x, y).x >= 0.f)) continue;  // misses keep their input anyway
+                    const glm::vec4 p = src.at(x, y);
+                    const float l = luminance(glm::vec3(p));
+                    // Not below (NaN included): the tile is filtered.
+                    if (!(p.a < limit * l * l)) return;
+                }
+            mSkipTiles[size_t(t.y0 / kSkipTile) * mSkipTilesPerRow + t.x0 / kSkipTile] = 1;
+        },
+        kSkipTile, kSkipTile);
+    return uint32_t(std::count(mSkipTiles.begin(), mSkipTiles.end(), uint8_t(1)));
+}
+
 void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst, int iterations,
                        const AtrousParams& params, int feedbackTap, ImageView<glm::vec4> feedback, bool reference,
                        AtrousTimings* timings, const simd::Remodulation* modulate, int slot) {
@@ -99,6 +123,12 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
     bool packed = std::exchange(mSignalPacked[slot], false);
     mSlots = std::max(mSlots, slot + 1);  // a second signal's planes are allocated by ensureLayout below
     if (timings) *timings = AtrousTimings{};
+    const uint32_t skipped = iterations > 0 ? classifyTiles(src, params) : 0;
+    if (timings) {
+        timings->skippedTiles = skipped;
+        timings->tiles = uint32_t(mSkipTiles.size());
+    }
+    const uint8_t* skipTiles = skipped ? mSkipTiles.data() : nullptr;
     if (iterations <= 0) {
         copyImage(src, dst);
         if (wantsFeedback) copyImage(src, feedback);
@@ -121,7 +151,9 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
             parallelFor2D(mWidth, mHeight, [&](const Tile& t) {
                 for (uint32_t y = t.y0; y < t.y1; ++y)
                     for (uint32_t x = t.x0; x < t.x1; ++x)
-                        out.at(x, y) = atrousPixel(in, mLinearZ, mNormal, int(x), int(y), step, params);
+                        out.at(x, y) = skipTiles && skipTiles[(y / kSkipTile) * mSkipTilesPerRow + x / kSkipTile]
+                                           ? in.at(x, y)
+                                           : atrousPixel(in, mLinearZ, mNormal, int(x), int(y), step, params);
             });
             if (wantsFeedback && level == tap) copyImage(asConst(out), feedback);
             in = asConst(out);
@@ -147,6 +179,8 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
         const auto t1 = std::chrono::steady_clock::now();
         const bool last = level == iterations - 1;
         simd::LevelOutputs out;
+        out.skipTiles = skipTiles;
+        out.skipTilesPerRow = mSkipTilesPerRow;
         if (!last) out.planes = signal[(level + 1) % 2];
         const bool feedbackHere = wantsFeedback && level == tap;
         if (last && modulate) {

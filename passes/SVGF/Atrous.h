@@ -18,6 +18,8 @@ namespace loom::svgf {
 struct AtrousTimings {
     double prepareMs = 0.0;
     double levelMs[16] = {};
+    uint32_t skippedTiles = 0;  ///< tiles that kept their input (AtrousParams::skipRelVariance)
+    uint32_t tiles = 0;         ///< tiles of the frame, kSkipTile x kSkipTile
 };
 
 class AtrousFilter {
@@ -54,6 +56,9 @@ private:
     /// (Re)allocates the planes for steps up to maxStep; true when the layout changed (guides need packing).
     bool ensureLayout(int maxStep);
     void packGuide();
+    /// Flags the tiles whose hit pixels of src all have a relative variance below params.skipRelVariance (none
+    /// when it is 0) into mSkipTiles; returns how many.
+    uint32_t classifyTiles(ImageView<const glm::vec4> src, const AtrousParams& params);
 
     ImageView<const glm::vec2> mLinearZ;
     ImageView<const glm::vec4> mNormal;
@@ -68,6 +73,8 @@ private:
     int mSlots = 1;  // signals laid out (mSignal[1] is allocated when 2)
     double mGuideMs = 0.0;
     bool mSignalPacked[2] = {false, false};  // preparePlanes was called: the slot's next input is in mSignal[slot][0]
+    std::vector<uint8_t> mSkipTiles;         // classifyTiles: one flag per tile, mSkipTilesPerRow to a row
+    uint32_t mSkipTilesPerRow = 0;
 };
 
 }  // namespace loom::svgf

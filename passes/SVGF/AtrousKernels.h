@@ -32,7 +32,13 @@ struct AtrousParams {
     float phiColor = 4.f;
     float phiNormal = 128.f;
     float phiDepth = 1.f;
+    /// Low-variance tile skip: a tile of kSkipTile x kSkipTile pixels whose every hit pixel has a variance below
+    /// this times its squared luminance (a relative variance) keeps its input at every level. 0: off (exact).
+    float skipRelVariance = 0.f;
 };
+
+/// Side of the square tiles of AtrousParams::skipRelVariance, in pixels.
+inline constexpr uint32_t kSkipTile = 16;
 
 inline constexpr float kAtrousEpsilon = 1e-10f;
 /// The largest cosine between normals the normal weight uses (the fast path's cap): above 1 only for normals that

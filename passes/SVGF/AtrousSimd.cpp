@@ -20,6 +20,7 @@ namespace loom::svgf::simd::detail {
 // the pipeline: the levels 0.88-0.92x of 64 x 64 tiles; 128 x 32 and 256 x 32 measured alike, longer rows slower).
 constexpr uint32_t kTileSize = 64;
 constexpr uint32_t kLevelTileWidth = 128, kLevelTileHeight = 64;
+static_assert(kSkipTile % kMaxLanes == 0, "a vector lies in one low-variance tile");
 // The B3 weights b(0), b(1), b(2) = 6/16, 4/16, 1/16 as exponents, -log2 b: the tap weight h(i, j) = b(i) b(j)
 // joins the edge-stopping exponent as kB3Exponent[|i|] + kB3Exponent[|j|] (an addend of an FMA, free).
 constexpr float kB3Exponent[3] = {1.4150374992788438f, 2.f, 4.f};
@@ -345,8 +346,10 @@ void filterRows(const PlaneLayout& L, const GuidePlanes& G, const SignalPlanes& 
 
             // A vector of misses only (sky, or the margin past the frame's right edge) keeps its input, as every
             // miss centre does in weighCentre: nothing to weigh.
+            // So does a vector of a low-variance tile (x0 is a multiple of N, which divides kSkipTile).
             V r = rc, g = gc, b = bc, v = kVariance ? vc : zero;
-            if (!hn::AllTrue(d, hn::Lt(zc, zero)))
+            const bool skipped = out.skipTiles && out.skipTiles[(y / kSkipTile) * out.skipTilesPerRow + x0 / kSkipTile];
+            if (!skipped && !hn::AllTrue(d, hn::Lt(zc, zero)))
                 weighCentre<kSeries, kVariance, kPadded>(
                     d, TapContext{G, in, c, W, H, int(y), ptrdiff_t(o), stride, G.dz - G.z}, zc, dzc, ncx, ncy, ncz, rc,
                     gc, bc, vc, lc, r, g, b, v);

@@ -149,6 +149,10 @@ struct LevelOutputs {
     ImageView<glm::vec4> image[2];
     Remodulation modulate;
     bool variance = true;
+    /// Optional: one flag per kSkipTile x kSkipTile tile (row-major, skipTilesPerRow to a row); a set flag makes
+    /// the tile's pixels keep their input, as miss pixels do (AtrousParams::skipRelVariance).
+    const uint8_t* skipTiles = nullptr;
+    uint32_t skipTilesPerRow = 0;
 };
 
 /// Whether the guide's planes (z, dz, nx, ny, nz) and the signal's (r, g, b, v, l) each follow one another

@@ -65,6 +65,7 @@ const char kStatReproject[] = "ms.reproject";
 const char kStatVariance[] = "ms.variance";
 const char kStatAtrousPrepare[] = "ms.atrous.prepare";
 const char kStatAtrous[] = "ms.atrous";
+const char kStatSkippedTiles[] = "atrousSkippedTiles";
 const char kStatModulate[] = "ms.modulate";
 const char kStatAntilag[] = "ms.antilag";
 
@@ -212,6 +213,11 @@ void SVGFPass::declareParams(ParamList& p) {
     // even a pixel's own weight vanishes, and with it the variance's (sum of weights)^2.
     p.add("phiNormal", &mEdgeStopping.phiNormal, defaults.phiNormal).range(0.0, 1e5).doc("normal edge-stopping exponent (eq. 4)");
     p.add("phiDepth", &mEdgeStopping.phiDepth, defaults.phiDepth).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
+    p.add("skipRelVariance", &mEdgeStopping.skipRelVariance, defaults.skipRelVariance)
+        .range(0.0, 1.0)
+        .doc(
+            "a 16x16 tile whose hit pixels all have a variance below this times their squared luminance skips the "
+            "a-trous levels (keeps the temporal result); 0: off. Stat atrousSkippedTiles: the fraction skipped");
     p.add("meanVariance", &mMeanVariance, true)
         .doc(
             "true: the a-trous levels get the variance of the accumulated mean (the per-sample variance times the sum "
@@ -514,6 +520,7 @@ void SVGFPass::atrousStage(Frame& f) {
     double prepareMs = msSince(t0);
     const int levels = mIterations;
     double levelMs[16] = {};
+    uint32_t skippedTiles = 0, tiles = 0;
     // The remodulation is fused into the last fast level's output (split: the second signal's, adding the first's;
     // signal 0's result is in integrated0 by then). The groups say which images each group of pixels reads.
     const simd::Remodulation remodulation{modulateViews(f), f.split,
@@ -526,6 +533,8 @@ void SVGFPass::atrousStage(Frame& f) {
                     slot);
         prepareMs += timings.prepareMs;
         for (int level = 0; level < levels && level < 16; ++level) levelMs[level] += timings.levelMs[level];
+        skippedTiles += timings.skippedTiles;
+        tiles += timings.tiles;
     };
     const simd::Remodulation* modulate = f.pipe.fusedModulation ? &remodulation : nullptr;
     filter(f.vv.estimate0, f.tv.integrated0, f.ctx.historyCur(kIllumHistory).view<glm::vec4>(),
@@ -539,6 +548,7 @@ void SVGFPass::atrousStage(Frame& f) {
         atrousMs += levelMs[level];
     }
     stats.set(kStatAtrous, atrousMs);
+    stats.set(kStatSkippedTiles, tiles ? double(skippedTiles) / tiles : 0.0);
 }
 
 void SVGFPass::modulateStage(Frame& f) {
@@ -603,5 +613,6 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "the temporal stage ran through the scalar reference kernel rather than the vector path), "
         "variance.spatialPixels (pixels given the spatial variance estimate; fused path only), "
         "variance.referenceShare (fraction of those through the scalar kernel), ms.reproject, "
-        "ms.variance, ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate.");
+        "ms.variance, ms.atrous.prepare, ms.atrous0.. (per level), ms.atrous (all levels), ms.modulate, "
+        "atrousSkippedTiles (fraction of tiles skipRelVariance left unfiltered).");
 }

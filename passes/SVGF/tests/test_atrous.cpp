@@ -409,3 +409,69 @@ TEST(Atrous, LevelRefusesPlanesNotEvenlySpaced) {
     strayIn.l = stray.data();
     EXPECT_THROW(simd::filterLevel(layout, guide, strayIn, out, 1, AtrousParams{}), std::invalid_argument);
 }
+
+namespace {
+
+/// The edgy frame with its variance set to zero on every tile of the low-variance skip but tile (1, 1), whose
+/// variance stays high (well above 0.05 of its squared luminance).
+Frame makeQuietFrame(uint32_t w, uint32_t h) {
+    Frame f = makeEdgyFrame(w, h, 5);
+    auto c = f.illum.view<glm::vec4>();
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            const bool loud = x / kSkipTile == 1 && y / kSkipTile == 1;
+            c.at(x, y).a = loud ? 4.f * luminance(glm::vec3(c.at(x, y))) * luminance(glm::vec3(c.at(x, y))) : 0.f;
+        }
+    return f;
+}
+
+bool inLoudTile(uint32_t x, uint32_t y) {
+    return x / kSkipTile == 1 && y / kSkipTile == 1;
+}
+
+}  // namespace
+
+TEST(Atrous, LowVarianceTilesKeepTheirInputExactly) {
+    // Every tile but (1, 1) is below the threshold: its pixels come out as they went in, bit for bit, on both
+    // paths, and the loud tile is filtered; the two paths still agree within the fast path's tolerance.
+    const Frame f = makeQuietFrame(67, 53);
+    AtrousParams skip;
+    skip.skipRelVariance = 0.05f;
+    Result fast, ref;
+    AtrousTimings timings;
+    {
+        AtrousFilter filter;
+        fast.dst = Texture(f.width, f.height, Format::RGBA32F);
+        filter.setGuide(f.z(), f.n());
+        filter.run(f.signal(), fast.dst.view<glm::vec4>(), 4, skip, -1, {}, false, &timings);
+    }
+    ref = runFilter(f, 4, true, -1, skip);
+    EXPECT_EQ(timings.tiles, 5u * 4u);
+    EXPECT_EQ(timings.skippedTiles, 5u * 4u - 1u);
+    const Result plain = runFilter(f, 4, false);
+    uint32_t loudChanged = 0;
+    for (uint32_t y = 0; y < f.height; ++y)
+        for (uint32_t x = 0; x < f.width; ++x) {
+            const glm::vec4 in = f.signal().at(x, y);
+            if (inLoudTile(x, y)) {
+                loudChanged += fast.dst.view<glm::vec4>().at(x, y) != in;
+                continue;
+            }
+            for (const Texture* t : {&fast.dst, &ref.dst})
+                ASSERT_EQ(t->view<glm::vec4>().at(x, y), in) << x << ", " << y;
+        }
+    EXPECT_GT(loudChanged, kSkipTile * kSkipTile / 2);  // the loud tile is filtered (misses aside)
+    EXPECT_LE(maxRelativeError(fast.dst, ref.dst), kTolerance);
+    // Off, the same frame is filtered everywhere: the skip is what kept the quiet tiles.
+    EXPECT_FALSE(plain.dst.samePixels(fast.dst));
+}
+
+TEST(Atrous, TileSkipOffOrBelowEveryVarianceChangesNothing) {
+    // The edgy frame's relative variances are all far above 1e-9: no tile is skipped, and the bits are those of
+    // the skip switched off.
+    const Frame f = makeEdgyFrame(67, 53, 3);
+    AtrousParams tiny;
+    tiny.skipRelVariance = 1e-9f;
+    for (bool reference : {false, true})
+        EXPECT_TRUE(runFilter(f, 4, reference, 1, tiny).dst.samePixels(runFilter(f, 4, reference, 1).dst));
+}
