@@ -11,8 +11,8 @@
 
 #include "loom/RenderPass.h"
 
-/// Bumped whenever RenderPass, PassContext or the registrar change layout (4: ParamDecl::role).
-#define LOOM_PLUGIN_ABI_VERSION 4
+/// Bumped whenever RenderPass, PassContext or the registrar change layout (4: ParamDecl::role, 5: FieldDesc::role).
+#define LOOM_PLUGIN_ABI_VERSION 5
 
 #if defined(_WIN32)
 #define LOOM_PLUGIN_EXPORT extern "C" __declspec(dllexport)
