@@ -32,7 +32,9 @@
 #include "loom/Metrics.h"
 #include "loom/Parallel.h"
 #include "loom/Params.h"
+#include "loom/Reflection.h"
 #include "loom/RenderGraph.h"
+#include "loom/StatNames.h"
 
 namespace loom::cli {
 
@@ -43,11 +45,11 @@ using bench::FrameMetrics;
 using bench::FrameResult;
 using bench::Run;
 
-// Pass types and parameters the command relies on. The path tracer is the pass whose parameters declare a sample
-// count (ParamRole::SampleCount), the reference's accumulator the pass that declares ParamRole::AutoReset.
-const char kToneMapType[] = "ToneMap";
-const char kToneMapInput[] = "src";
-const char kAccumulateFramesStat[] = "frames";
+// The command names no pass type, parameter or field: it asks for the one that declares a role. The path tracer is
+// the pass whose parameters declare a sample count (ParamRole::SampleCount; its path length, Russian roulette and
+// pixel filter are the parameters that declare MaxBounces, RussianRouletteStart and PixelFilter), the reference's
+// accumulator the pass that declares ParamRole::AutoReset (it reports stat::kAccumulatedFrames), and the measured
+// image what feeds the input that declares FieldRole::DisplayInput.
 
 /// Reference batches use PathTracer seeds from here on, so their samples are independent of every graph's and of
 /// the brute-force runs (which use seed 0 unless --set says otherwise).
@@ -60,9 +62,6 @@ constexpr int kCacheFormat = 2;
 constexpr uint64_t kBruteForceTimingFrames = 3;
 /// The reference noise should be this far below the smallest measured error.
 constexpr double kNoiseMargin = 10.0;
-const char kMaxBouncesParam[] = "maxBounces";
-const char kRrStartParam[] = "rrStartBounce";
-const char kPixelFilterParam[] = "pixelFilter";
 const char* const kColorField = channel::kColor;
 
 struct BenchOptions {
@@ -187,15 +186,23 @@ Sweep parseSweep(const std::string& text) {
     return s;
 }
 
-/// The field a graph's metrics are taken of: --measure, else the linear HDR image feeding ToneMap.src, else the
-/// first marked output. The graph must be compiled.
+/// Is `input` (Pass.field) of a compiled graph the linear image its pass maps for display (FieldRole::DisplayInput)?
+bool isDisplayInput(const RenderGraph& graph, const ChannelRef& input) {
+    Reflection r;
+    CompileInfo info;
+    info.frameWidth = graph.plan().width;
+    info.frameHeight = graph.plan().height;
+    graph.pass(input.pass)->reflect(r, info);
+    const FieldDesc* f = r.findRole(FieldRole::DisplayInput);
+    return f && f->name == input.channel;
+}
+
+/// The field a graph's metrics are taken of: --measure, else the linear HDR image feeding the display transform's
+/// input (ToneMap.src), else the first marked output. The graph must be compiled.
 ChannelRef measuredField(const RenderGraph& graph, const std::string& measure, const std::string& file) {
     if (!measure.empty()) return parseChannelRef(measure, "--measure");
-    const GraphDesc desc = graph.desc();
-    for (const Wire& w : graph.plan().wires) {
-        const PassDesc* p = desc.findPass(w.dst.pass);
-        if (p && p->type == kToneMapType && w.dst.channel == kToneMapInput && !w.src.prev) return w.src;
-    }
+    for (const Wire& w : graph.plan().wires)
+        if (!w.src.prev && isDisplayInput(graph, w.dst)) return w.src;
     if (graph.outputs().empty())
         throwBadInput("outputs", "the graph marks no output", "an RGBA32F output to measure", "", file);
     return graph.outputs().front();
@@ -290,7 +297,7 @@ std::string sequenceKeyText(const BenchOptions& o, uint32_t width, uint32_t heig
 /// How a reference is rendered: the reference graph, its path tracer set to these values.
 struct ReferenceSpec {
     std::optional<int> maxBounces;       ///< overrides the reference graph's when set
-    std::string pixelFilter = "center";  ///< PathTracer.pixelFilter
+    std::string pixelFilter = kPixelFilterCenter;  ///< the path tracer's ParamRole::PixelFilter
     uint64_t firstFrame = 0;             ///< frames before it are not needed (left empty)
     std::string label = "reference";
 };
@@ -369,14 +376,18 @@ std::string roleParam(const RenderGraph& graph, const std::string& pass, ParamRo
     const ParamDecl* d = graph.pass(pass)->params().findRole(role);
     if (!d)
         throwBadInput(pass, fmt::format("pass '{}' declares no {} parameter", pass, paramRoleName(role)),
-                      "a path tracer whose parameters declare a sample count and a seed");
+                      fmt::format("a path tracer whose parameters declare a sample count, a seed, a path length, "
+                                  "a Russian roulette start and a pixel filter (the {} role among them)",
+                                  paramRoleName(role)));
     return d->name;
 }
 
-/// A parameter's current value (defaults included) of a pass of a built graph.
-int intParam(const RenderGraph& graph, const std::string& pass, const char* param) {
-    const nlohmann::json j = graph.pass(pass)->params().toJson(false);
-    return j.contains(param) && j[param].is_number_integer() ? j[param].get<int>() : 0;
+/// The current value (default included) of the int parameter of a pass of a built graph that plays `role`; 0 when
+/// none does.
+int roleInt(const RenderGraph& graph, const std::string& pass, ParamRole role) {
+    const ParamDecl* d = graph.pass(pass)->params().findRole(role);
+    const nlohmann::json j = d ? d->get() : nlohmann::json();
+    return j.is_number_integer() ? j.get<int>() : 0;
 }
 
 /// Renders or loads the reference of every frame. Per frame: the reference graph's history is reset, the scene is
@@ -387,7 +398,7 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
                         uint32_t width, uint32_t height, const ReferenceSpec& spec) {
     ReferenceSet out;
     // With a box filter the image does not depend on the camera jitter.
-    const bool shared = !scene->hasMotion() && (o.scene.jitter == "none" || spec.pixelFilter == "box");
+    const bool shared = !scene->hasMotion() && (o.scene.jitter == "none" || spec.pixelFilter == kPixelFilterBox);
     out.shared = shared;
     const GraphDesc desc = loadGraph(o.referenceGraph);  // checked before its bytes are hashed
 
@@ -418,15 +429,18 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
     graph->setScene(scene);
     graph->setParam(tracer, spp.param, batchSpp, "--reference-spp");
     const std::string seedParam = roleParam(*graph, tracer, ParamRole::Seed);
-    if (spec.maxBounces) graph->setParam(tracer, kMaxBouncesParam, *spec.maxBounces, "--reference-bounces");
-    graph->setParam(tracer, kPixelFilterParam, spec.pixelFilter, "reference pixel filter");
+    if (spec.maxBounces)
+        graph->setParam(tracer, roleParam(*graph, tracer, ParamRole::MaxBounces), *spec.maxBounces,
+                        "--reference-bounces");
+    graph->setParam(tracer, roleParam(*graph, tracer, ParamRole::PixelFilter), spec.pixelFilter,
+                    "reference pixel filter");
     CompileOptions copts;
     copts.width = width;
     copts.height = height;
     copts.observe = {tracer + "." + kColorField};  // each batch's mean, for the noise estimate
     graph->compile(copts);
-    out.maxBounces = intParam(*graph, tracer, kMaxBouncesParam);
-    out.rrStartBounce = intParam(*graph, tracer, kRrStartParam);
+    out.maxBounces = roleInt(*graph, tracer, ParamRole::MaxBounces);
+    out.rrStartBounce = roleInt(*graph, tracer, ParamRole::RussianRouletteStart);
 
     const std::string key =
         sequenceKeyText(o, width, height) +
@@ -468,11 +482,11 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
         }
         const auto stats = graph->lastStats();
         const auto acc = stats.find(accumulate);
-        if (acc != stats.end() && acc->second.count(kAccumulateFramesStat) &&
-            acc->second.at(kAccumulateFramesStat) != double(batches))
+        if (acc != stats.end() && acc->second.count(stat::kAccumulatedFrames) &&
+            acc->second.at(stat::kAccumulatedFrames) != double(batches))
             throw Error({ErrorKind::Runtime, o.referenceGraph, accumulate,
                          fmt::format("the reference accumulated {} of {} batches (it restarted)",
-                                     acc->second.at(kAccumulateFramesStat), batches),
+                                     acc->second.at(stat::kAccumulatedFrames), batches),
                          "",
                          fmt::format("set {} false on the reference graph's {}", reset.param,
                                      desc.findPass(accumulate)->type)});
@@ -642,7 +656,7 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
     out.cache = entry.string();
     const std::string sppParam = roleParam(*brute.graph, tracer, ParamRole::SampleCount);
     const std::string seedParam = roleParam(*brute.graph, tracer, ParamRole::Seed);
-    const uint32_t seed = uint32_t(intParam(*brute.graph, tracer, seedParam.c_str()));
+    const uint32_t seed = uint32_t(roleInt(*brute.graph, tracer, ParamRole::Seed));
     // Brute force has no history: of the warm-up frames it runs only the last one (which gives the first measured
     // frame its temporal predecessor).
     const uint64_t first = o.warmup > 0 ? o.warmup - 1 : 0;
@@ -934,8 +948,8 @@ void runBench(BenchOptions o) {
         const std::string tracer = tracerOf(v.desc, registry);
         if (!tracer.empty())
             bounces.emplace_back(v.desc.name + (v.sweep ? " " + v.label() : ""),
-                                 std::make_pair(intParam(*p.graph, tracer, kMaxBouncesParam),
-                                                intParam(*p.graph, tracer, kRrStartParam)));
+                                 std::make_pair(roleInt(*p.graph, tracer, ParamRole::MaxBounces),
+                                                roleInt(*p.graph, tracer, ParamRole::RussianRouletteStart)));
     }
     const GraphDesc bruteDesc = loadGraph(o.bruteForceGraph);
     PreparedGraph brute =
@@ -954,8 +968,8 @@ void runBench(BenchOptions o) {
         graphsDiffer = graphsDiffer || b.first != graphBounces->first;
     }
     if (!graphBounces)
-        graphBounces = std::make_pair(intParam(*brute.graph, bruteTracer, kMaxBouncesParam),
-                                      intParam(*brute.graph, bruteTracer, kRrStartParam));
+        graphBounces = std::make_pair(roleInt(*brute.graph, bruteTracer, ParamRole::MaxBounces),
+                                      roleInt(*brute.graph, bruteTracer, ParamRole::RussianRouletteStart));
     ReferenceSpec spec;
     if (o.referenceBounces == "graph") {
         if (graphsDiffer) {
@@ -987,12 +1001,15 @@ void runBench(BenchOptions o) {
     }
     // Brute force traces what the graphs trace (when they agree), so it shares their bias.
     if (!graphsDiffer) {
-        brute.graph->setParam(bruteTracer, kMaxBouncesParam, graphBounces->first, "--reference-bounces");
-        brute.graph->setParam(bruteTracer, kRrStartParam, graphBounces->second, "--reference-bounces");
+        brute.graph->setParam(bruteTracer, roleParam(*brute.graph, bruteTracer, ParamRole::MaxBounces),
+                              graphBounces->first, "--reference-bounces");
+        brute.graph->setParam(bruteTracer, roleParam(*brute.graph, bruteTracer, ParamRole::RussianRouletteStart),
+                              graphBounces->second, "--reference-bounces");
     }
     // Jittered sequences are anti-aliased by TAA: their reference (and brute force) average over the pixel's area.
-    spec.pixelFilter = o.scene.jitter == "none" ? "center" : "box";
-    brute.graph->setParam(bruteTracer, kPixelFilterParam, spec.pixelFilter, "--jitter");
+    spec.pixelFilter = o.scene.jitter == "none" ? kPixelFilterCenter : kPixelFilterBox;
+    brute.graph->setParam(bruteTracer, roleParam(*brute.graph, bruteTracer, ParamRole::PixelFilter), spec.pixelFilter,
+                          "--jitter");
     info.pixelFilter = spec.pixelFilter;
 
     const ReferenceSet refSet = references(o, registry, scene, width, height, spec);
@@ -1017,7 +1034,7 @@ void runBench(BenchOptions o) {
             const GraphDesc refDesc = loadGraph(o.referenceGraph);
             RenderGraph g(refDesc, registry);
             const std::string t = tracerOf(refDesc, registry);
-            if (!t.empty() && intParam(g, t, kMaxBouncesParam) == refSet.maxBounces) return ReferenceSet{};
+            if (!t.empty() && roleInt(g, t, ParamRole::MaxBounces) == refSet.maxBounces) return ReferenceSet{};
             return references(o, registry, scene, width, height, full);
         }();
         if (!fullSet.frames.empty()) {

@@ -78,6 +78,11 @@ std::string paramDoc(const ParamDecl& d) {
     return d.role == ParamRole::None ? d.doc : d.doc + " (role: " + paramRoleName(d.role) + ")";
 }
 
+/// A field's description, with the role it plays when it declares one.
+std::string fieldDoc(const FieldDesc& f) {
+    return f.role == FieldRole::None ? f.doc : f.doc + " (role: " + fieldRoleName(f.role) + ")";
+}
+
 /// The standard channels (loom/Channels.h) as a Markdown section.
 std::string standardChannelsMarkdown() {
     std::ostringstream s;
@@ -122,7 +127,7 @@ std::string passReference(PluginRegistry& registry, bool markdown) {
             s << "| field | kind | format | size | optional | description |\n|---|---|---|---|---|---|\n";
             for (const auto& f : r.fields())
                 s << "| `" << f.name << "` | " << fieldKindName(f.kind) << " | " << formatName(f.format) << " | "
-                  << sizeText(f) << " | " << (f.optional ? "yes" : "") << " | " << cell(f.doc) << " |\n";
+                  << sizeText(f) << " | " << (f.optional ? "yes" : "") << " | " << cell(fieldDoc(f)) << " |\n";
             if (!pass->params().decls().empty()) {
                 s << "\n| parameter | type | default | range | description |\n|---|---|---|---|---|\n";
                 for (const auto& d : pass->params().decls())
@@ -134,7 +139,7 @@ std::string passReference(PluginRegistry& registry, bool markdown) {
             s << info->type << "  -  " << info->description << "\n    plugin: " << info->library.string() << "\n";
             for (const auto& f : r.fields())
                 s << fmt::format("    {:9} {:14} {:10} {}{}\n", fieldKindName(f.kind), f.name, formatName(f.format),
-                                 f.optional ? "(optional) " : "", f.doc);
+                                 f.optional ? "(optional) " : "", fieldDoc(f));
             for (const auto& d : pass->params().decls())
                 s << fmt::format("    param     {:14} {:6} = {:10} {} {}\n", d.name, paramTypeName(d.type),
                                  d.defaultValue().dump(), paramRange(d), paramDoc(d));

@@ -6,6 +6,7 @@
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 #include "loom/Scene.h"
+#include "loom/StatNames.h"
 
 namespace loom {
 
@@ -25,7 +26,6 @@ const char kFrames[] = "frames";
 const char* const kStateFields[] = {kSum, kCompensation, kSumRG, kSumBA, kCount, kFrames};
 
 // Counters reported in the frame's stats.
-const char kStatFrames[] = "frames";
 const char kStatNonFinite[] = "nonFinite";
 const char kStatReset[] = "reset";
 
@@ -151,7 +151,7 @@ void AccumulatePass::execute(PassContext& ctx) {
         parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) { dst.at(x, y) = src.at(x, y); });
         for (const char* field : kStateFields) ctx.historyCur(field).clear();
         mRestartPending = true;
-        ctx.stats().set(kStatFrames, 0);
+        ctx.stats().set(stat::kAccumulatedFrames, 0);
         ctx.stats().set(kStatNonFinite, 0);
         ctx.stats().set(kStatReset, 0);
         return;
@@ -204,7 +204,7 @@ void AccumulatePass::execute(PassContext& ctx) {
         --mStaleFrames;
     }
 
-    ctx.stats().set(kStatFrames, frames);
+    ctx.stats().set(stat::kAccumulatedFrames, frames);
     ctx.stats().set(kStatNonFinite, double(skipped));
     ctx.stats().set(kStatReset, reset ? 1 : 0);
 }

@@ -20,6 +20,14 @@ inline constexpr ChannelInfo kChannels[] = {
     standard(kEmission), standard(kVBuffer), standard(kMeshId),
 };
 
+/// Which surfaces a G-buffer sees. Both passes bind their cullMode and alphaTest parameters to this struct, so its
+/// members hold their defaults and the two passes stay interchangeable.
+struct Visibility {
+    enum class CullMode { None, Back };
+    CullMode cullMode = CullMode::Back;  ///< Back: single-sided materials show only their front faces
+    bool alphaTest = true;               ///< alphaMode MASK and BLEND apply; false: every material opaque
+};
+
 /// Declares every channel as an optional output: only consumed ones are computed.
 inline void reflectChannels(Reflection& r) {
     for (const auto& c : kChannels) r.output(c.name, c.format).optional().doc(c.meaning);

@@ -15,9 +15,10 @@ using namespace gbuffer;
 void GBufferRT::reflect(Reflection& r, const CompileInfo&) const { reflectChannels(r); }
 
 void GBufferRT::declareParams(ParamList& p) {
-    p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
+    const gbuffer::Visibility defaults;
+    p.addEnum("cullMode", &mVisibility.cullMode, defaults.cullMode, {"none", "back"})
         .doc("skip back faces of single-sided materials (double-sided ones are always hit)");
-    p.add("alphaTest", &mAlphaTest, true)
+    p.add("alphaTest", &mVisibility.alphaTest, defaults.alphaTest)
         .doc(
             "alphaMode MASK: rays pass where alpha < alphaCutoff; BLEND: stochastic transparency (the surface is "
             "there with probability alpha); false: every material opaque");
@@ -74,7 +75,8 @@ void GBufferRT::execute(PassContext& ctx) {
     const RayScene& rays = scene->rayScene();
     // Culling and alpha testing are RayScene's (RayRules), for the coherent 4x4 packets too; the path tracer's
     // camera rays use the same rules and coverage keys, so they agree with this vbuffer bit for bit.
-    const uint32_t rules = (mCullMode == CullMode::Back ? kRayCullBackFaces : 0u) | (mAlphaTest ? kRayAlphaTest : 0u);
+    const uint32_t rules = (mVisibility.cullMode == CullMode::Back ? kRayCullBackFaces : 0u) |
+                           (mVisibility.alphaTest ? kRayAlphaTest : 0u);
     const uint32_t frame = uint32_t(ctx.frameIndex());
     parallelFor2D(w, h, [&](const Tile& t) {
         traceCameraRays(rays, cam, t, rules, frame, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {

@@ -1,5 +1,6 @@
 #pragma once
 // GBufferRT: the standard G-buffer channels from Embree primary rays.
+#include "GBufferCommon.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
@@ -10,11 +11,10 @@ public:
     void declareParams(ParamList& p) override;
     void execute(PassContext& ctx) override;
 
-    enum class CullMode { None, Back };
+    using CullMode = gbuffer::Visibility::CullMode;
 
 private:
-    CullMode mCullMode = CullMode::Back;
-    bool mAlphaTest = true;
+    gbuffer::Visibility mVisibility;  ///< cullMode, alphaTest: the shared struct holds the defaults
 };
 
 }  // namespace loom

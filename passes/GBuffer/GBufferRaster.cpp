@@ -549,9 +549,10 @@ GBufferRaster::~GBufferRaster() {
 void GBufferRaster::reflect(Reflection& r, const CompileInfo&) const { reflectChannels(r); }
 
 void GBufferRaster::declareParams(ParamList& p) {
-    p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
+    const gbuffer::Visibility defaults;
+    p.addEnum("cullMode", &mVisibility.cullMode, defaults.cullMode, {"none", "back"})
         .doc("cull back faces of single-sided materials (double-sided ones are always drawn)");
-    p.add("alphaTest", &mAlphaTest, true)
+    p.add("alphaTest", &mVisibility.alphaTest, defaults.alphaTest)
         .doc(
             "alphaMode MASK discards fragments where alpha < alphaCutoff; BLEND is stochastic transparency (kept "
             "with probability alpha, decided as in GBufferRT); false: every material opaque");
@@ -659,7 +660,7 @@ void GBufferRaster::execute(PassContext& ctx) {
     glBindBufferBase(GL_UNIFORM_BUFFER, kBindFrame, g.frameUbo);
     glViewport(0, 0, GLsizei(width), GLsizei(height));
 
-    const bool cullBack = mCullMode == CullMode::Back;
+    const bool cullBack = mVisibility.cullMode == CullMode::Back;
     // World-space ray direction of image position ndc = rayBasis * (1, ndc.x, ndc.y).
     const float tanHalfFovY = std::tan(0.5f * camera.fovY);
     const glm::mat3 rayBasis(camera.forward(), camera.right() * (tanHalfFovY * camera.aspect),
@@ -704,7 +705,7 @@ void GBufferRaster::execute(PassContext& ctx) {
                                                          uint32_t(scene->materials.size()));
             const MaterialGpu& mat = materials[matIndex];
             const bool doubleSided = mat.flags.x != 0;
-            const bool alphaTested = mAlphaTest && (mat.flags.y != 0 || mat.flags.z != 0);
+            const bool alphaTested = mVisibility.alphaTest && (mat.flags.y != 0 || mat.flags.z != 0);
 
             uint32_t textured = 0;
             for (int slot = 0; slot < 4; ++slot)

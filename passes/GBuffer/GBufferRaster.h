@@ -24,6 +24,7 @@
 // The context is current only inside execute/setScene (and restored after).
 #include <memory>
 
+#include "GBufferCommon.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
@@ -42,14 +43,13 @@ public:
     /// that come without a scene.
     void setScene(const std::shared_ptr<const Scene>& scene) override;
 
-    enum class CullMode { None, Back };
+    using CullMode = gbuffer::Visibility::CullMode;
 
 private:
     struct Gpu;  // the GL context and every GL object (GBufferRaster.cpp)
     Gpu& gpu();
 
-    CullMode mCullMode = CullMode::Back;
-    bool mAlphaTest = true;
+    gbuffer::Visibility mVisibility;  ///< cullMode, alphaTest: the shared struct holds the defaults
     std::shared_ptr<const Scene> mScene;
     std::unique_ptr<Gpu> mGpu;
 };

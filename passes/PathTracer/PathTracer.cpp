@@ -226,21 +226,29 @@ void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
 }
 
 void PathTracer::declareParams(ParamList& p) {
-    p.add("maxBounces", &mMaxBounces, 3).range(0, 64).doc("scattering events per path (0: emission seen directly)");
+    const pt::PathTracerSettings defaults;
+    p.add("maxBounces", &mSettings.maxBounces, defaults.maxBounces)
+        .range(0, 64)
+        .role(ParamRole::MaxBounces)
+        .doc("scattering events per path (0: emission seen directly)");
     p.add("samplesPerPixel", &mSamplesPerPixel, 1)
         .range(1, 4096)
         .role(ParamRole::SampleCount)
         .doc("paths per pixel per frame");
-    p.add("rrStartBounce", &mRrStartBounce, 2).range(0, 64).doc("Russian roulette from this bounce on");
-    p.addEnum("lightSampling", &mLightSampling, LightSamplingMode::Mis, {"mis", "nee", "bsdf"})
+    p.add("rrStartBounce", &mSettings.rrStartBounce, defaults.rrStartBounce)
+        .range(0, 64)
+        .role(ParamRole::RussianRouletteStart)
+        .doc("Russian roulette from this bounce on");
+    p.addEnum("lightSampling", &mSettings.lightSampling, defaults.lightSampling, {"mis", "nee", "bsdf"})
         .doc("direct light by MIS of light and BRDF sampling, light sampling only, or BRDF sampling only");
-    p.add("lambertOnly", &mLambertOnly, false).doc("replace the glTF BRDF by baseColor/pi (validation)");
-    p.add("indirectClamp", &mIndirectClamp, 0.f)
+    p.add("lambertOnly", &mSettings.lambertOnly, defaults.lambertOnly)
+        .doc("replace the glTF BRDF by baseColor/pi (validation)");
+    p.add("indirectClamp", &mSettings.indirectClamp, defaults.indirectClamp)
         .range(0.f, 1e6f)
         .doc(
             "firefly guard: the largest channel of any contribution after the first bounce is clamped to this "
             "(biased, darker); 0 = off, as references need");
-    p.add("energyCompensation", &mEnergyCompensation, true)
+    p.add("energyCompensation", &mSettings.multiScatter, defaults.multiScatter)
         .doc(
             "multiple-scattering energy compensation of the glTF BRDF (a white furnace reflects 1 at every "
             "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
@@ -259,7 +267,8 @@ void PathTracer::declareParams(ParamList& p) {
         .doc(
             "camera rays skip back faces of single-sided materials, as the G-buffers' cullMode (bounce and shadow "
             "rays never cull)");
-    p.addEnum("pixelFilter", &mPixelFilter, PixelFilter::Center, {"center", "box"})
+    p.addEnum("pixelFilter", &mPixelFilter, PixelFilter::Center, {kPixelFilterCenter, kPixelFilterBox})
+        .role(ParamRole::PixelFilter)
         .doc(
             "where camera paths start in the pixel: center = every sample at the (jittered) pixel centre, as the "
             "G-buffers see it; box = each sample uniformly in the pixel, camera jitter ignored (an anti-aliased "
@@ -586,13 +595,7 @@ void PathTracer::execute(PassContext& ctx) {
     const uint32_t cameraRules = alphaRules | (mCullMode == CullMode::Back ? kRayCullBackFaces : 0u);
     const SecondaryRays secondary{static_cast<RTCScene>(rayScene.embreeScene()), &view, alphaRules,
                                   mAlphaTest && rayScene.hasAlphaTestedGeometry()};
-    pt::PathTracerSettings set;
-    set.maxBounces = uint32_t(mMaxBounces);
-    set.rrStartBounce = uint32_t(mRrStartBounce);
-    set.lightSampling = uint32_t(mLightSampling);
-    set.lambertOnly = mLambertOnly;
-    set.multiScatter = mEnergyCompensation;
-    set.indirectClamp = mIndirectClamp;
+    const pt::PathTracerSettings set = mSettings;
     const bool boxFilter = mPixelFilter == PixelFilter::Box;
     const uint32_t spp = uint32_t(mSamplesPerPixel);
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);

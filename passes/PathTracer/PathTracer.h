@@ -3,12 +3,12 @@
 // with NEE and MIS over emissive triangles, punctual lights and the
 // environment. Runs on the CPU (Embree + oneTBB); `device` selects a CUDA
 // backend where one is usable.
+#include <glm/glm.hpp>
 #include <memory>
 #include <vector>
 
-#include <glm/glm.hpp>
-
 #include "Lights.h"
+#include "PathTracerKernels.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
@@ -22,7 +22,6 @@ public:
     void setScene(const std::shared_ptr<const Scene>& scene) override;
 
     enum class Device { Auto, Cpu, Cuda };
-    enum class LightSamplingMode { Mis, Nee, Bsdf };
     enum class CullMode { None, Back };
     enum class EmissionWeights { Texture, Area };
     enum class PixelFilter { Center, Box };
@@ -33,13 +32,10 @@ private:
     const std::vector<float>& triangleEmission(const Scene& scene, uint32_t instance);
 
     // Parameters.
-    int mMaxBounces = 3;
+    /// maxBounces, rrStartBounce, lightSampling, lambertOnly, energyCompensation, indirectClamp: the kernel's struct
+    /// holds the defaults
+    pt::PathTracerSettings mSettings;
     int mSamplesPerPixel = 1;
-    int mRrStartBounce = 2;
-    LightSamplingMode mLightSampling = LightSamplingMode::Mis;
-    bool mLambertOnly = false;
-    bool mEnergyCompensation = true;
-    float mIndirectClamp = 0.f;
     Device mDevice = Device::Auto;
     int mSeed = 0;
     bool mSimdShading = true;

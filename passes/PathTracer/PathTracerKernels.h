@@ -20,10 +20,12 @@ namespace loom::pt {
 
 enum LightSampling : uint32_t { kMis = 0, kNeeOnly = 1, kBsdfOnly = 2 };
 
+/// What the integrator does. PathTracer binds its parameters of the same meaning to this struct, so these are the
+/// pass's defaults too.
 struct PathTracerSettings {
     uint32_t maxBounces = 3;     ///< scattering events; 0 shows only what the camera sees directly
     uint32_t rrStartBounce = 2;  ///< Russian roulette from this bounce on
-    uint32_t lightSampling = kMis;
+    LightSampling lightSampling = kMis;
     bool lambertOnly = false;  ///< f = baseColor / pi, for analytic tests
     bool multiScatter = true;  ///< the BRDF's energy compensation (BrdfInputs::multiScatter)
     float indirectClamp = 0.f;  ///< firefly guard: largest channel of one indirect contribution; 0 = off

@@ -58,11 +58,12 @@ LOOM_HD inline glm::vec3 clampIllumination(const glm::vec3& v) {
                      minf(maxf(v.z, 0.f), kMaxIllumination));
 }
 
-/// Parameters of the temporal stage.
+/// Parameters of the temporal stage. SVGFPass binds its alpha, momentsAlpha and maxHistory to this struct, so these
+/// are the pass's defaults too.
 struct TemporalParams {
-    float alpha = 0.05f;        ///< colour blend factor (paper eq. 1)
+    float alpha = 0.2f;         ///< colour blend factor (paper eq. 1)
     float momentsAlpha = 0.2f;  ///< moments blend factor
-    float maxHistory = 32.f;    ///< history length cap
+    int maxHistory = 32;        ///< history length cap, in frames
     bool temporal = true;       ///< false: no reprojection, every frame starts from history length 1
     bool split = false;         ///< two signals (direct, indirect) instead of one (color)
     /// The variance handed on is the luminance's per-sample variance times max(1 / n, varianceFloor): the variance
@@ -252,7 +253,7 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         r.illum1 = glm::vec4(glm::vec3(r.illum1) * ratio, r.illum1.a);
         const float ratio2 = ratio * ratio;
         r.moments = glm::vec4(r.moments.x * ratio, r.moments.y * ratio2, r.moments.z * ratio, r.moments.w * ratio2);
-        length = minf(r.length * (1.f - change) + 1.f, p.maxHistory);
+        length = minf(r.length * (1.f - change) + 1.f, float(p.maxHistory));
         // Paper eq. 1 with Falcor's max(alpha, 1 / n): a plain mean until the history is 1 / alpha long.
         const float a = maxf(p.alpha + change * (1.f - p.alpha), 1.f / length);
         const float am = maxf(p.momentsAlpha + change * (1.f - p.momentsAlpha), 1.f / length);

@@ -203,17 +203,26 @@ void SVGFPass::declareParams(ParamList& p) {
     p.add("feedbackTap", &mFeedbackTap, -1)
         .range(-1, 15)
         .doc("the output of this level (0-based) is next frame's colour history; -1: the unfiltered signal");
-    p.add("alpha", &mAlpha, 0.2f).range(0.0, 1.0).doc("temporal blend factor of colour (at least 1 / history)");
-    p.add("momentsAlpha", &mMomentsAlpha, 0.2f)
+    const svgf::TemporalParams temporal;
+    p.add("alpha", &mTemporalParams.alpha, temporal.alpha)
+        .range(0.0, 1.0)
+        .doc("temporal blend factor of colour (at least 1 / history)");
+    p.add("momentsAlpha", &mTemporalParams.momentsAlpha, temporal.momentsAlpha)
         .range(0.0, 1.0)
         .doc("temporal blend factor of the luminance moments (at least 1 / history)");
-    const svgf::AtrousParams defaults;
-    p.add("phiColor", &mEdgeStopping.phiColor, defaults.phiColor).min(0.0).doc("luminance edge-stopping, in standard deviations (eq. 5)");
+    const svgf::AtrousParams edgeStopping;
+    p.add("phiColor", &mEdgeStopping.phiColor, edgeStopping.phiColor)
+        .min(0.0)
+        .doc("luminance edge-stopping, in standard deviations (eq. 5)");
     // Bounded: a normal's dot product with itself is 1 only to a few units in the last place, so past about 1e8
     // even a pixel's own weight vanishes, and with it the variance's (sum of weights)^2.
-    p.add("phiNormal", &mEdgeStopping.phiNormal, defaults.phiNormal).range(0.0, 1e5).doc("normal edge-stopping exponent (eq. 4)");
-    p.add("phiDepth", &mEdgeStopping.phiDepth, defaults.phiDepth).min(0.0).doc("depth edge-stopping, in depth derivatives (eq. 3)");
-    p.add("skipRelVariance", &mEdgeStopping.skipRelVariance, defaults.skipRelVariance)
+    p.add("phiNormal", &mEdgeStopping.phiNormal, edgeStopping.phiNormal)
+        .range(0.0, 1e5)
+        .doc("normal edge-stopping exponent (eq. 4)");
+    p.add("phiDepth", &mEdgeStopping.phiDepth, edgeStopping.phiDepth)
+        .min(0.0)
+        .doc("depth edge-stopping, in depth derivatives (eq. 3)");
+    p.add("skipRelVariance", &mEdgeStopping.skipRelVariance, edgeStopping.skipRelVariance)
         .range(0.0, 1.0)
         .doc(
             "a 16x16 tile whose hit pixels all have a variance below this times their squared luminance skips the "
@@ -223,7 +232,9 @@ void SVGFPass::declareParams(ParamList& p) {
             "true: the a-trous levels get the variance of the accumulated mean (the per-sample variance times the sum "
             "of the history's squared weights), so phiColor counts standard deviations of the signal they filter; "
             "false: the per-sample variance (Falcor)");
-    p.add("maxHistory", &mMaxHistory, 32).range(1, 1024).doc("cap of the history length in frames");
+    p.add("maxHistory", &mTemporalParams.maxHistory, temporal.maxHistory)
+        .range(1, 1024)
+        .doc("cap of the history length in frames");
     p.add("referenceAtrous", &mReferenceAtrous, false)
         .doc("run the scalar reference a-trous kernel instead of the fast path (validation)");
     p.add("referenceStages", &mReferenceStages, false)
@@ -394,10 +405,8 @@ void SVGFPass::bindFrame(Frame& f) {
     }
 
     TemporalParams& tp = f.tp;
-    tp.alpha = mAlpha;
-    tp.momentsAlpha = mMomentsAlpha;
-    tp.maxHistory = float(mMaxHistory);
-    tp.varianceFloor = mMeanVariance ? meanVarianceFloor(mAlpha) : 1.f;
+    tp = mTemporalParams;  // alpha, momentsAlpha, maxHistory; the rest is this frame's
+    tp.varianceFloor = mMeanVariance ? meanVarianceFloor(tp.alpha) : 1.f;
     if (const Camera* camera = ctx.camera()) tp.jitterDelta = camera->jitter - camera->prevJitter;
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();

@@ -58,11 +58,9 @@ private:
     bool mTemporal = true;
     int mIterations = 4;
     int mFeedbackTap = -1;
-    float mAlpha = 0.2f;
-    float mMomentsAlpha = 0.2f;
+    svgf::TemporalParams mTemporalParams;  ///< alpha, momentsAlpha, maxHistory: the kernel's struct holds the defaults
     svgf::AtrousParams mEdgeStopping;  ///< phiColor, phiNormal, phiDepth: the kernel's struct holds the defaults
     bool mMeanVariance = true;
-    int mMaxHistory = 32;
     bool mReferenceAtrous = false;
     bool mReferenceStages = false;
 

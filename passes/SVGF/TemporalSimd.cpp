@@ -379,8 +379,8 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
     rm[1] = hn::Mul(rm[1], rq2);
     rm[2] = hn::Mul(rm[2], rq);
     rm[3] = hn::Mul(rm[3], rq2);
-    const V length =
-        hn::IfThenElse(valid, minOf(hn::Add(hn::Mul(rl, hn::Sub(one, change)), one), hn::Set(d, p.maxHistory)), one);
+    const V length = hn::IfThenElse(
+        valid, minOf(hn::Add(hn::Mul(rl, hn::Sub(one, change)), one), hn::Set(d, float(p.maxHistory))), one);
     const V invLength = hn::Div(one, length);
     const V a = maxOf(hn::Add(hn::Set(d, p.alpha), hn::Mul(change, hn::Set(d, 1.f - p.alpha))), invLength);
     const V am =

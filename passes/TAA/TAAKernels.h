@@ -56,6 +56,8 @@
 
 namespace loom::taa {
 
+/// The resolve's parameters. TAAPass binds its alpha, sigma and antiFlicker to this struct, so these are the pass's
+/// defaults too.
 struct TaaParams {
     float alpha = 0.1f;  ///< weight of the current frame
     float sigma = 1.f;   ///< box half-size in standard deviations

@@ -45,13 +45,14 @@ void TAAPass::reflect(Reflection& r, const CompileInfo&) const {
 }
 
 void TAAPass::declareParams(ParamList& p) {
-    p.add("alpha", &mParams.alpha, 0.1f)
+    const taa::TaaParams defaults;
+    p.add("alpha", &mParams.alpha, defaults.alpha)
         .range(0.0, 1.0)
         .doc("weight of the current frame in the blend (1 = no history)");
-    p.add("sigma", &mParams.sigma, 1.f)
+    p.add("sigma", &mParams.sigma, defaults.sigma)
         .range(0.0, 10.0)
         .doc("clipping box half-size in standard deviations of the 3x3 neighbourhood (YCoCg)");
-    p.add("antiFlicker", &mParams.antiFlicker, false)
+    p.add("antiFlicker", &mParams.antiFlicker, defaults.antiFlicker)
         .doc(
             "weight current and history by 1 / (1 + luma) (Karis 2014) so bright outliers do not flicker; biased: it "
             "darkens a light's jittered edges (the Cornell box lamp loses about 10 %)");

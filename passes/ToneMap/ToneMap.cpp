@@ -343,7 +343,7 @@ ToneMapPass::ToneMapPass() : mSrgbTable(std::make_unique<SrgbEncodeTable>()) {
 }
 
 void ToneMapPass::reflect(Reflection& r, const CompileInfo&) const {
-    r.input(kSrc, Format::RGBA32F).doc("scene-referred (HDR) colour");
+    r.input(kSrc, Format::RGBA32F).role(FieldRole::DisplayInput).doc("scene-referred (HDR) colour");
     r.output(kDst, Format::RGBA8Srgb)
         .doc("tone-mapped colour, sRGB-encoded (exact piecewise OETF, rounded to nearest); alpha clamped to [0, 1]");
     r.output(kDstFloat, Format::RGBA32F)
@@ -357,7 +357,8 @@ void ToneMapPass::reflect(Reflection& r, const CompileInfo&) const {
 }
 
 void ToneMapPass::declareParams(ParamList& p) {
-    p.addEnum("operator", &mOperator, Operator::Aces, {"linear", "reinhard", "modifiedReinhard", "aces", "hable"})
+    p.addEnum("operator", &mMapping.op, tonemap::ToneMapParams{}.op,
+              {"linear", "reinhard", "modifiedReinhard", "aces", "hable"})
         .doc(
             "per-channel curve: linear (clamp), reinhard v/(1+v), modifiedReinhard v(1+v/white^2)/(1+v), aces "
             "(Narkowicz fit), hable (Uncharted 2 filmic, white 11.2)");
@@ -436,7 +437,7 @@ void ToneMapPass::execute(PassContext& ctx) {
         scale *= double(mKey) / double(adapted);
     }
 
-    ToneMapParams params;
+    ToneMapParams params = mMapping;
     params.scale = float(scale);
     params.invWhiteSquared = 1.f / (mWhitePoint * mWhitePoint);
     params.hableInvWhite = 1.f / tonemap::hableCurve(tonemap::kHableWhite);
@@ -444,7 +445,7 @@ void ToneMapPass::execute(PassContext& ctx) {
     std::unique_ptr<LogAverageSums> sums;
     if (measureWhileMapping) sums = std::make_unique<LogAverageSums>(src.height());
     uint64_t nonFinite = 0;
-    switch (mOperator) {
+    switch (params.op) {
         case Operator::Linear:
             nonFinite = mapFrame<Operator::Linear>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
             break;

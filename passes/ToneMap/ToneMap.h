@@ -49,7 +49,8 @@ private:
     bool measureLogAverage(const Texture& src, double& logAverage) const;
 
     // Parameters.
-    Operator mOperator = Operator::Aces;
+    tonemap::ToneMapParams mMapping;  ///< op: the operator parameter, whose default the kernel's struct holds; the
+                                      ///< other members are each frame's (execute)
     float mExposureEv = 0.f;
     bool mAutoExposure = false;
     float mKey = 0.18f;

@@ -47,7 +47,7 @@ inline constexpr float kHableE = 0.02f;  ///< toe numerator
 inline constexpr float kHableF = 0.30f;  ///< toe denominator
 inline constexpr float kHableWhite = 11.2f;
 
-/// What one frame's mapping needs.
+/// What one frame's mapping needs. ToneMapPass binds its operator to `op`, so its default is the pass's too.
 struct ToneMapParams {
     Operator op = Operator::Aces;
     float scale = 1.f;            ///< exposure scale applied before the operator

@@ -2,10 +2,11 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
-#include <set>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "loom/Error.h"
 #include "loom/InputFile.h"
@@ -33,6 +34,12 @@ const char* paramRoleName(ParamRole r) {
         case ParamRole::SampleCount: return "sampleCount";
         case ParamRole::Seed: return "seed";
         case ParamRole::AutoReset: return "autoReset";
+        case ParamRole::MaxBounces:
+            return "maxBounces";
+        case ParamRole::RussianRouletteStart:
+            return "russianRouletteStart";
+        case ParamRole::PixelFilter:
+            return "pixelFilter";
     }
     return "?";
 }
@@ -59,6 +66,16 @@ ParamBuilder ParamList::add(std::string name, int* member, int def) {
     auto& d = push(std::move(name), ParamType::Int);
     d.get = [member] { return json(*member); };
     d.set = [member](const json& v) { *member = v.get<int>(); };
+    d.defaultValue = [def] { return json(def); };
+    return ParamBuilder(d);
+}
+
+ParamBuilder ParamList::add(std::string name, uint32_t* member, uint32_t def) {
+    *member = def;
+    auto& d = push(std::move(name), ParamType::Int);
+    d.min = 0.0;
+    d.get = [member] { return json(*member); };
+    d.set = [member](const json& v) { *member = v.get<uint32_t>(); };
     d.defaultValue = [def] { return json(def); };
     return ParamBuilder(d);
 }
@@ -136,6 +153,23 @@ const ParamDecl* ParamList::findRole(ParamRole role) const {
 }
 
 namespace {
+
+/// The type of the parameters that may play `role` (not None).
+ParamType roleType(ParamRole role) {
+    switch (role) {
+        case ParamRole::AutoReset:
+            return ParamType::Bool;
+        case ParamRole::PixelFilter:
+            return ParamType::Enum;
+        case ParamRole::None:
+        case ParamRole::SampleCount:
+        case ParamRole::Seed:
+        case ParamRole::MaxBounces:
+        case ParamRole::RussianRouletteStart:
+            break;
+    }
+    return ParamType::Int;
+}
 
 std::vector<std::string> declNames(const std::vector<ParamDecl>& decls) {
     std::vector<std::string> out;
@@ -252,10 +286,16 @@ std::string ParamList::declarationProblem() const {
             if (!d.defaultValue().is_string()) return name + " has a default outside its enum values";
         }
         if (d.role != ParamRole::None) {
-            const ParamType wanted = d.role == ParamRole::AutoReset ? ParamType::Bool : ParamType::Int;
+            const ParamType wanted = roleType(d.role);
             if (d.type != wanted)
                 return fmt::format("{} plays the role {}, which needs a parameter of type {}", name,
                                    paramRoleName(d.role), paramTypeName(wanted));
+            const auto hasValue = [&](const char* v) {
+                return std::find(d.enumValues.begin(), d.enumValues.end(), v) != d.enumValues.end();
+            };
+            if (d.role == ParamRole::PixelFilter && !(hasValue(kPixelFilterCenter) && hasValue(kPixelFilterBox)))
+                return fmt::format("{} plays the role {}, whose values include '{}' and '{}'", name,
+                                   paramRoleName(d.role), kPixelFilterCenter, kPixelFilterBox);
             if (const ParamDecl* first = findRole(d.role); first != &d)
                 return fmt::format("{} plays the role {}, which parameter '{}' already plays", name,
                                    paramRoleName(d.role), printable(first->name));

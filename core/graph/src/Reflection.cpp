@@ -15,6 +15,16 @@ const char* fieldKindName(FieldKind k) {
     return "?";
 }
 
+const char* fieldRoleName(FieldRole r) {
+    switch (r) {
+        case FieldRole::None:
+            return "";
+        case FieldRole::DisplayInput:
+            return "displayInput";
+    }
+    return "?";
+}
+
 void FieldDesc::resolveSize(uint32_t frameWidth, uint32_t frameHeight, uint32_t& w, uint32_t& h) const {
     switch (sizeMode) {
         case SizeMode::Frame: w = frameWidth; h = frameHeight; break;
@@ -38,6 +48,12 @@ FieldBuilder Reflection::add(std::string name, FieldKind kind, Format f) {
 const FieldDesc* Reflection::find(const std::string& name) const {
     for (const auto& f : mFields)
         if (f.name == name) return &f;
+    return nullptr;
+}
+
+const FieldDesc* Reflection::findRole(FieldRole role) const {
+    for (const auto& f : mFields)
+        if (role != FieldRole::None && f.role == role) return &f;
     return nullptr;
 }
 

@@ -26,9 +26,17 @@ enum class ParamRole : uint8_t {
     SampleCount,  ///< int >= 1: samples per pixel per frame; the output is their mean
     Seed,         ///< int: decorrelates the random numbers of runs that share frame indices
     AutoReset,    ///< bool, of a pass that accumulates frames: true restarts the running mean when the view changes
+    MaxBounces,   ///< int >= 0: scattering events per path of a path tracer
+    RussianRouletteStart,  ///< int >= 0: the bounce from which a path tracer's Russian roulette may end paths
+    PixelFilter,           ///< enum with the values kPixelFilterCenter and kPixelFilterBox: where camera samples start
 };
 
-/// "sampleCount", "seed", "autoReset" ("" for None).
+/// The values of a ParamRole::PixelFilter parameter every pass that declares the role accepts: every sample at the
+/// (jittered) pixel centre, or each sample uniformly in the pixel (camera jitter ignored).
+inline constexpr char kPixelFilterCenter[] = "center";
+inline constexpr char kPixelFilterBox[] = "box";
+
+/// "sampleCount", "seed", "autoReset", "maxBounces", "russianRouletteStart", "pixelFilter" ("" for None).
 const char* paramRoleName(ParamRole r);
 
 struct ParamDecl {
@@ -65,6 +73,8 @@ class ParamList {
 public:
     ParamBuilder add(std::string name, bool* member, bool def);
     ParamBuilder add(std::string name, int* member, int def);
+    /// An int that is never negative (min 0 unless a range says more), for a kernel struct's unsigned member.
+    ParamBuilder add(std::string name, uint32_t* member, uint32_t def);
     ParamBuilder add(std::string name, float* member, float def);
     ParamBuilder add(std::string name, std::string* member, std::string def);
     ParamBuilder add(std::string name, glm::vec3* member, glm::vec3 def);
@@ -93,7 +103,7 @@ public:
     nlohmann::json toJson(bool onlyNonDefault) const;
     /// What is wrong with the declarations themselves, or empty: a name that is not plain, a name declared twice,
     /// an empty or non-finite range, an enum without values, a default outside its own range or values, a role
-    /// given twice or to a parameter of another type than the role's.
+    /// given twice or to a parameter of another type than the role's (or, for PixelFilter, without its values).
     std::string declarationProblem() const;
 
 private:

@@ -24,6 +24,17 @@ enum class SizeMode : uint8_t {
     Fixed,  ///< (fixedWidth, fixedHeight)
 };
 
+/// A standard meaning a field can declare, so a tool that drives graphs it does not know (`loom bench`) asks for
+/// "the field that plays this role" instead of a pass type and a field name. A pass gives a role to at most one of its
+/// fields.
+enum class FieldRole : uint8_t {
+    None,
+    DisplayInput,  ///< input, RGBA32F: the linear, scene-referred image a display transform (tone mapping) maps
+};
+
+/// "displayInput" ("" for None).
+const char* fieldRoleName(FieldRole r);
+
 struct FieldDesc {
     std::string name;
     FieldKind kind = FieldKind::Input;
@@ -33,6 +44,7 @@ struct FieldDesc {
     float scaleX = 1.f, scaleY = 1.f;
     uint32_t fixedWidth = 0, fixedHeight = 0;
     std::string doc;
+    FieldRole role = FieldRole::None;  ///< the standard meaning it declares, if any
 
     /// Resolved size for a frame of frameWidth x frameHeight.
     void resolveSize(uint32_t frameWidth, uint32_t frameHeight, uint32_t& w, uint32_t& h) const;
@@ -51,6 +63,10 @@ public:
         mField.sizeMode = SizeMode::Fixed; mField.fixedWidth = w; mField.fixedHeight = h; return *this;
     }
     FieldBuilder& doc(std::string text) { mField.doc = std::move(text); return *this; }
+    FieldBuilder& role(FieldRole r) {
+        mField.role = r;
+        return *this;
+    }
 
 private:
     FieldDesc& mField;
@@ -66,6 +82,8 @@ public:
 
     const std::vector<FieldDesc>& fields() const { return mFields; }
     const FieldDesc* find(const std::string& name) const;
+    /// The field that plays `role`, or nullptr.
+    const FieldDesc* findRole(FieldRole role) const;
     std::vector<std::string> names(FieldKind kind) const;
 
 private:
