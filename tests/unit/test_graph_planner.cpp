@@ -254,8 +254,11 @@ void expectNotRunAgreesWithThePlan(const Planned& p) {
     for (const auto& c : s.culled) culledInPlan.push_back(c.name);
     EXPECT_EQ(culled, culledInPlan);
     EXPECT_EQ(notComputed, s.skippedOutputs);
-    for (size_t i = 0; i < p.plan.passes.size(); ++i)
-        if (!p.plan.passes[i].live) EXPECT_NE(notRun(p.plan, p.desc.passes[i].name), nullptr) << i;
+    for (size_t i = 0; i < p.plan.passes.size(); ++i) {
+        if (!p.plan.passes[i].live) {
+            EXPECT_NE(notRun(p.plan, p.desc.passes[i].name), nullptr) << i;
+        }
+    }
 }
 
 }  // namespace
@@ -279,9 +282,9 @@ TEST(GraphPlannerWhy, CulledPassesSayWhy) {
         ASSERT_NE(n, nullptr) << pass;
         EXPECT_EQ(n->kind, NotRunKind::Culled);
     }
-    EXPECT_EQ(notRun(p.plan, "Dead")->reason, "nothing reads its outputs, and none of them is marked or observed");
+    EXPECT_EQ(notRun(p.plan, "Dead")->reason, "no pass reads its outputs, and none is marked or observed");
     EXPECT_EQ(notRun(p.plan, "Feeder")->reason, "only culled passes read its outputs: Reader");
-    EXPECT_EQ(notRun(p.plan, "Reader")->reason, "nothing reads its outputs, and none of them is marked or observed");
+    EXPECT_EQ(notRun(p.plan, "Reader")->reason, "no pass reads its outputs, and none is marked or observed");
     EXPECT_TRUE(contains(notRun(p.plan, "Loop")->reason, "only itself reads its outputs (through @prev)"))
         << notRun(p.plan, "Loop")->reason;
     EXPECT_TRUE(contains(notRun(p.plan, "Sink")->reason, "it has no outputs")) << notRun(p.plan, "Sink")->reason;
@@ -318,14 +321,13 @@ TEST(GraphPlannerWhy, OptionalOutputsNotComputedSayWhy) {
     const NotRun* depth = notRun(p.plan, "A", "depth");
     ASSERT_NE(depth, nullptr);
     EXPECT_EQ(depth->reason,
-              "optional, and no pass reads it (U.depth is listed as unconnected), nor is it marked or "
-              "observed");
+              "optional, not marked or observed, and no pass reads it (U.depth is listed as unconnected)");
     const NotRun* y = notRun(p.plan, "A", "y");
     ASSERT_NE(y, nullptr);
-    EXPECT_EQ(y->reason, "optional, and no pass reads it (V.y reads Y.y), nor is it marked or observed");
+    EXPECT_EQ(y->reason, "optional, not marked or observed, and no pass reads it (V.y reads Y.y)");
     const NotRun* spare = notRun(p.plan, "A", "spare");
     ASSERT_NE(spare, nullptr);
-    EXPECT_EQ(spare->reason, "optional, and no pass reads it, nor is it marked or observed");
+    EXPECT_EQ(spare->reason, "optional, not marked or observed, and no pass reads it");
     // Read (by name), or observed: computed, allocated and not listed.
     EXPECT_EQ(notRun(p.plan, "A", "kept"), nullptr);
     EXPECT_NE(resource(p.plan, "A.kept"), nullptr);

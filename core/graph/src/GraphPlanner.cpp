@@ -319,8 +319,8 @@ private:
         }
         if (!readers.empty()) return "only culled passes read its outputs: " + namedPasses(std::move(readers));
         if (refl(p).names(FieldKind::Output).empty()) return "it has no outputs, and none of its fields is observed";
-        if (self) return "only itself reads its outputs (through @prev), and none of them is marked or observed";
-        return "nothing reads its outputs, and none of them is marked or observed";
+        if (self) return "only itself reads its outputs (through @prev), and none is marked or observed";
+        return "no pass reads its outputs, and none is marked or observed";
     }
 
     // Order: topological over same-frame wires, ties by description order (the lowest ready index runs first).
@@ -487,9 +487,9 @@ private:
                     notes.push_back(key + " reads " + mWires[w->second].wire.src.str());
             }
         }
-        if (notes.empty()) return "optional, and no pass reads it, nor is it marked or observed";
-        return "optional, and no pass reads it (" + join(notes, "; ") + (more ? "; ..." : "") +
-               "), nor is it marked or observed";
+        if (notes.empty()) return "optional, not marked or observed, and no pass reads it";
+        return "optional, not marked or observed, and no pass reads it (" + join(notes, "; ") + (more ? "; ..." : "") +
+               ")";
     }
 
     /// Each culled pass, and each optional output not computed, optional input not connected and field left out of
