@@ -1,13 +1,14 @@
 // loom check (validate and print the compiled plan) and loom passes (the pass reference).
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cctype>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
-
 #include "CliUtil.h"
+#include "SceneSetup.h"
 #include "loom/Channels.h"
 #include "loom/Error.h"
 #include "loom/Files.h"
@@ -22,15 +23,23 @@ struct CheckOptions {
     std::string graph;
     std::string size = "1280x720";
     std::string dot;
+    std::vector<std::string> set;
+    SceneOptions scene;
 };
 
+/// Compiles the graph (with the scene, when one is given) and prints its plan: what runs, what does not and why,
+/// and the memory.
 void runCheck(const CheckOptions& o) {
     uint32_t width, height;
     parseSize(o.size, "--size", width, height);
     if (!o.dot.empty() && o.dot != "-")
-        checkOutputFile(o.dot, "--dot", {o.graph});  // a folder is bad input, not a failed rename
+        checkOutputFile(o.dot, "--dot", {o.graph, o.scene.scene, o.scene.env});  // a folder is bad input
     PluginRegistry registry = makeRegistry();
+    std::shared_ptr<Scene> scene = loadScene(o.scene);
     RenderGraph graph(loadGraph(o.graph), registry);
+    // With a scene, the plan also lists the work each pass leaves out for it (RenderPass::skippedWork).
+    if (scene) graph.setScene(scene);
+    applySet(graph, o.set);
     CompileOptions copts;
     copts.width = width;
     copts.height = height;
@@ -157,6 +166,8 @@ void addCheckCommand(CLI::App& app) {
     cmd->add_option("graph", o->graph, "graph file (.json)")->required();
     cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT used for the memory plan")->capture_default_str();
     cmd->add_option("--dot", o->dot, "write the compiled graph as Graphviz to this file ('-' for stdout)");
+    cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
+    addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runCheck(*o); });
 }
 

@@ -283,6 +283,56 @@ TEST_F(Cli, CheckPrintsThePlan) {
     EXPECT_CONTAINS(dot.output, "\"Pattern\":\"dst\" -> \"Blur\":\"src\"");
 }
 
+// check lists each culled pass, optional output not computed and input left unconnected once, with why; with a
+// scene, also the work each live pass says it leaves out (NoOp reports its skippedWork parameter).
+TEST_F(Cli, CheckSaysWhatDoesNotRunAndWhy) {
+    writeText("why.json", R"({"loom_graph": 1, "name": "Why",
+        "passes": [{"name": "Src", "type": "Constant"},
+                   {"name": "Opt", "type": "OptionalInput"},
+                   {"name": "Unused", "type": "Blur"},
+                   {"name": "Idle", "type": "NoOp", "params": {"skippedWork": "idling: the graph asks for it"}}],
+        "edges": [["Src.dst", "Opt.src"], ["Src.dst", "Unused.src"]],
+        "outputs": ["Opt.dst", "Idle.dst"]})");
+    const auto count = [](const std::string& text, const std::string& part) {
+        size_t n = 0;
+        for (size_t at = text.find(part); at != std::string::npos; at = text.find(part, at + 1)) ++n;
+        return n;
+    };
+    RunResult r = loom("check why.json --size 64x64");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "Not run or not allocated, and why:\n");
+    EXPECT_CONTAINS(r.output, "  Unused (culled): no pass reads its outputs, and none is marked or observed\n");
+    EXPECT_CONTAINS(r.output, "  Opt.mask (not computed): optional, not marked or observed, and no pass reads it\n");
+    EXPECT_CONTAINS(r.output, "  Opt.bias (not connected): optional, and no pass outputs a channel named 'bias'\n");
+    EXPECT_CONTAINS(r.output, "  Idle.src (not connected): optional, and no pass outputs a channel named 'src'\n");
+    // Said once: the culled pass and the skipped output appear nowhere else in the plan.
+    EXPECT_EQ(count(r.output, "Unused"), 1u) << r.output;
+    EXPECT_EQ(count(r.output, "Opt.mask"), 1u) << r.output;
+    EXPECT_EQ(r.output.find("Culled passes"), std::string::npos) << r.output;
+    // Without a scene no pass is asked for the work it leaves out.
+    EXPECT_EQ(r.output.find("idling"), std::string::npos) << r.output;
+
+    const std::string scene = " --scene " + quoted(loom::test::dataScene("cornell_box.gltf"));
+    RunResult withScene = loom("check why.json --size 64x64" + scene);
+    ASSERT_EQ(withScene.code, 0) << withScene.output;
+    const size_t section = withScene.output.find("Not run or not allocated, and why:\n");
+    ASSERT_NE(section, std::string::npos) << withScene.output;
+    const size_t line = withScene.output.find("\n  Idle: idling: the graph asks for it\n");
+    ASSERT_NE(line, std::string::npos) << withScene.output;
+    EXPECT_GT(line, section);
+    EXPECT_LT(line, withScene.output.find("\nAllocations:"));
+    // The line follows the parameter, as --set leaves it.
+    RunResult set = loom("check why.json --size 64x64" + scene + " --set \"Idle.skippedWork=resting: --set\"");
+    ASSERT_EQ(set.code, 0) << set.output;
+    EXPECT_CONTAINS(set.output, "  Idle: resting: --set\n");
+    EXPECT_EQ(set.output.find("idling"), std::string::npos) << set.output;
+
+    // A graph where everything runs says so.
+    RunResult all = loom("check " + quoted(kTestPattern) + " --size 64x64");
+    ASSERT_EQ(all.code, 0) << all.output;
+    EXPECT_CONTAINS(all.output, "Not run or not allocated, and why: none\n");
+}
+
 TEST_F(Cli, CheckReportsABadGraph) {
     RunResult r = loom("check " + quoted(patchedGraph(R"(["Mix.dst", "Display.src"])", R"(["Mix.dst", "Display.a"])")));
     EXPECT_EQ(r.code, 2) << r.output;

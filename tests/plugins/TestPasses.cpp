@@ -183,14 +183,27 @@ public:
     }
 };
 
-/// Does nothing; used to measure scheduling overhead.
+/// Does nothing; used to measure scheduling overhead. With a scene, reports its skippedWork parameter as work left
+/// out (for loom check).
 class NoOpPass final : public RenderPass {
 public:
     void reflect(Reflection& r, const CompileInfo&) const override {
         r.input(kSrc, Format::RGBA32F).optional();
         r.output(kDst, Format::RGBA32F).fixedSize(1, 1);
     }
+    void declareParams(ParamList& p) override {
+        p.add("skippedWork", &mSkippedWork, std::string()).doc("a line skippedWork() reports when a scene is set");
+    }
     void execute(PassContext&) override {}
+    void setScene(const std::shared_ptr<const Scene>& scene) override { mHasScene = scene != nullptr; }
+    std::vector<std::string> skippedWork() const override {
+        if (!mHasScene || mSkippedWork.empty()) return {};
+        return {mSkippedWork};
+    }
+
+private:
+    std::string mSkippedWork;
+    bool mHasScene = false;
 };
 
 /// Converts linear RGBA32F to 8-bit sRGB for PNG output.

@@ -1,5 +1,5 @@
 // The graph planner from lists of reflections, without plugins: wiring by name, culling, order, cycles, second
-// reflections, lifetimes and arena placement.
+// reflections, lifetimes and arena placement, and why what does not run or gets no memory is left out.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -25,6 +25,7 @@ bool contains(const std::string& haystack, const std::string& needle) {
 struct TestPass {
     std::string name;
     std::vector<std::string> fields;
+    std::vector<std::string> unconnected = {};  ///< optional inputs the pass asks to leave unconnected
 };
 
 Reflection reflectionOf(const std::vector<std::string>& fields) {
@@ -53,7 +54,7 @@ Planned plan(const std::vector<TestPass>& passes, const std::vector<std::pair<st
     Planned p;
     PlannerInput in;
     for (const auto& t : passes) {
-        p.desc.passes.push_back({t.name, "T" + t.name, nlohmann::json::object(), {}});
+        p.desc.passes.push_back({t.name, "T" + t.name, nlohmann::json::object(), t.unconnected});
         in.reflections.push_back(reflectionOf(t.fields));
     }
     for (const auto& [src, dst] : edges)
@@ -211,4 +212,191 @@ TEST(GraphPlanner, PlacementNeverSharesLiveBytes) {
     EXPECT_LT(p.plan.summary.transientPeakBytes, p.plan.summary.transientSumBytes);
     EXPECT_EQ(resource(p.plan, "Left.l")->lastUse, 5);  // marked: kept after the frame
     EXPECT_EQ(resource(p.plan, "Src.a")->lastUse, 2);   // read by Left (1) and Right (2)
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Why what does not run or gets no memory is left out
+
+namespace {
+
+/// The entry of plan.notRun for a pass (field empty) or a field; nullptr when there is none.
+const NotRun* notRun(const GraphPlan& plan, const std::string& pass, const std::string& field = {}) {
+    for (const auto& n : plan.summary.notRun)
+        if (n.pass == pass && n.field == field) return &n;
+    return nullptr;
+}
+
+/// The list agrees with the rest of the plan: culled passes are exactly those without a position; a listed field
+/// has no memory; the optional outputs listed as not computed are exactly the skipped ones; passes come in
+/// description order.
+void expectNotRunAgreesWithThePlan(const Planned& p) {
+    const CompiledPlan& s = p.plan.summary;
+    std::vector<std::string> culled, notComputed;
+    size_t lastPass = 0;
+    for (const auto& n : s.notRun) {
+        EXPECT_FALSE(n.reason.empty()) << n.pass << "." << n.field;
+        size_t index = 0;
+        while (index < p.desc.passes.size() && p.desc.passes[index].name != n.pass) ++index;
+        ASSERT_LT(index, p.desc.passes.size()) << n.pass;
+        EXPECT_GE(index, lastPass) << n.pass << " out of description order";
+        lastPass = index;
+        if (n.kind == NotRunKind::Culled) {
+            EXPECT_TRUE(n.field.empty());
+            EXPECT_EQ(p.plan.passes[index].position, -1) << n.pass;
+            culled.push_back(n.pass);
+        } else {
+            EXPECT_TRUE(p.plan.passes[index].live) << n.pass;
+            EXPECT_EQ(resource(p.plan, fieldKey(n.pass, n.field)), nullptr) << n.pass << "." << n.field;
+        }
+        if (n.kind == NotRunKind::NotComputed) notComputed.push_back(fieldKey(n.pass, n.field));
+    }
+    std::vector<std::string> culledInPlan;
+    for (const auto& c : s.culled) culledInPlan.push_back(c.name);
+    EXPECT_EQ(culled, culledInPlan);
+    EXPECT_EQ(notComputed, s.skippedOutputs);
+    for (size_t i = 0; i < p.plan.passes.size(); ++i) {
+        if (!p.plan.passes[i].live) {
+            EXPECT_NE(notRun(p.plan, p.desc.passes[i].name), nullptr) << i;
+        }
+    }
+}
+
+}  // namespace
+
+// A pass is culled because nothing reads its outputs, because only culled passes do (named), because only itself
+// does (@prev), or because it has no outputs.
+TEST(GraphPlannerWhy, CulledPassesSayWhy) {
+    const Planned p = plan({{"Render", {"out:hdr"}},
+                            {"Tone", {"in:hdr", "out:ldr"}},
+                            {"Dead", {"out:dead"}},
+                            {"Feeder", {"out:f"}},
+                            {"Reader", {"in:f", "out:r"}},
+                            {"Loop", {"in:back", "out:fwd"}},
+                            {"Sink", {"in:hdr"}}},
+                           {{"Loop.fwd@prev", "Loop.back"}}, {"Tone.ldr"});
+    EXPECT_EQ(p.order(), (std::vector<std::string>{"Render", "Tone"}));
+    expectNotRunAgreesWithThePlan(p);
+    EXPECT_EQ(p.plan.summary.notRun.size(), 5u);
+    for (const std::string pass : {"Dead", "Feeder", "Reader", "Loop", "Sink"}) {
+        const NotRun* n = notRun(p.plan, pass);
+        ASSERT_NE(n, nullptr) << pass;
+        EXPECT_EQ(n->kind, NotRunKind::Culled);
+    }
+    EXPECT_EQ(notRun(p.plan, "Dead")->reason, "no pass reads its outputs, and none is marked or observed");
+    EXPECT_EQ(notRun(p.plan, "Feeder")->reason, "only culled passes read its outputs: Reader");
+    EXPECT_EQ(notRun(p.plan, "Reader")->reason, "no pass reads its outputs, and none is marked or observed");
+    EXPECT_TRUE(contains(notRun(p.plan, "Loop")->reason, "only itself reads its outputs (through @prev)"))
+        << notRun(p.plan, "Loop")->reason;
+    EXPECT_TRUE(contains(notRun(p.plan, "Sink")->reason, "it has no outputs")) << notRun(p.plan, "Sink")->reason;
+    // Render feeds a culled pass too, but it is live: only culled passes are listed.
+    EXPECT_EQ(notRun(p.plan, "Render"), nullptr);
+    EXPECT_EQ(p.plan.summary.culled[1].reason, notRun(p.plan, "Feeder")->reason);
+}
+
+// The readers a reason names are distinct, in description order, and capped with a count of the rest.
+TEST(GraphPlannerWhy, ManyCulledReadersAreCounted) {
+    std::vector<TestPass> passes = {{"Out", {"out:o"}}, {"Shared", {"out:m"}}};
+    for (int i = 5; i >= 0; --i) passes.push_back({"R" + std::to_string(i), {"in:m", "out:r" + std::to_string(i)}});
+    const Planned p = plan(passes, {}, {"Out.o"});
+    expectNotRunAgreesWithThePlan(p);
+    EXPECT_EQ(notRun(p.plan, "Shared")->reason, "only culled passes read its outputs: R5, R4, R3, R2 and 2 more");
+}
+
+// An optional output of a live pass is not computed because only culled passes read it, or nothing does; inputs of
+// its name that are listed as unconnected, or that read another output, are named.
+TEST(GraphPlannerWhy, OptionalOutputsNotComputedSayWhy) {
+    const Planned p = plan(
+        {{"A",
+          {"out:x", "opt-out:mask", "opt-out:depth", "opt-out:spare", "opt-out:y", "opt-out:kept", "opt-out:seen"}},
+         {"Culled", {"in:mask", "out:c"}},
+         {"U", {"opt-in:depth", "out:u"}, {"depth"}},
+         {"Y", {"out:y"}},
+         {"V", {"in:y", "in:kept", "out:v"}}},
+        {{"Y.y", "V.y"}}, {"A.x", "U.u", "V.v"}, {"A.seen"});
+    expectNotRunAgreesWithThePlan(p);
+    const NotRun* mask = notRun(p.plan, "A", "mask");
+    ASSERT_NE(mask, nullptr);
+    EXPECT_EQ(mask->kind, NotRunKind::NotComputed);
+    EXPECT_EQ(mask->reason, "optional, and only culled passes read it: Culled");
+    const NotRun* depth = notRun(p.plan, "A", "depth");
+    ASSERT_NE(depth, nullptr);
+    EXPECT_EQ(depth->reason,
+              "optional, not marked or observed, and no pass reads it (U.depth is listed as unconnected)");
+    const NotRun* y = notRun(p.plan, "A", "y");
+    ASSERT_NE(y, nullptr);
+    EXPECT_EQ(y->reason, "optional, not marked or observed, and no pass reads it (V.y reads Y.y)");
+    const NotRun* spare = notRun(p.plan, "A", "spare");
+    ASSERT_NE(spare, nullptr);
+    EXPECT_EQ(spare->reason, "optional, not marked or observed, and no pass reads it");
+    // Read (by name), or observed: computed, allocated and not listed.
+    EXPECT_EQ(notRun(p.plan, "A", "kept"), nullptr);
+    EXPECT_NE(resource(p.plan, "A.kept"), nullptr);
+    EXPECT_EQ(notRun(p.plan, "A", "seen"), nullptr);
+    EXPECT_NE(resource(p.plan, "A.seen"), nullptr);
+}
+
+// An optional input of a live pass is not connected because the pass lists it as unconnected, or because no other
+// pass outputs a channel of its name; a connected one, and a culled pass's inputs, are not listed.
+TEST(GraphPlannerWhy, UnconnectedInputsSayWhy) {
+    const Planned p = plan({{"Src", {"out:color", "out:direct"}},
+                            {"P", {"in:color", "opt-in:direct", "opt-in:albedo", "out:o"}, {"direct"}},
+                            {"Off", {"opt-in:nothing", "out:off"}}},
+                           {}, {"P.o"});
+    expectNotRunAgreesWithThePlan(p);
+    const NotRun* direct = notRun(p.plan, "P", "direct");
+    ASSERT_NE(direct, nullptr);
+    EXPECT_EQ(direct->kind, NotRunKind::NotConnected);
+    EXPECT_EQ(direct->reason, "optional, and listed in the pass's \"unconnected\"");
+    const NotRun* albedo = notRun(p.plan, "P", "albedo");
+    ASSERT_NE(albedo, nullptr);
+    EXPECT_EQ(albedo->reason, "optional, and no pass outputs a channel named 'albedo'");
+    EXPECT_EQ(notRun(p.plan, "P", "color"), nullptr);
+    EXPECT_EQ(notRun(p.plan, "Off", "nothing"), nullptr);  // the pass is listed, not its fields
+    EXPECT_EQ(notRun(p.plan, "Off")->kind, NotRunKind::Culled);
+    // A required output nobody reads is still computed: not listed.
+    EXPECT_EQ(notRun(p.plan, "Src", "direct"), nullptr);
+    EXPECT_NE(resource(p.plan, "Src.direct"), nullptr);
+}
+
+// Internal and history fields the second reflection leaves out get no memory and say so; fields that share the
+// arena or live in a history pair are allocated and not listed.
+TEST(GraphPlannerWhy, FieldsLeftOutSayWhy) {
+    GraphDesc desc;
+    desc.passes.push_back({"P", "T", nlohmann::json::object(), {}});
+    desc.passes.push_back({"Q", "T", nlohmann::json::object(), {}});
+    desc.outputs.push_back(parseChannelRef("Q.q", "output"));
+    desc.edges.push_back({parseChannelRef("P.out@prev", "edge"), parseChannelRef("Q.back", "edge")});
+    PlannerInput in;
+    in.desc = &desc;
+    in.width = in.height = 4;
+    in.reflections.push_back(reflectionOf({"out:out", "out:now", "int:scratch", "hist:moments", "int:used"}));
+    in.reflections.push_back(reflectionOf({"in:back", "in:now", "out:q", "int:tmp"}));
+    in.reflectWired = [](size_t pass, const CompileInfo&) {
+        return pass == 0 ? reflectionOf({"out:out", "out:now", "int:used"})
+                         : reflectionOf({"in:back", "in:now", "out:q", "int:tmp"});
+    };
+    Planned p;
+    p.desc = desc;
+    p.plan = planGraph(in);
+    planResources(p.plan, desc);
+    expectNotRunAgreesWithThePlan(p);
+    ASSERT_EQ(p.plan.summary.notRun.size(), 2u);
+    const NotRun* scratch = notRun(p.plan, "P", "scratch");
+    ASSERT_NE(scratch, nullptr);
+    EXPECT_EQ(scratch->kind, NotRunKind::NotAllocated);
+    EXPECT_EQ(scratch->reason, "internal field the pass does not use with these connections");
+    const NotRun* moments = notRun(p.plan, "P", "moments");
+    ASSERT_NE(moments, nullptr);
+    EXPECT_EQ(moments->reason, "history field the pass does not use with these connections");
+    // A history pair (P.out, read @prev) and arena transients are allocated.
+    ASSERT_NE(resource(p.plan, "P.out"), nullptr);
+    EXPECT_EQ(resource(p.plan, "P.out")->kind, ResourceKind::History);
+    EXPECT_NE(resource(p.plan, "P.used"), nullptr);
+    EXPECT_NE(resource(p.plan, "Q.tmp"), nullptr);
+}
+
+// A graph where everything runs and is allocated lists nothing.
+TEST(GraphPlannerWhy, NothingLeftOutListsNothing) {
+    const Planned p = plan({{"A", {"out:a", "opt-out:b"}}, {"B", {"in:a", "in:b", "out:c"}}}, {}, {"B.c"});
+    EXPECT_TRUE(p.plan.summary.notRun.empty());
 }

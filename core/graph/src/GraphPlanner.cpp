@@ -54,6 +54,9 @@ struct IndexedWire {
     Wire wire;
 };
 
+/// How many passes or fields a reason names before it says how many more there are.
+constexpr size_t kMaxNamed = 4;
+
 /// The first wiring problem of a pass: reported if the pass is live, a warning if it is culled.
 struct WiringProblem {
     std::string where, what, expected;
@@ -88,6 +91,7 @@ public:
         cull();
         order();
         reflectWired();
+        explainNotRun();
         return std::move(mPlan);
     }
 
@@ -96,6 +100,17 @@ private:
         throwBadInput(std::move(where), std::move(what), std::move(expected), std::move(hint), mFile);
     }
     const Reflection& refl(uint32_t pass) const { return mPlan.passes[pass].reflection; }
+
+    /// "A, B, C" of the passes (distinct, in description order), at most kMaxNamed of them, then "and N more".
+    std::string namedPasses(std::vector<uint32_t> passes) const {
+        std::sort(passes.begin(), passes.end());
+        passes.erase(std::unique(passes.begin(), passes.end()), passes.end());
+        std::vector<std::string> names;
+        for (size_t i = 0; i < passes.size() && i < kMaxNamed; ++i) names.push_back(mDesc.passes[passes[i]].name);
+        std::string text = join(names);
+        if (passes.size() > kMaxNamed) text += fmt::format(" and {} more", passes.size() - kMaxNamed);
+        return text;
+    }
 
     std::vector<std::string> passNames() const {
         std::vector<std::string> out;
@@ -269,10 +284,16 @@ private:
             work.pop_back();
             for (uint32_t s : sources[p]) markLive(s);
         }
+        // What culled passes would have read, by source and output: why their sources, and optional outputs of
+        // live passes, are not needed.
+        mCulledReads.resize(n);
+        for (const auto& w : mWires)
+            if (!mPlan.passes[w.dst].live) mCulledReads[w.src].emplace_back(w.wire.src.channel, w.dst);
+        for (auto& reads : mCulledReads) std::sort(reads.begin(), reads.end());
         for (uint32_t p = 0; p < n; ++p) {
             const std::string& name = mDesc.passes[p].name;
             if (!mPlan.passes[p].live) {
-                mPlan.summary.culled.push_back({name, "does not contribute to a marked output"});
+                mPlan.summary.culled.push_back({name, culledReason(p)});
                 if (mProblems[p]) mPlan.summary.warnings.push_back(name + " (culled): " + mProblems[p]->what);
             } else if (mProblems[p]) {
                 const WiringProblem& w = *mProblems[p];
@@ -284,6 +305,22 @@ private:
         std::erase_if(mWires, [&](const IndexedWire& w) { return !mPlan.passes[w.dst].live; });
         for (auto& into : mWireInto) into.clear();
         for (size_t i = 0; i < mWires.size(); ++i) mWireInto[mWires[i].dst][mWires[i].wire.dst.channel] = i;
+    }
+
+    /// Why a pass is culled: no marked or observed field depends on it, directly or through the passes that read it.
+    std::string culledReason(uint32_t p) const {
+        std::vector<uint32_t> readers;
+        bool self = false;
+        for (const auto& [field, dst] : mCulledReads[p]) {
+            if (dst == p)
+                self = true;
+            else
+                readers.push_back(dst);
+        }
+        if (!readers.empty()) return "only culled passes read its outputs: " + namedPasses(std::move(readers));
+        if (refl(p).names(FieldKind::Output).empty()) return "it has no outputs, and none of its fields is observed";
+        if (self) return "only itself reads its outputs (through @prev), and none is marked or observed";
+        return "no pass reads its outputs, and none is marked or observed";
     }
 
     // Order: topological over same-frame wires, ties by description order (the lowest ready index runs first).
@@ -365,6 +402,7 @@ private:
     // Which outputs are consumed, what feeds each input, and each live pass's second reflection: it may leave out
     // internal and history fields these connections do not use; its inputs and outputs must stay the same.
     void reflectWired() {
+        mLeftOut.resize(mDesc.passes.size());
         for (const auto& w : mWires) (w.wire.src.prev ? mPrevConsumed : mConsumed)[w.src].insert(w.wire.src.channel);
         for (size_t p = 0; p < mDesc.passes.size(); ++p) {
             mConsumed[p].insert(mMarked[p].begin(), mMarked[p].end());
@@ -386,7 +424,9 @@ private:
                         "history fields may depend on the connections)",
                         "fix the pass's reflect()"});
                 for (const auto& f : pp.reflection.fields()) {
-                    if (mObserved[p].count(f.name) && !wired.find(f.name)) {
+                    if (wired.find(f.name)) continue;
+                    mLeftOut[p].push_back(f);
+                    if (mObserved[p].count(f.name)) {
                         mPlan.summary.warnings.push_back("'" + fieldKey(pd.name, f.name) + "' is not computed: " +
                                                          pd.name + " does not use it with these connections");
                         mObserved[p].erase(f.name);
@@ -416,6 +456,71 @@ private:
         }
     }
 
+    /// Why an optional output of a live pass is not computed: culled passes read it, or nothing does (inputs of its
+    /// name are listed as unconnected or read another output).
+    std::string unreadOutputReason(uint32_t p, const std::string& field) {
+        const auto& reads = mCulledReads[p];
+        auto first = std::lower_bound(reads.begin(), reads.end(), std::make_pair(field, uint32_t(0)));
+        std::vector<uint32_t> readers;
+        for (auto it = first; it != reads.end() && it->first == field; ++it) readers.push_back(it->second);
+        if (!readers.empty()) return "optional, and only culled passes read it: " + namedPasses(std::move(readers));
+        if (!mInputsIndexed) {
+            mInputsIndexed = true;
+            for (uint32_t q = 0; q < mDesc.passes.size(); ++q)
+                if (mPlan.passes[q].live)
+                    for (const auto& f : refl(q).fields())
+                        if (f.kind == FieldKind::Input) mInputsNamed[f.name].push_back(q);
+        }
+        std::vector<std::string> notes;
+        bool more = false;
+        if (auto it = mInputsNamed.find(field); it != mInputsNamed.end()) {
+            for (uint32_t q : it->second) {
+                if (q == p) continue;
+                if (notes.size() == kMaxNamed) {
+                    more = true;
+                    break;
+                }
+                const std::string key = fieldKey(mDesc.passes[q].name, field);
+                if (mUnconnected[q].count(field))
+                    notes.push_back(key + " is listed as unconnected");
+                else if (auto w = mWireInto[q].find(field); w != mWireInto[q].end())
+                    notes.push_back(key + " reads " + mWires[w->second].wire.src.str());
+            }
+        }
+        if (notes.empty()) return "optional, not marked or observed, and no pass reads it";
+        return "optional, not marked or observed, and no pass reads it (" + join(notes, "; ") + (more ? "; ..." : "") +
+               ")";
+    }
+
+    /// Each culled pass, and each optional output not computed, optional input not connected and field left out of
+    /// a live pass, with why (CompiledPlan::notRun).
+    void explainNotRun() {
+        std::vector<NotRun>& out = mPlan.summary.notRun;
+        size_t culled = 0;
+        for (uint32_t p = 0; p < mDesc.passes.size(); ++p) {
+            const std::string& name = mDesc.passes[p].name;
+            const PassPlan& pp = mPlan.passes[p];
+            if (!pp.live) {
+                out.push_back({name, {}, NotRunKind::Culled, mPlan.summary.culled[culled++].reason});
+                continue;
+            }
+            for (const auto& f : pp.reflection.fields()) {
+                if (f.kind == FieldKind::Input && !mWireInto[p].count(f.name))
+                    out.push_back({name, f.name, NotRunKind::NotConnected,
+                                   mUnconnected[p].count(f.name)
+                                       ? "optional, and listed in the pass's \"unconnected\""
+                                       : "optional, and no pass outputs a channel named '" + f.name + "'"});
+                if (f.kind == FieldKind::Output && f.optional && !pp.consumed.count(f.name) &&
+                    !pp.history.count(f.name))
+                    out.push_back({name, f.name, NotRunKind::NotComputed, unreadOutputReason(p, f.name)});
+            }
+            for (const auto& f : mLeftOut[p])
+                out.push_back(
+                    {name, f.name, NotRunKind::NotAllocated,
+                     fmt::format("{} field the pass does not use with these connections", fieldKindName(f.kind))});
+        }
+    }
+
     const PlannerInput& mIn;
     const GraphDesc& mDesc;
     std::string mFile;
@@ -425,6 +530,11 @@ private:
     std::vector<std::map<std::string, size_t>> mWireInto;  // per pass: input -> wire
     std::vector<std::set<std::string>> mUnconnected, mConsumed, mPrevConsumed, mMarked, mObserved;
     std::vector<std::optional<WiringProblem>> mProblems;
+    // Per pass: (output, culled pass that reads it), sorted.
+    std::vector<std::vector<std::pair<std::string, uint32_t>>> mCulledReads;
+    std::vector<std::vector<FieldDesc>> mLeftOut;  // per live pass: fields its second reflection leaves out
+    std::unordered_map<std::string, std::vector<uint32_t>> mInputsNamed;  // input name -> live passes; built on demand
+    bool mInputsIndexed = false;
 };
 
 /// Placed transients, found by lifetime: bucketed by the first position of their lifetime, under a max-tree of

@@ -20,6 +20,20 @@ namespace loom {
 
 using json = nlohmann::json;
 
+const char* notRunKindName(NotRunKind kind) {
+    switch (kind) {
+        case NotRunKind::Culled:
+            return "culled";
+        case NotRunKind::NotComputed:
+            return "not computed";
+        case NotRunKind::NotConnected:
+            return "not connected";
+        case NotRunKind::NotAllocated:
+            return "not allocated";
+    }
+    return "?";
+}
+
 bool globMatch(const std::string& pattern, const std::string& text) {
     return fnmatch(pattern.c_str(), text.c_str(), 0) == 0;
 }
@@ -455,16 +469,21 @@ std::string RenderGraph::planText() const {
     s << ", " << p.width << "x" << p.height << "\n\nExecution order:\n";
     for (size_t i = 0; i < p.order.size(); ++i)
         s << fmt::format("  {:2}. {} ({})\n", i + 1, p.order[i], mImpl->node(p.order[i])->desc.type);
-    s << "\nCulled passes:";
-    if (p.culled.empty()) s << " none";
-    s << "\n";
-    for (const auto& c : p.culled) s << "  " << c.name << ": " << c.reason << "\n";
     s << "\nWiring:\n";
     for (const auto& w : p.wires)
         s << "  " << w.src.str() << " -> " << w.dst.str() << (w.byName ? "   (by name)" : "") << "\n";
     s << "\nMarked outputs:\n";
     for (const auto& o : p.outputs) s << "  " << o.str() << "\n";
-    if (!p.skippedOutputs.empty()) s << "\nOptional outputs not computed: " << join(p.skippedOutputs) << "\n";
+    // What the planner leaves out, then what each live pass leaves out of its work for the scene.
+    std::vector<std::string> notRun;
+    for (const NotRun& n : p.notRun)
+        notRun.push_back(fmt::format("{} ({}): {}", n.field.empty() ? n.pass : fieldKey(n.pass, n.field),
+                                     notRunKindName(n.kind), n.reason));
+    if (mImpl->scene)
+        for (const PassNode* n : mImpl->order)
+            for (const std::string& line : n->pass->skippedWork()) notRun.push_back(n->desc.name + ": " + line);
+    s << "\nNot run or not allocated, and why:" << (notRun.empty() ? " none\n" : "\n");
+    for (const std::string& line : notRun) s << "  " << line << "\n";
     s << "\nAllocations:\n";
     for (const auto& r : p.resources) {
         s << fmt::format("  {:28} {:10} {:>5}x{:<5} {:>11}  ", r.name, formatName(r.format), r.width, r.height,

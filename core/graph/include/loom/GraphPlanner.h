@@ -55,7 +55,9 @@ struct GraphPlan {
     CompiledPlan summary;
 };
 
-/// Resolves, wires, culls, orders and reflects again. Throws loom::Error (bad input naming the graph file, or a
+/// Resolves, wires, culls, orders and reflects again, and records why each culled pass, optional output not
+/// computed, optional input not connected and field a live pass leaves out is missing (summary.notRun; the culled
+/// passes' reasons are also summary.culled's). Throws loom::Error (bad input naming the graph file, or a
 /// runtime error naming a pass whose reflections are faulty) at the first problem.
 GraphPlan planGraph(const PlannerInput& input);
 

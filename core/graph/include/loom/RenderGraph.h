@@ -60,6 +60,25 @@ struct CulledPass {
     std::string reason;
 };
 
+/// What of the graph does not run or gets no memory.
+enum class NotRunKind {
+    Culled,        ///< a pass that does not run
+    NotComputed,   ///< an optional output of a live pass, neither allocated nor written
+    NotConnected,  ///< an optional input of a live pass that nothing feeds
+    NotAllocated,  ///< an internal or history field the pass leaves out once its connections are known
+};
+
+/// One pass or field that does not run or gets no memory, and why (`loom check` lists them).
+struct NotRun {
+    std::string pass;
+    std::string field;  ///< empty for the pass itself
+    NotRunKind kind = NotRunKind::Culled;
+    std::string reason;
+};
+
+/// "culled", "not computed", "not connected" or "not allocated".
+const char* notRunKindName(NotRunKind kind);
+
 /// The result of compiling: what `loom check` prints.
 struct CompiledPlan {
     uint32_t width = 0, height = 0;
@@ -69,6 +88,10 @@ struct CompiledPlan {
     std::vector<ChannelRef> outputs;   ///< marked outputs
     std::vector<ResourceInfo> resources;
     std::vector<std::string> skippedOutputs;  ///< optional outputs not computed
+    /// Every culled pass, and every optional output not computed, optional input not connected and field left out
+    /// of a live pass, with why: passes in description order, a pass's fields in declaration order. A field that
+    /// shares arena memory or lives in a history pair is allocated, so it is not listed.
+    std::vector<NotRun> notRun;
     std::vector<std::string> warnings;
     size_t transientPeakBytes = 0;     ///< size of the shared transient arena
     size_t transientSumBytes = 0;      ///< what the transients would take unshared
@@ -138,7 +161,8 @@ public:
     /// The description with current parameter values (non-default ones).
     GraphDesc desc() const;
 
-    /// Human-readable plan (for `loom check`) and Graphviz.
+    /// Human-readable plan (for `loom check`) and Graphviz. With a scene set, the section on what does not run also
+    /// lists the work each live pass leaves out (RenderPass::skippedWork) for the scene and its parameters.
     std::string planText() const;
     std::string planDot() const;
 
