@@ -41,6 +41,7 @@ public:
     /// precedence when it is a different one; this one is used for frames
     /// that come without a scene.
     void setScene(const std::shared_ptr<const Scene>& scene) override;
+    std::vector<std::string> skippedWork() const override;
 
     enum class CullMode { None, Back };
 
@@ -50,6 +51,7 @@ private:
 
     CullMode mCullMode = CullMode::Back;
     bool mAlphaTest = true;
+    bool mSpecialize = true;
     std::shared_ptr<const Scene> mScene;
     std::unique_ptr<Gpu> mGpu;
 };

@@ -3,10 +3,10 @@
 // with NEE and MIS over emissive triangles, punctual lights and the
 // environment. Runs on the CPU (Embree + oneTBB); `device` selects a CUDA
 // backend where one is usable.
-#include <memory>
-#include <vector>
-
 #include <glm/glm.hpp>
+#include <memory>
+#include <string>
+#include <vector>
 
 #include "Lights.h"
 #include "loom/RenderPass.h"
@@ -20,6 +20,7 @@ public:
     void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
     void setScene(const std::shared_ptr<const Scene>& scene) override;
+    std::vector<std::string> skippedWork() const override;
 
     enum class Device { Auto, Cpu, Cuda };
     enum class LightSamplingMode { Mis, Nee, Bsdf };
@@ -31,6 +32,8 @@ private:
     void buildLights(const Scene& scene);
     void buildEnvironment(const Scene& scene);
     const std::vector<float>& triangleEmission(const Scene& scene, uint32_t instance);
+    /// The pt::KernelFeature bits of the kernel the current light list needs (kAllFeatures unless specialize).
+    uint32_t kernelFeatures() const;
 
     // Parameters.
     int mMaxBounces = 3;
@@ -47,6 +50,7 @@ private:
     bool mAlphaTest = true;
     EmissionWeights mEmissionWeights = EmissionWeights::Texture;
     PixelFilter mPixelFilter = PixelFilter::Center;
+    bool mSpecialize = true;
 
     // Light data, rebuilt per frame (triangles, punctual lights: animated emission is followed) or per scene
     // (environment).
@@ -62,6 +66,13 @@ private:
     std::vector<glm::vec3> mTriEmissionFactor;  // per mesh: the emissive factor its means were measured with
     const void* mEmissionSource = nullptr;
     pt::LightsView mLights;
+    // The scene and parameters the light list was built for (a static scene's is built once).
+    const void* mLightsSource = nullptr;
+    uint64_t mLightsVersion = 0;
+    bool mLightsAlphaTest = true;
+    EmissionWeights mLightsWeights = EmissionWeights::Texture;
+    uint32_t mKernelFeatures = 3u;  // pt::kAllFeatures
+    bool mEmitterSurfaces = true;   // a light sample evaluates an emitter's material (textured or alpha-tested)
 };
 
 }  // namespace loom
