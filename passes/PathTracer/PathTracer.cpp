@@ -152,7 +152,9 @@ struct BatchContext {
     bool skipIdle;      // skip the vector shading of batches whose paths all ended (specialize)
 };
 
-/// Shades the live paths ts.live[0, live) with the kernel compiled for feature bits F.
+/// Shades the live paths ts.live[0, live) with the SIMD kernel compiled for feature bits F. The per-path kernel (a
+/// validation mode) is always the generic one: compiled inline into this loop, a variant of it may fuse multiplies
+/// and adds differently (GCC contracts across what inlining exposes), and the skip must not change a bit.
 template <uint32_t F>
 void shadeLive(const BatchContext& b, TileScratch& ts, uint32_t live) {
     if (b.simd) {
@@ -162,7 +164,7 @@ void shadeLive(const BatchContext& b, TileScratch& ts, uint32_t live) {
     } else {
         for (uint32_t j = 0; j < live; ++j) {
             const uint32_t k = ts.live[j];
-            ts.requests[j] = pt::shadeVertex<F>(ts.paths[k], ts.hits[k], b.view, b.lights, b.set);
+            ts.requests[j] = pt::shadeVertex(ts.paths[k], ts.hits[k], b.view, b.lights, b.set);
         }
     }
 }
@@ -635,7 +637,6 @@ void PathTracer::execute(PassContext& ctx) {
         mLightsAlphaTest = mAlphaTest;
         mLightsWeights = mEmissionWeights;
     }
-    mKernelFeatures = kernelFeatures();
 
     const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
     Camera camera = *ctx.camera();
@@ -660,6 +661,7 @@ void PathTracer::execute(PassContext& ctx) {
     const pt::LightsView lights = mLights;
     // Vertices are shaded several paths at a time in SIMD lanes where the settings allow (the default).
     const bool simd = mSimdShading && pt::simdShadingSupports(set);
+    mKernelFeatures = simd ? kernelFeatures() : pt::kAllFeatures;
     const uint32_t lanes = pt::shadeLanes();
 
     const Texture* vbTex = ctx.input(kVBuffer);

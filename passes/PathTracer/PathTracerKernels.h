@@ -39,7 +39,7 @@ LOOM_HD inline glm::vec3 clampIndirect(glm::vec3 c, float limit) {
     return m > limit ? c * (limit / m) : c;
 }
 
-/// Work the shading kernels can be compiled without (template parameter F of shadeEmission, shadeVertex and
+/// Work the shading kernels can be compiled without (template parameter F of shadeEmission, lightSampleRadiance and
 /// shadeVerticesSimd). PathTracer picks the kernel once per scene from its light list, so a bit is left out only
 /// where the scene never runs the code it guards, and the image is the generic kernel's bit for bit.
 enum KernelFeature : uint32_t {
@@ -240,11 +240,10 @@ LOOM_HD inline bool isLastVertex(uint32_t bounce, const PathTracerSettings& set,
 /// Shades the hit (or miss) of st.rayOrigin + t st.rayDir: emission reached there, a light sample (the shadow ray
 /// from st.rayOrigin along st.shadowDir, on return) and the BRDF-sampled continuation (st.rayOrigin/rayDir, on
 /// return). Returns kShadowRay and/or kNextRay; without kNextRay the path has ended (after its shadow ray).
-template <uint32_t F = kAllFeatures>
 LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const SceneView& scene, const LightsView& lights,
                                     const PathTracerSettings& set) {
     SurfaceHit s;
-    if (!shadeEmission<F>(st, hit, scene, lights, set, s)) return 0u;
+    if (!shadeEmission(st, hit, scene, lights, set, s)) return 0u;
     PathResult& r = st.r;
     const uint32_t bounce = st.bounce;
     PathRng& rng = st.rng;
@@ -267,7 +266,7 @@ LOOM_HD inline uint32_t shadeVertex(PathState& st, const RayHit& hit, const Scen
     if (ls.valid && (set.lightSampling != kBsdfOnly || ls.delta)) {
         const float cosI = glm::dot(n, ls.wi);
         if (cosI > 0.f && glm::dot(fn, ls.wi) > 0.f) {
-            const glm::vec3 Li = lightSampleRadiance<F>(scene, ls, n, fn);
+            const glm::vec3 Li = lightSampleRadiance(scene, ls, n, fn);
             if (Li != glm::vec3(0.f)) {
                 glm::vec3 f;
                 float bsdfPdf;

@@ -59,8 +59,9 @@ void expectSameWithAndWithout(const std::shared_ptr<Scene>& scene, const std::st
             EXPECT_TRUE(on->fieldTexture("P." + o)->samePixels(*off->fieldTexture("P." + o)))
                 << label << ": P." << o << " differs at frame " << i;
         const auto& statsOn = on->lastStats().at("P");
-        if (statsOn.count("rays"))
+        if (statsOn.count("rays")) {
             EXPECT_EQ(statsOn.at("rays"), off->lastStats().at("P").at("rays")) << label << ", frame " << i;
+        }
     }
 }
 
