@@ -574,7 +574,10 @@ std::vector<std::string> GBufferRaster::skippedWork() const {
         lines.push_back("texture sampling: no material has a texture");
     else
         lines.push_back("texture sampling of the slots a material lacks: a shader variant per material");
-    if (!f.alphaTested || !mAlphaTest) lines.push_back("alpha testing: no material is alpha-tested");
+    if (!f.alphaTested)
+        lines.push_back("alpha testing: no material is alpha-tested");
+    else if (mAlphaTest)
+        lines.push_back("alpha testing of opaque materials: a shader variant per material");
     if (!f.animatedNodes)
         lines.push_back("previous positions of surfaces: no node is animated (motion vectors are the camera's alone)");
     return lines;

@@ -323,7 +323,7 @@ std::vector<std::string> PathTracer::skippedWork() const {
         lines.push_back("environment map lookups: the environment is " +
                         std::string(f.environment == EnvironmentKind::None ? "black" : "a constant colour"));
     }
-    lines.push_back("vector shading of batches of ended paths: misses end at the primary ray");
+    if (mSimdUsed) lines.push_back("vector shading of batches of ended paths: misses end at the primary ray");
     if (!f.animatedNodes && !f.animatedLights)
         lines.push_back("per-frame light list: nothing moves and no emission is animated (built once)");
     else if (!f.animatedLights)
@@ -662,6 +662,7 @@ void PathTracer::execute(PassContext& ctx) {
     // Vertices are shaded several paths at a time in SIMD lanes where the settings allow (the default).
     const bool simd = mSimdShading && pt::simdShadingSupports(set);
     mKernelFeatures = simd ? kernelFeatures() : pt::kAllFeatures;
+    mSimdUsed = simd;
     const uint32_t lanes = pt::shadeLanes();
 
     const Texture* vbTex = ctx.input(kVBuffer);

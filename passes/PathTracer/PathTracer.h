@@ -72,6 +72,7 @@ private:
     bool mLightsAlphaTest = true;
     EmissionWeights mLightsWeights = EmissionWeights::Texture;
     uint32_t mKernelFeatures = 3u;  // pt::kAllFeatures
+    bool mSimdUsed = true;          // the last frame shaded with the SIMD kernel
     bool mEmitterSurfaces = true;   // a light sample evaluates an emitter's material (textured or alpha-tested)
 };
 
