@@ -833,11 +833,30 @@ def make_materials():
     return g
 
 
+SKY_CAMERA_POS = (0.0, 0.4, 4.0)
+
+
+def make_sky_sphere():
+    g = Gltf()
+    # One glossy sphere on nothing: the rest of the frame is environment (given with --env), so most camera
+    # rays miss. A sun (directional light) lights it besides the environment.
+    attrs, idx = g.geometry(uv_sphere(0.5, 32, 16), USHORT)
+    glossy = g.material("GlossyOrange", (0.9, 0.45, 0.1), 0.0, 0.3)
+    roots = [g.node("Sphere", g.mesh("Sphere", [(attrs, idx, glossy)]))]
+    sun = g.light({"name": "Sun", "type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 3.0})
+    roots.append(g.node("Sun", r=quat_look_at((0.0, 0.0, 0.0), (-0.4, -1.0, -0.6)), light=sun))
+    cam = g.camera("SkyCamera", 0.8, 16.0 / 9.0, 0.05, 100.0)
+    roots.append(g.node("Camera", camera=cam, t=SKY_CAMERA_POS, r=quat_look_at(SKY_CAMERA_POS, (0.0, 0.0, 0.0))))
+    g.scene("SkySphere", roots)
+    return g
+
+
 SCENES = (
     ("cornell_box.gltf", make_cornell_box),
     ("cornell_dynamic.gltf", make_cornell_dynamic),
     ("cornell_lightstep.gltf", make_cornell_lightstep),
     ("materials.gltf", make_materials),
+    ("sky_sphere.gltf", make_sky_sphere),
 )
 
 

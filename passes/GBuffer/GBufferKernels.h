@@ -68,11 +68,16 @@ LOOM_HD inline glm::vec3 interpolatedNormal(const SceneView& scene, uint32_t ins
 /// The G-buffer sample of a primary hit. Screen-space derivatives come from
 /// ray differentials: the rays through the next pixel in x and y are
 /// intersected with the hit triangle's plane, as a rasterizer's dFdx/dFdy see
-/// a planar triangle.
+/// a planar triangle. Moving = false is for frames where every instance's
+/// prevWorld equals its world: the surface's position last frame is its
+/// position now (motion is the camera's alone), and neither it nor the uv of an
+/// untextured material is computed; the sample is the same bit for bit.
+template <bool Moving = true>
 LOOM_HD inline GBufferSample hitSample(const SceneView& scene, const CameraData& cam, uint32_t x, uint32_t y,
                                        uint32_t instance, uint32_t prim, float u, float v) {
     const glm::vec3 dir = pixelRayDir(cam, x, y);
-    const SurfaceHit s = evalSurface(scene, instance, prim, u, v, dir);
+    SurfaceHit s = evalSurface(scene, instance, prim, u, v, dir, Moving ? SurfaceEval::Full : SurfaceEval::Shading);
+    if (!Moving) s.prevPosW = s.posW;
     GBufferSample g;
     g.posW = glm::vec4(s.posW, 1.f);
     g.normW = glm::vec4(s.normalW, 0.f);

@@ -1,5 +1,7 @@
 #include "GBufferRT.h"
 
+#include <algorithm>
+
 #include "GBufferCommon.h"
 #include "GBufferKernels.h"
 #include "loom/CameraRays.h"
@@ -22,6 +24,20 @@ void GBufferRT::declareParams(ParamList& p) {
         .doc(
             "alphaMode MASK: rays pass where alpha < alphaCutoff; BLEND: stochastic transparency (the surface is "
             "there with probability alpha); false: every material opaque");
+    p.add("specialize", &mSpecialize, true)
+        .doc(
+            "skip what the frame does not need: where no instance moved since the last frame, motion vectors are "
+            "the camera's alone (no previous-position transform); the output is the same bit for bit. false: the "
+            "generic kernel, for comparison");
+}
+
+void GBufferRT::setScene(const std::shared_ptr<const Scene>& scene) {
+    mScene = scene;
+}
+
+std::vector<std::string> GBufferRT::skippedWork() const {
+    if (!mSpecialize || !mScene || mScene->features().animatedNodes) return {};
+    return {"previous positions of surfaces: no node is animated (motion vectors are the camera's alone)"};
 }
 
 namespace {
@@ -78,13 +94,23 @@ void GBufferRT::execute(PassContext& ctx) {
     const uint32_t rules = (mVisibility.cullMode == CullMode::Back ? kRayCullBackFaces : 0u) |
                            (mVisibility.alphaTest ? kRayAlphaTest : 0u);
     const uint32_t frame = uint32_t(ctx.frameIndex());
-    parallelFor2D(w, h, [&](const Tile& t) {
-        traceCameraRays(rays, cam, t, rules, frame, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
-            store(o, x, y,
-                  hit.hit() ? hitSample(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
-                            : missSample(cam, dir));
+    // Decided once per frame: whether any instance moved since the last one (its prevWorld differs from its world).
+    const bool moving = !mSpecialize || std::any_of(scene->instances.begin(), scene->instances.end(),
+                                                    [](const Instance& i) { return i.prevWorld != i.world; });
+    auto run = [&]<bool Moving>() {
+        parallelFor2D(w, h, [&](const Tile& t) {
+            traceCameraRays(rays, cam, t, rules, frame, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
+                store(o, x, y,
+                      hit.hit() ? hitSample<Moving>(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
+                                : missSample(cam, dir));
+            });
         });
-    });
+    };
+    if (moving)
+        run.template operator()<true>();
+    else
+        run.template operator()<false>();
+    ctx.stats().set("staticInstances", moving ? 0.0 : 1.0);
 }
 
 }  // namespace loom

@@ -140,6 +140,8 @@ constexpr uint32_t kVBufferBit = channelBit(kVBuffer), kMeshIdBit = channelBit(k
 constexpr uint32_t kVariantAlphaTest = 1u << 16;
 constexpr uint32_t kVariantMiss = 1u << 17;
 constexpr uint32_t kVariantTextureSlot0 = 1u << 18;  // bits 18..21: texture slots 0..3 (order of uTextures)
+constexpr uint32_t kVariantAllTextureSlots = 15u << 18;
+constexpr uint32_t kVariantStatic = 1u << 22;  // the instance did not move: prevPosW = posW
 
 [[noreturn]] void runtimeError(const std::string& what, const std::string& suggestion = {}) {
     throw Error(Error::Info{ErrorKind::Runtime, {}, "GBufferRaster", what, {}, suggestion});
@@ -331,6 +333,7 @@ struct GBufferRaster::Gpu {
             if (variant & (1u << c)) defines += "#define " + outputDefine(kChannels[c].name) + " " +
                                                 std::to_string(location++) + "\n";
         if (variant & kVariantAlphaTest) defines += "#define ALPHA_TEST 1\n";
+        if (variant & kVariantStatic) defines += "#define STATIC_INSTANCE 1\n";
         for (int slot = 0; slot < 4; ++slot)
             if (variant & (kVariantTextureSlot0 << slot))
                 defines += "#define TEXTURE_SLOT_" + std::to_string(slot) + " 1\n";
@@ -556,6 +559,29 @@ void GBufferRaster::declareParams(ParamList& p) {
         .doc(
             "alphaMode MASK discards fragments where alpha < alphaCutoff; BLEND is stochastic transparency (kept "
             "with probability alpha, decided as in GBufferRT); false: every material opaque");
+    p.add("specialize", &mSpecialize, true)
+        .doc(
+            "a shader variant per draw without what its material and instance do not need: texture slots the "
+            "material lacks, alpha testing for opaque materials, the previous-position transform for an instance "
+            "that did not move; the output is the same bit for bit. false: one generic variant for every draw, "
+            "for comparison");
+}
+
+std::vector<std::string> GBufferRaster::skippedWork() const {
+    if (!mSpecialize || !mScene) return {};
+    const SceneFeatures& f = mScene->features();
+    std::vector<std::string> lines;
+    if (!f.textures)
+        lines.push_back("texture sampling: no material has a texture");
+    else
+        lines.push_back("texture sampling of the slots a material lacks: a shader variant per material");
+    if (!f.alphaTested)
+        lines.push_back("alpha testing: no material is alpha-tested");
+    else if (mVisibility.alphaTest)
+        lines.push_back("alpha testing of opaque materials: a shader variant per material");
+    if (!f.animatedNodes)
+        lines.push_back("previous positions of surfaces: no node is animated (motion vectors are the camera's alone)");
+    return lines;
 }
 
 GBufferRaster::Gpu& GBufferRaster::gpu() {
@@ -707,10 +733,17 @@ void GBufferRaster::execute(PassContext& ctx) {
             const bool doubleSided = mat.flags.x != 0;
             const bool alphaTested = mVisibility.alphaTest && (mat.flags.y != 0 || mat.flags.z != 0);
 
-            uint32_t textured = 0;
-            for (int slot = 0; slot < 4; ++slot)
-                if (mat.textures[slot] >= 0) textured |= kVariantTextureSlot0 << slot;
-            const GLuint program = g.program(groupMask | (alphaTested ? kVariantAlphaTest : 0u) | textured);
+            // The variant without what this draw does not need (specialize), else the generic one.
+            uint32_t variant = groupMask;
+            if (mSpecialize) {
+                for (int slot = 0; slot < 4; ++slot)
+                    if (mat.textures[slot] >= 0) variant |= kVariantTextureSlot0 << slot;
+                if (alphaTested) variant |= kVariantAlphaTest;
+                if (inst.prevWorld == inst.world) variant |= kVariantStatic;
+            } else {
+                variant |= kVariantAllTextureSlots | (mVisibility.alphaTest ? kVariantAlphaTest : 0u);
+            }
+            const GLuint program = g.program(variant);
             if (program != boundProgram) {
                 glUseProgram(program);
                 boundProgram = program;

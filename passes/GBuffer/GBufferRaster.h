@@ -42,6 +42,7 @@ public:
     /// precedence when it is a different one; this one is used for frames
     /// that come without a scene.
     void setScene(const std::shared_ptr<const Scene>& scene) override;
+    std::vector<std::string> skippedWork() const override;
 
     using CullMode = gbuffer::Visibility::CullMode;
 
@@ -50,6 +51,7 @@ private:
     Gpu& gpu();
 
     gbuffer::Visibility mVisibility;  ///< cullMode, alphaTest: the shared struct holds the defaults
+    bool mSpecialize = true;
     std::shared_ptr<const Scene> mScene;
     std::unique_ptr<Gpu> mGpu;
 };

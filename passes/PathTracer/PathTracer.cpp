@@ -148,7 +148,26 @@ struct BatchContext {
     const pt::PathTracerSettings& set;
     bool simd;
     uint32_t lanes;
+    uint32_t features;  // pt::KernelFeature bits of the kernel the scene needs (pt::kAllFeatures: the generic one)
+    bool skipIdle;      // skip the vector shading of batches whose paths all ended (specialize)
 };
+
+/// Shades the live paths ts.live[0, live) with the SIMD kernel compiled for feature bits F. The per-path kernel (a
+/// validation mode) is always the generic one: compiled inline into this loop, a variant of it may fuse multiplies
+/// and adds differently (GCC contracts across what inlining exposes), and the skip must not change a bit.
+template <uint32_t F>
+void shadeLive(const BatchContext& b, TileScratch& ts, uint32_t live) {
+    if (b.simd) {
+        for (uint32_t j = 0; j < live; j += b.lanes)
+            pt::shadeVerticesSimd<F>(ts.paths.data(), ts.hits.data(), &ts.live[j], std::min(b.lanes, live - j), b.view,
+                                     b.lights, b.set, &ts.requests[j], b.skipIdle);
+    } else {
+        for (uint32_t j = 0; j < live; ++j) {
+            const uint32_t k = ts.live[j];
+            ts.requests[j] = pt::shadeVertex(ts.paths[k], ts.hits[k], b.view, b.lights, b.set);
+        }
+    }
+}
 
 /// Runs paths ts.paths[0, count) (begun, their first hits in ts.hits) to their ends as a small wavefront: each round
 /// shades every live path, then traces all their shadow rays as one Embree stream, then all their continuation rays
@@ -157,16 +176,12 @@ void runPaths(const BatchContext& b, TileScratch& ts, uint32_t count) {
     for (uint32_t k = 0; k < count; ++k) ts.live[k] = k;
     uint32_t live = count;
     while (live > 0) {
-        if (b.simd) {
-            for (uint32_t j = 0; j < live; j += b.lanes)
-                pt::shadeVerticesSimd(ts.paths.data(), ts.hits.data(), &ts.live[j], std::min(b.lanes, live - j), b.view,
-                                      b.lights, b.set, &ts.requests[j]);
-        } else {
-            for (uint32_t j = 0; j < live; ++j) {
-                const uint32_t k = ts.live[j];
-                ts.requests[j] = pt::shadeVertex(ts.paths[k], ts.hits[k], b.view, b.lights, b.set);
-            }
-        }
+        // Two kernels: the generic one, and one without any optional feature (the smallest superset of a scene's
+        // needs among them; see PathTracer::kernelFeatures()).
+        if (b.features == 0u)
+            shadeLive<0u>(b, ts, live);
+        else
+            shadeLive<pt::kAllFeatures>(b, ts, live);
         uint32_t shadows = 0, next = 0;
         for (uint32_t j = 0; j < live; ++j) {
             const uint32_t k = ts.live[j];
@@ -274,6 +289,12 @@ void PathTracer::declareParams(ParamList& p) {
             "G-buffers see it; box = each sample uniformly in the pixel, camera jitter ignored (an anti-aliased "
             "image, for references of jittered sequences; its own camera rays, so a vbuffer feeds only albedo, "
             "specAlbedo and emission)");
+    p.add("specialize", &mSpecialize, true)
+        .doc(
+            "skip what the scene does not need (skippedWork lists it): a kernel without textured-emitter and "
+            "environment-map code where the scene has neither, no vector shading of batches of ended paths, and "
+            "for a static scene the light list built once; the image is the same bit for bit. false: the generic "
+            "kernel and per-frame rebuilds, for comparison");
     p.add("alphaTest", &mAlphaTest, true)
         .doc(
             "every ray: alphaMode MASK passes where alpha < alphaCutoff, BLEND is stochastic transparency (there "
@@ -292,6 +313,34 @@ void PathTracer::compile(const CompileInfo&) {
 void PathTracer::setScene(const std::shared_ptr<const Scene>&) {
     mEnvSource = nullptr;
     mEmissionSource = nullptr;
+    mLightsSource = nullptr;
+}
+
+uint32_t PathTracer::kernelFeatures() const {
+    if (!mSpecialize) return pt::kAllFeatures;
+    const uint32_t f = (mLights.env.texels ? pt::kEnvironmentMap : 0u) | (mEmitterSurfaces ? pt::kEmitterSurfaces : 0u);
+    // Only two kernels are compiled: none of the features, or all of them.
+    return f == 0u ? 0u : pt::kAllFeatures;
+}
+
+std::vector<std::string> PathTracer::skippedWork() const {
+    std::vector<std::string> lines;
+    if (!mSpecialize || !mLightsSource) return lines;
+    const SceneFeatures& f = static_cast<const Scene*>(mLightsSource)->features();
+    if (mKernelFeatures == 0u) {
+        lines.push_back("emitter material at light samples: no emissive texture or alpha-tested emitter");
+        lines.push_back("environment map lookups: the environment is " +
+                        std::string(f.environment == EnvironmentKind::None ? "black" : "a constant colour"));
+    }
+    if (mSimdUsed) lines.push_back("vector shading of batches of ended paths: misses end at the primary ray");
+    if (!f.animatedNodes && !f.animatedLights)
+        lines.push_back("per-frame light list: nothing moves and no emission is animated (built once)");
+    else if (!f.animatedLights)
+        lines.push_back("light list rebuilds while no instance moves: no emission is animated");
+    if (mTris.empty()) lines.push_back("emissive-triangle sampling: the scene has no emissive triangles");
+    if (mPunctual.empty()) lines.push_back("punctual-light sampling: the scene has no punctual light");
+    if (!mLights.hasEnv) lines.push_back("environment sampling: the environment is black");
+    return lines;
 }
 
 void PathTracer::buildEnvironment(const Scene& scene) {
@@ -444,6 +493,8 @@ void PathTracer::buildLights(const Scene& scene) {
             mTris.push_back(e);
         }
     }
+    mEmitterSurfaces =
+        std::any_of(mTris.begin(), mTris.end(), [](const pt::EmissiveTri& t) { return t.textured || t.alphaTested; });
     mTriCdf.assign(mTris.size() + 1, 0.f);
     const double total = pt::fillTriangleCdf(mTris.data(), uint32_t(mTris.size()), mTriCdf.data());
 
@@ -583,7 +634,18 @@ void PathTracer::execute(PassContext& ctx) {
         throwBadInput(ctx.passName(), "the path tracer needs a scene", "a scene given with --scene",
                       "render with `loom render --scene data/scenes/cornell_box.gltf ...`");
     if (mEnvSource != scene) buildEnvironment(*scene);
-    buildLights(*scene);
+    // A static scene's lights never change: its light list is built once (specialize), else every frame (animated
+    // instances and emission are followed).
+    const SceneFeatures& features = scene->features();
+    const bool lightsStatic = mSpecialize && !features.animatedLights;
+    if (!lightsStatic || mLightsSource != scene || mLightsVersion != scene->geometryVersion() ||
+        mLightsAlphaTest != mAlphaTest || mLightsWeights != mEmissionWeights) {
+        buildLights(*scene);
+        mLightsSource = scene;
+        mLightsVersion = scene->geometryVersion();
+        mLightsAlphaTest = mAlphaTest;
+        mLightsWeights = mEmissionWeights;
+    }
 
     const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
     Camera camera = *ctx.camera();
@@ -602,6 +664,8 @@ void PathTracer::execute(PassContext& ctx) {
     const pt::LightsView lights = mLights;
     // Vertices are shaded several paths at a time in SIMD lanes where the settings allow (the default).
     const bool simd = mSimdShading && pt::simdShadingSupports(set);
+    mKernelFeatures = simd ? kernelFeatures() : pt::kAllFeatures;
+    mSimdUsed = simd;
     const uint32_t lanes = pt::shadeLanes();
 
     const Texture* vbTex = ctx.input(kVBuffer);
@@ -613,7 +677,7 @@ void PathTracer::execute(PassContext& ctx) {
     const ImageView<glm::vec4> color = view4(kColor), albedo = view4(kAlbedo), specAlbedo = view4(kSpecAlbedo),
                                emission = view4(kEmission), direct = view4(kDirect), indirect = view4(kIndirect);
     const bool wantsPrimary = albedo.data || specAlbedo.data || emission.data;
-    const BatchContext batch{secondary, view, lights, set, simd, lanes};
+    const BatchContext batch{secondary, view, lights, set, simd, lanes, mKernelFeatures, mSpecialize};
     // Temporal gradients: this frame keeps one sample per block (hit, luminance) for the next one.
     Texture* gradientTex = ctx.output(kGradient);
     const ImageView<glm::uvec4> gradientHits =

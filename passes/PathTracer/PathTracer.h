@@ -5,6 +5,7 @@
 // backend where one is usable.
 #include <glm/glm.hpp>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "Lights.h"
@@ -20,6 +21,7 @@ public:
     void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
     void setScene(const std::shared_ptr<const Scene>& scene) override;
+    std::vector<std::string> skippedWork() const override;
 
     enum class Device { Auto, Cpu, Cuda };
     enum class CullMode { None, Back };
@@ -30,6 +32,8 @@ private:
     void buildLights(const Scene& scene);
     void buildEnvironment(const Scene& scene);
     const std::vector<float>& triangleEmission(const Scene& scene, uint32_t instance);
+    /// The pt::KernelFeature bits of the kernel the current light list needs (kAllFeatures unless specialize).
+    uint32_t kernelFeatures() const;
 
     // Parameters.
     /// maxBounces, rrStartBounce, lightSampling, lambertOnly, energyCompensation, indirectClamp: the kernel's struct
@@ -43,6 +47,7 @@ private:
     bool mAlphaTest = true;
     EmissionWeights mEmissionWeights = EmissionWeights::Texture;
     PixelFilter mPixelFilter = PixelFilter::Center;
+    bool mSpecialize = true;
 
     // Light data, rebuilt per frame (triangles, punctual lights: animated emission is followed) or per scene
     // (environment).
@@ -58,6 +63,14 @@ private:
     std::vector<glm::vec3> mTriEmissionFactor;  // per mesh: the emissive factor its means were measured with
     const void* mEmissionSource = nullptr;
     pt::LightsView mLights;
+    // The scene and parameters the light list was built for (a static scene's is built once).
+    const void* mLightsSource = nullptr;
+    uint64_t mLightsVersion = 0;
+    bool mLightsAlphaTest = true;
+    EmissionWeights mLightsWeights = EmissionWeights::Texture;
+    uint32_t mKernelFeatures = 3u;  // pt::kAllFeatures
+    bool mSimdUsed = true;          // the last frame shaded with the SIMD kernel
+    bool mEmitterSurfaces = true;   // a light sample evaluates an emitter's material (textured or alpha-tested)
 };
 
 }  // namespace loom

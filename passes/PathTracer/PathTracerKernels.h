@@ -41,6 +41,19 @@ LOOM_HD inline glm::vec3 clampIndirect(glm::vec3 c, float limit) {
     return m > limit ? c * (limit / m) : c;
 }
 
+/// Work the shading kernels can be compiled without (template parameter F of shadeEmission, lightSampleRadiance and
+/// shadeVerticesSimd). PathTracer picks the kernel once per scene from its light list, so a bit is left out only
+/// where the scene never runs the code it guards, and the image is the generic kernel's bit for bit.
+enum KernelFeature : uint32_t {
+    /// A light sample evaluates the emitter's material at the sampled point (emissive texture or alpha-tested
+    /// emitter); without it the sample's radiance is the triangle's emissive factor.
+    kEmitterSurfaces = 1u,
+    /// The environment is an equirectangular map; without it a constant colour (or black): no texel lookup on a
+    /// miss, and its pdf is the uniform sphere's.
+    kEnvironmentMap = 2u,
+};
+inline constexpr uint32_t kAllFeatures = kEmitterSurfaces | kEnvironmentMap;
+
 struct PathResult {
     glm::vec3 color{0.f};
     glm::vec3 direct{0.f};    ///< emission seen directly, NEE at the first hit, and emission one bounce away
@@ -103,19 +116,23 @@ LOOM_HD inline void beginPath(PathState& st, glm::vec3 origin, glm::vec3 dir, co
 /// The first part of shading a vertex: adds what the path sees at the hit (or miss) of st.rayOrigin + t st.rayDir
 /// (emission, MIS-weighted) and evaluates the surface into s. Returns false when the path ends there (a miss, or
 /// bounce == maxBounces); otherwise the caller scatters at s.
+template <uint32_t F = kAllFeatures>
 LOOM_HD inline bool shadeEmission(PathState& st, const RayHit& hit, const SceneView& scene, const LightsView& lights,
                                   const PathTracerSettings& set, SurfaceHit& s) {
     PathResult& r = st.r;
     const bool directSlot = st.bounce <= 1;  // emission reached here belongs to "direct"
     const glm::vec3 rayDir = st.rayDir;
     if (!hit.hit()) {
-        const glm::vec3 Le = envRadiance(lights.env, rayDir);
+        // Without a map, envRadiance() and envPdf() reduce to these constants (the same expressions).
+        constexpr bool map = (F & kEnvironmentMap) != 0;
+        const glm::vec3 Le = map ? envRadiance(lights.env, rayDir) : lights.env.color * lights.env.intensity;
         float w = 1.f;
         if (!st.prevDelta && lights.hasEnv) {
             if (set.lightSampling == kNeeOnly)
                 w = 0.f;
             else if (set.lightSampling == kMis)
-                w = powerHeuristic(st.prevBsdfPdf, lights.pEnv * envPdf(lights.env, rayDir));
+                w = powerHeuristic(st.prevBsdfPdf,
+                                   lights.pEnv * (map ? envPdf(lights.env, rayDir) : 1.f / (4.f * kPi)));
         }
         const glm::vec3 c =
             directSlot ? st.throughput * Le * w : clampIndirect(st.throughput * Le * w, set.indirectClamp);
@@ -192,7 +209,9 @@ LOOM_HD inline ScatterFrame scatterFrame(const SurfaceHit& s, glm::vec3 wo) {
 /// textured emitter the material evaluated at the sampled point (only where the sample can reach the surface).
 /// An alpha-tested emitter's coverage there scales it: a MASK emitter emits nothing where it is cut out, a BLEND
 /// emitter its mean over its stochastic transparency (alpha times its radiance), as rays that hit it see.
+template <uint32_t F = kAllFeatures>
 LOOM_HD inline glm::vec3 lightSampleRadiance(const SceneView& scene, const LightSample& ls, glm::vec3 n, glm::vec3 fn) {
+    if ((F & kEmitterSurfaces) == 0) return ls.Li;  // no light sample has isTriangle set
     if (!ls.isTriangle || !(glm::dot(n, ls.wi) > 0.f && glm::dot(fn, ls.wi) > 0.f)) return ls.Li;
     const SurfaceHit e =
         evalSurface(scene, ls.instance, ls.primitive, ls.bary.x, ls.bary.y, ls.wi, SurfaceEval::Shading);

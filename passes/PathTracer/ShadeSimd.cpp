@@ -3,6 +3,7 @@
 #include <hwy/contrib/math/math-inl.h>
 #include <hwy/highway.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -440,9 +441,10 @@ uint32_t shadeLanes() {
     return uint32_t(hn::Lanes(D()));
 }
 
+template <uint32_t F>
 void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx, uint32_t count,
                        const SceneView& scene, const LightsView& lights, const PathTracerSettings& set,
-                       uint32_t* requests) {
+                       uint32_t* requests, bool skipIdle) {
     const uint32_t lanes = shadeLanes();
     Batch b;
     bool active[kMaxShadeLanes] = {};
@@ -454,7 +456,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         }
         PathState& st = paths[idx[j]];
         SurfaceHit s;
-        if (!shadeEmission(st, hits[idx[j]], scene, lights, set, s)) {
+        if (!shadeEmission<F>(st, hits[idx[j]], scene, lights, set, s)) {
             fillIdle(b, j);
             continue;
         }
@@ -470,7 +472,7 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         const glm::vec2 l01 = rng.next2(), l23 = rng.next2(), b01 = rng.next2();
         const float uLobe = rng.next(), uRoulette = rng.next();
         const LightSample ls = sampleLight(lights, sf.p, l01.x, l01.y, l23.x, l23.y);
-        const glm::vec3 Li = ls.valid ? lightSampleRadiance(scene, ls, sf.n, sf.fn) : glm::vec3(0.f);
+        const glm::vec3 Li = ls.valid ? lightSampleRadiance<F>(scene, ls, sf.n, sf.fn) : glm::vec3(0.f);
         set3(b.n, j, sf.n);
         set3(b.fn, j, sf.fn);
         set3(b.wo, j, wo);
@@ -495,6 +497,11 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         b.roulette[j] = bounce + 1 >= set.rrStartBounce ? 1.f : 0.f;
     }
 
+    // Every path ended here (a batch of misses): nothing to shade, no ray to ask for.
+    if (skipIdle && std::none_of(active, active + lanes, [](bool a) { return a; })) {
+        std::fill(requests, requests + count, 0u);
+        return;
+    }
     shadeBatch(b, set.multiScatter);
 
     // Back into the paths, as shadeVertex() leaves them.
@@ -522,5 +529,10 @@ void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx
         }
     }
 }
+
+template void shadeVerticesSimd<kAllFeatures>(PathState*, const RayHit*, const uint32_t*, uint32_t, const SceneView&,
+                                              const LightsView&, const PathTracerSettings&, uint32_t*, bool);
+template void shadeVerticesSimd<0u>(PathState*, const RayHit*, const uint32_t*, uint32_t, const SceneView&,
+                                    const LightsView&, const PathTracerSettings&, uint32_t*, bool);
 
 }  // namespace loom::pt

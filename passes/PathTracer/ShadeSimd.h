@@ -25,10 +25,13 @@ inline bool simdShadingSupports(const PathTracerSettings& set) {
     return set.lightSampling == kMis && !set.lambertOnly;
 }
 
-/// shadeVertex(paths[idx[j]], hits[idx[j]], ...) for j in [0, count), count <= shadeLanes(); requests[j] receives
-/// its return value. Requires simdShadingSupports(set).
+/// shadeVertex<F>(paths[idx[j]], hits[idx[j]], ...) for j in [0, count), count <= shadeLanes(); requests[j] receives
+/// its return value. Requires simdShadingSupports(set). With skipIdle, a call where every path ended at this vertex
+/// (misses, paths at their last bounce) does no vector work; the results are the same. Instantiated for F =
+/// kAllFeatures and F = 0.
+template <uint32_t F>
 void shadeVerticesSimd(PathState* paths, const RayHit* hits, const uint32_t* idx, uint32_t count,
                        const SceneView& scene, const LightsView& lights, const PathTracerSettings& set,
-                       uint32_t* requests);
+                       uint32_t* requests, bool skipIdle = true);
 
 }  // namespace loom::pt

@@ -410,6 +410,8 @@ void Scene::finalize() {
     mUpdated = false;
     mLightingChanged = false;
     mLightState = lightState();
+    computeFeatures();
+    ++mGeometryVersion;
     rebuildView();
 }
 
@@ -420,9 +422,14 @@ void Scene::update(double time) {
     mLightingChanged = mUpdated && light != mLightState;
     mLightState = std::move(light);
 
+    // Whether an instance's transform (now or last frame's) changed: only then are the ray-tracing instances
+    // committed again and the instances' view rebuilt, so a static scene does no per-frame rebuild work.
+    bool moved = !mUpdated;
     for (Instance& inst : instances) {
         const glm::mat4& world = mNodeWorld[inst.node];
-        inst.prevWorld = mUpdated ? inst.world : world;
+        const glm::mat4 prev = mUpdated ? inst.world : world;
+        moved = moved || prev != inst.prevWorld || world != inst.world;
+        inst.prevWorld = prev;
         inst.world = world;
     }
     for (Light& light : lights) {
@@ -465,9 +472,11 @@ void Scene::update(double time) {
     camera.prevWorld = mUpdated ? camera.world : camWorld;
     camera.world = camWorld;
 
-    if (mRayScene) mRayScene->updateInstances(*this);
+    if (mRayScene && moved) mRayScene->updateInstances(*this);
+    if (moved) ++mGeometryVersion;
     mUpdated = true;
-    rebuildView();
+    updateDynamicFeatures();
+    rebuildView(moved);
 }
 
 void Scene::cutMotion() {
@@ -601,9 +610,47 @@ void Scene::loadEnvironmentMap(const std::filesystem::path& path) {
     environment.width = width;
     environment.height = height;
     environment.texels = std::move(texels);
+    updateDynamicFeatures();
 }
 
-void Scene::rebuildView() {
+void Scene::computeFeatures() {
+    SceneFeatures f;
+    f.diffuseOnly = true;
+    for (const Material& m : materials) {
+        f.textures = f.textures || m.baseColorTexture.image >= 0 || m.metallicRoughnessTexture.image >= 0 ||
+                     m.normalTexture.image >= 0 || m.emissiveTexture.image >= 0;
+        f.normalMaps = f.normalMaps || m.normalTexture.image >= 0;
+        f.alphaTested = f.alphaTested || m.alphaMode != AlphaMode::Opaque;
+        // metallic = clamp(metallicFactor * texture) is 0 for a factor of 0; specularFactor 0 makes both the
+        // dielectric's f0 (dielectricF0) and its f90 zero.
+        f.diffuseOnly = f.diffuseOnly && m.metallicFactor == 0.f && m.specularFactor == 0.f;
+    }
+    f.emissiveTriangles = !emissiveTriangles.empty();
+    f.punctualLights = !lights.empty();
+    for (const Animation& a : animations)
+        for (const AnimationChannel& ch : a.channels) {
+            if (ch.sampler >= a.samplers.size()) continue;
+            if (animatesLight(ch.path))
+                f.animatedLights = true;
+            else if (ch.node >= 0 && size_t(ch.node) < nodes.size() && !nodes[size_t(ch.node)].hasMatrix)
+                f.animatedNodes = true;
+        }
+    mFeatures = f;
+    updateDynamicFeatures();
+}
+
+/// The flags tools may change after loading without finalize(): the environment and the camera path.
+void Scene::updateDynamicFeatures() {
+    SceneFeatures& f = mFeatures;
+    if (environment.isConstant())
+        f.environment = environment.color * environment.intensity == glm::vec3(0.f) ? EnvironmentKind::None
+                                                                                    : EnvironmentKind::Constant;
+    else
+        f.environment = environment.intensity == 0.f ? EnvironmentKind::None : EnvironmentKind::Map;
+    f.animatedCamera = mCameraAnimated || cameraPath.kind != CameraPathKind::Static;
+}
+
+void Scene::rebuildView(bool instancesToo) {
     mMeshViews.resize(meshes.size());
     for (size_t i = 0; i < meshes.size(); ++i) {
         const Mesh& m = meshes[i];
@@ -641,15 +688,17 @@ void Scene::rebuildView() {
     mImageViews.resize(images.size());
     for (size_t i = 0; i < images.size(); ++i)
         mImageViews[i] = ImageView8{images[i].texels.data(), images[i].width, images[i].height};
-    mInstanceViews.resize(instances.size());
-    for (size_t i = 0; i < instances.size(); ++i) {
-        const Instance& inst = instances[i];
-        InstanceView& v = mInstanceViews[i];
-        v.world = inst.world;
-        v.prevWorld = inst.prevWorld;
-        // A hidden instance (Instance::visible) is never hit; any finite matrix will do.
-        v.normalMatrix = inst.visible() ? glm::transpose(glm::inverse(glm::mat3(inst.world))) : glm::mat3(1.f);
-        v.mesh = inst.mesh;
+    if (instancesToo || mInstanceViews.size() != instances.size()) {
+        mInstanceViews.resize(instances.size());
+        for (size_t i = 0; i < instances.size(); ++i) {
+            const Instance& inst = instances[i];
+            InstanceView& v = mInstanceViews[i];
+            v.world = inst.world;
+            v.prevWorld = inst.prevWorld;
+            // A hidden instance (Instance::visible) is never hit; any finite matrix will do.
+            v.normalMatrix = inst.visible() ? glm::transpose(glm::inverse(glm::mat3(inst.world))) : glm::mat3(1.f);
+            v.mesh = inst.mesh;
+        }
     }
     mView.meshes = mMeshViews.data();
     mView.materials = mMaterialData.data();

@@ -198,7 +198,12 @@ void main() {
     // SurfaceKernels.h evalSurface, term by term.
     const vec3 pObj = w * p0 + u * p1 + v * p2;
     const vec3 posW = (world * vec4(pObj, 1.0)).xyz;
+#ifdef STATIC_INSTANCE
+    // The instance did not move (uPrevWorld == uWorld): last frame's position is this one.
+    const vec3 prevPosW = posW;
+#else
     const vec3 prevPosW = (uPrevWorld * vec4(pObj, 1.0)).xyz;
+#endif
     vec3 fn = normalize(normalMatrix * nObj);
     vec3 n = normalize(normalMatrix * (w * fetchNormal(i0) + u * fetchNormal(i1) + v * fetchNormal(i2)));
     const vec2 uv = w * fetchUv(i0) + u * fetchUv(i1) + v * fetchUv(i2);

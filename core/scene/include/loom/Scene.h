@@ -190,6 +190,36 @@ struct CameraPath {
     float amount = 0.25f;  ///< dolly: amplitude as a fraction of the distance to the target
 };
 
+/// What lights the scene from infinitely far away (Scene::environment).
+enum class EnvironmentKind : uint8_t {
+    None,      ///< black everywhere: a black constant colour, or intensity 0
+    Constant,  ///< one colour in every direction: sampled uniformly, no importance-sampling tables
+    Map,       ///< an equirectangular map, importance-sampled
+};
+
+/// What a scene holds, decided once per scene (Scene::finalize, loadEnvironmentMap; the environment and camera path
+/// again at every update, since tools set them after loading), never per pixel. Passes choose kernels that leave out
+/// the work a feature needs when the scene lacks it. Each flag is conservative: true whenever the work might matter.
+struct SceneFeatures {
+    bool textures = false;     ///< a material samples an image (base colour, metallic-roughness, normal, emission)
+    bool normalMaps = false;   ///< a material has a normal texture
+    bool alphaTested = false;  ///< a material's alphaMode is MASK or BLEND (honoured with alpha testing on)
+    bool emissiveTriangles = false;  ///< Scene::emissiveTriangles is not empty (animated emission counts at any time)
+    bool punctualLights = false;     ///< a KHR_lights_punctual light is placed in the scene
+    EnvironmentKind environment = EnvironmentKind::None;
+    /// No material has a specular lobe: metallicFactor 0 (so metallic is 0 whatever its texture says) and
+    /// specularFactor 0 (KHR_materials_specular: the dielectric's f0 and f90 are both 0). The glTF BRDF is then
+    /// exactly its diffuse lobe, baseColor / pi, and every GGX term is a product with 0.
+    bool diffuseOnly = false;
+    bool animatedNodes = false;  ///< an animation moves a node (instances, lights or cameras may move)
+    bool animatedLights =
+        false;  ///< an animation changes a material's emission or a punctual light's colour or intensity
+    bool animatedCamera = false;  ///< the render camera moves: an animated glTF camera, or a procedural camera path
+    /// Whether anything may change between frames. A static scene builds its ray-tracing acceleration structure and
+    /// its light list once, and its motion vectors are the camera's alone.
+    bool animated() const { return animatedNodes || animatedLights || animatedCamera; }
+};
+
 /// Texture limits of Scene::load. Images are decoded to 8-bit RGBA (4 bytes a texel); the sizes are checked from the
 /// image header before anything is decoded or allocated. 16384 is the largest 2D texture llvmpipe (and most GPUs)
 /// accept, so GBufferRaster can upload any texture the loader keeps.
@@ -288,6 +318,12 @@ public:
     /// or an environment that is not black.
     bool emitsLight() const;
     bool cameraAnimated() const { return mCameraAnimated; }  ///< the glTF camera is animated (setCameraPose ignored)
+    /// What the scene holds (SceneFeatures): computed by finalize() and loadEnvironmentMap(), its environment and
+    /// camera flags again by update().
+    const SceneFeatures& features() const { return mFeatures; }
+    /// Counts finalize() calls and the updates that moved an instance: what a pass built from the instances' world
+    /// transforms (a light list) is still valid while it stays the same and no emission is animated.
+    uint64_t geometryVersion() const { return mGeometryVersion; }
 
     const RayScene& rayScene() const { return *mRayScene; }
     /// Plain view for kernels; rebuilt by finalize() and update().
@@ -299,8 +335,10 @@ private:
     void linkHierarchy();
     void chooseCamera();
     void updateWorldTransforms();
-    void rebuildView();
+    void rebuildView(bool instancesToo = true);
     std::vector<float> lightState() const;
+    void computeFeatures();
+    void updateDynamicFeatures();
     SceneView mView;
     std::vector<MeshView> mMeshViews;
     std::vector<MaterialData> mMaterialData;
@@ -313,6 +351,8 @@ private:
     Bounds mRestBounds;           // world bounds at time 0: the pivot of camera paths
     bool mCameraAnimated = false;
     bool mLightingChanged = false;
+    SceneFeatures mFeatures;
+    uint64_t mGeometryVersion = 0;
     std::vector<float> mLightState;  // emission and punctual light values the last update left, when animated
 };
 
