@@ -250,4 +250,9 @@ TEST(StillConverge, ACameraMoveOrAParameterUpstreamRestartsFromTheDenoisedImage)
     expectGoesOn("Accumulate.denoisedFrames");
     r.graph->setParam("PathTracer", "maxBounces", 2, "test");
     expectGoesOn("PathTracer.maxBounces set to its value");
+
+    // Disabled, the accumulator passes the denoised image on: the graph as it was before it converged.
+    r.graph->setParam("Accumulate", "enabled", false, "test");
+    r.step();
+    EXPECT_TRUE(sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered")));
 }
