@@ -75,14 +75,6 @@ struct GraphRun {
     uint64_t frame = 0;
 };
 
-bool sameBits(const Texture& a, const Texture& b) {
-    if (a.width() != b.width() || a.height() != b.height() || a.format() != b.format()) return false;
-    const size_t rowBytes = size_t(a.width()) * formatInfo(a.format()).bytesPerPixel;
-    for (uint32_t y = 0; y < a.height(); ++y)
-        if (std::memcmp(a.row(y), b.row(y), rowBytes) != 0) return false;
-    return true;
-}
-
 std::vector<glm::vec3> rgb(const Texture& t) {
     std::vector<glm::vec3> out;
     const auto v = t.view<glm::vec4>();
@@ -160,8 +152,9 @@ TEST(StillConverge, UnderMotionTheOutputIsTheDenoisersBitForBit) {
             converging.step();
             before.step();
             EXPECT_EQ(converging.stat("Accumulate", "frames"), 1.0) << "frame " << f;
-            EXPECT_TRUE(sameBits(converging.field("Accumulate.dst"), converging.field(denoised))) << "frame " << f;
-            EXPECT_TRUE(sameBits(converging.field("ToneMap.dst"), before.field("ToneMap.dst"))) << "frame " << f;
+            EXPECT_TRUE(test::sameBits(converging.field("Accumulate.dst"), converging.field(denoised)))
+                << "frame " << f;
+            EXPECT_TRUE(test::sameBits(converging.field("ToneMap.dst"), before.field("ToneMap.dst"))) << "frame " << f;
         }
     }
 }
@@ -215,10 +208,10 @@ TEST(StillConverge, ACameraMoveOrAParameterUpstreamRestartsFromTheDenoisedImage)
     const auto expectRestart = [&](const std::string& what) {
         r.step();
         EXPECT_EQ(r.stat("Accumulate", "frames"), 1.0) << what;
-        EXPECT_TRUE(sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered"))) << what;
+        EXPECT_TRUE(test::sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered"))) << what;
         r.step();
         EXPECT_EQ(r.stat("Accumulate", "frames"), 2.0) << what << ": still again";
-        EXPECT_FALSE(sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered"))) << what << ": still again";
+        EXPECT_FALSE(test::sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered"))) << what << ": still again";
     };
     const auto expectGoesOn = [&](const std::string& what) {
         const double before = r.stat("Accumulate", "frames");
@@ -254,5 +247,5 @@ TEST(StillConverge, ACameraMoveOrAParameterUpstreamRestartsFromTheDenoisedImage)
     // Disabled, the accumulator passes the denoised image on: the graph as it was before it converged.
     r.graph->setParam("Accumulate", "enabled", false, "test");
     r.step();
-    EXPECT_TRUE(sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered")));
+    EXPECT_TRUE(test::sameBits(r.field("Accumulate.dst"), r.field("SVGF.filtered")));
 }
