@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -94,6 +95,15 @@ inline std::vector<FieldDesc> reflectedFields(PluginRegistry& registry, const st
     info.frameWidth = info.frameHeight = 32;
     pass->reflect(r, info);
     return r.fields();
+}
+
+/// Whether two textures hold the same texels, bit for bit (row padding aside).
+inline bool sameBits(const Texture& a, const Texture& b) {
+    if (a.width() != b.width() || a.height() != b.height() || a.format() != b.format()) return false;
+    const size_t rowBytes = size_t(a.width()) * formatInfo(a.format()).bytesPerPixel;
+    for (uint32_t y = 0; y < a.height(); ++y)
+        if (std::memcmp(a.row(y), b.row(y), rowBytes) != 0) return false;
+    return true;
 }
 
 /// A deterministic pseudo-random value in [0, 1) from three integers (e.g. frame, x, y).

@@ -136,9 +136,11 @@ void runRender(const RenderOptions& o) {
         graph.execute(frame);
         if (i > 0) {
             const auto stats = graph.lastStats();
+            // An accumulation blended with a denoised image (it reports "meanWeight", as the default graphs'
+            // does) restarts by design under motion: its output is the denoiser's then.
             restarts += std::any_of(stats.begin(), stats.end(), [](const auto& pass) {
                 const auto reset = pass.second.find("reset");
-                return reset != pass.second.end() && reset->second != 0.0;
+                return reset != pass.second.end() && reset->second != 0.0 && !pass.second.count("meanWeight");
             });
         }
         if (!o.hold || i + 1 == o.frames) writeOutputs(o.hold ? o.startFrame : frame.frameIndex);

@@ -259,6 +259,8 @@ private:
         ImGui::PushItemWidth(0.5f * kPanelWidth);  // room for the parameters' names beside their widgets
         ImGui::Text("frame %llu  %ux%u  %.1f ms", (unsigned long long)session.frame(), session.width(),
                     session.height(), renderMs);
+        if (const std::string accumulated = session.accumulationText(); !accumulated.empty())
+            ImGui::Text("%s", accumulated.c_str());
         if (ImGui::Button(paused ? "Run" : "Pause")) paused = !paused;
         ImGui::SameLine();
         if (ImGui::Button("Step")) stepOnce = true;
@@ -374,6 +376,9 @@ void runView(const ViewOptions& o) {
                      "install libglfw3-dev and libimgui-dev and rebuild, or use --headless"});
 #endif
     }
+    if (o.headless && session.frame() > 0)
+        if (const std::string accumulated = session.accumulationText(); !accumulated.empty())
+            spdlog::info("after {} frame(s): {}", session.frame(), accumulated);
     if (stopRequested()) spdlog::warn("stopped by {} after {} frame(s)", signalName(stopSignal()), session.frame());
     session.finish();
     if (!o.screenshot.empty() && session.frame() > 0) session.saveDisplay(o.screenshot);

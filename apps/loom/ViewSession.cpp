@@ -300,6 +300,28 @@ void ViewSession::step() {
     }
 }
 
+std::string ViewSession::accumulationText() const {
+    // The samples per pixel of each frame, when one pass declares them (a path tracer).
+    int samplesPerFrame = 0, samplers = 0;
+    for (const std::string& name : mGraph->plan().order)
+        if (const ParamDecl* d = mGraph->pass(name)->params().findRole(ParamRole::SampleCount)) {
+            samplesPerFrame = d->get().get<int>();
+            ++samplers;
+        }
+    const auto stats = mGraph->lastStats();
+    std::string text;
+    for (const std::string& name : mGraph->plan().order) {
+        const auto s = stats.find(name);
+        if (s == stats.end() || !mGraph->pass(name)->params().findRole(ParamRole::AutoReset)) continue;
+        const auto frames = s->second.find("frames");
+        if (frames == s->second.end()) continue;
+        text += fmt::format("{}{}: {:g} frames", text.empty() ? "" : ", ", name, frames->second);
+        if (samplers == 1) text += fmt::format(" x {} spp", samplesPerFrame);
+        text += " accumulated";
+    }
+    return text;
+}
+
 void ViewSession::finish() {
     if (mVideo) mVideo->finish();
 }

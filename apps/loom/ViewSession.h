@@ -97,6 +97,10 @@ public:
     void saveField(const std::filesystem::path& path) const;
     void saveDisplay(const std::filesystem::path& path) const;
 
+    /// What the accumulating passes (those with an AutoReset parameter) hold after the last frame, e.g.
+    /// "Accumulate: 57 frames x 1 spp accumulated"; empty when the graph has none.
+    std::string accumulationText() const;
+
     RenderGraph& graph() { return *mGraph; }
     const ViewOptions& options() const { return mOptions; }
 

@@ -89,6 +89,26 @@ LOOM_HD inline glm::vec4 mean(Precision precision, const PixelState& s) {
     }
 }
 
+/// The output when a denoised image is blended in (the pass's `denoised` input, e.g. SVGF's output for the same
+/// frames). The denoised image D counts as K = `denoisedFrames` frames and the running mean M of n = `count`
+/// samples as n - 1 (its first sample is in D already, through the denoiser's own input):
+///     out = (K D + (n - 1) M) / (K + n - 1).
+/// - n <= 1 (a frame after a restart): D itself, bit for bit, so while anything moves the output is the
+///   denoiser's. D is passed on as it is, the denoiser's own output, finite or not.
+/// - If D and M are unbiased with errors e_D and s2 / n (s2: one sample's variance), the blend's mean squared
+///   error is least for K = s2 / e_D, the samples the denoiser's image is worth; the weight of the mean grows like
+///   n / (n + K), so the error falls like 1 / n once n >> K, to the image the samples converge to.
+/// - A non-finite D (past the first sample) leaves the mean alone: one bad denoised pixel must not stop the
+///   convergence.
+LOOM_HD inline glm::vec4 blendDenoised(const glm::vec4& denoised, const glm::vec4& mean, uint32_t count,
+                                       float denoisedFrames) {
+    if (count <= 1) return denoised;
+    if (!isFinite(denoised)) return mean;
+    const float meanFrames = float(count - 1);
+    const float w = meanFrames / (meanFrames + denoisedFrames);
+    return denoised + w * (mean - denoised);
+}
+
 /// The running sum as a float, whatever the precision: what the `sum` field
 /// shows when the state itself is kept elsewhere (Double).
 LOOM_HD inline glm::vec4 sumAsFloat(Precision precision, const PixelState& s) {

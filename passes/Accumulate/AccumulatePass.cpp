@@ -15,6 +15,7 @@ using accumulate::PixelState;
 namespace {
 
 const char kSrc[] = "src";
+const char kDenoised[] = "denoised";
 const char kDst[] = "dst";
 const char kSum[] = "sum";
 const char kCompensation[] = "compensation";
@@ -28,10 +29,13 @@ const char* const kStateFields[] = {kSum, kCompensation, kSumRG, kSumBA, kCount,
 // Counters reported in the frame's stats.
 const char kStatNonFinite[] = "nonFinite";
 const char kStatReset[] = "reset";
+const char kStatMeanWeight[] = "meanWeight";
 
 /// Every texture one frame touches, as typed views.
 struct FrameViews {
     ImageView<const glm::vec4> src;
+    ImageView<const glm::vec4> denoised;  ///< empty when not connected
+    float denoisedFrames = 0.f;
     ImageView<glm::vec4> dst;
     ImageView<const glm::vec4> prevSum, prevCompensation;
     ImageView<glm::vec4> curSum, curCompensation;
@@ -67,8 +71,9 @@ void storeState(const FrameViews& v, uint32_t x, uint32_t y, const PixelState& s
 }
 
 /// One frame over every pixel: starts from zero when `reset`, adds this frame's
-/// sample when `addSamples`, writes the state and the mean. Returns the number of
-/// pixels whose sample was skipped as non-finite.
+/// sample when `addSamples`, writes the state and the mean (blended with the
+/// denoised image when there is one). Returns the number of pixels whose sample
+/// was skipped as non-finite.
 template <AccumulatePass::Precision P>
 uint64_t accumulateFrame(const FrameViews& v, bool reset, bool addSamples) {
     std::atomic<uint64_t> skipped{0};
@@ -79,7 +84,9 @@ uint64_t accumulateFrame(const FrameViews& v, bool reset, bool addSamples) {
                 PixelState s = reset ? PixelState{} : loadState<P>(v, x, y);
                 if (addSamples && !accumulate::addSample(P, s, v.src.at(x, y))) ++tileSkipped;
                 storeState<P>(v, x, y, s);
-                v.dst.at(x, y) = accumulate::mean(P, s);
+                const glm::vec4 m = accumulate::mean(P, s);
+                v.dst.at(x, y) =
+                    v.denoised.data ? accumulate::blendDenoised(v.denoised.at(x, y), m, s.count, v.denoisedFrames) : m;
             }
         }
         // An integer sum: the same total whatever order the tiles finish in.
@@ -94,7 +101,13 @@ void AccumulatePass::reflect(Reflection& r, const CompileInfo&) const {
     // Every precision's state fields are declared whatever the precision: reflection must not depend on
     // parameters, so switching precision never reallocates.
     r.input(kSrc, Format::RGBA32F).doc("samples to average, e.g. PathTracer.color (connect with an explicit edge)");
-    r.output(kDst, Format::RGBA32F).doc("mean of the finite samples since the last reset");
+    r.input(kDenoised, Format::RGBA32F)
+        .optional()
+        .doc(
+            "a denoised image of the same frames (e.g. SVGF.filtered): the output starts as it after every reset and "
+            "turns into the mean as frames accumulate (see denoisedFrames)");
+    r.output(kDst, Format::RGBA32F)
+        .doc("mean of the finite samples since the last reset; with `denoised`, the blend of the two");
     r.history(kSum, Format::RGBA32F)
         .doc("running sum: the state for float and kahan; for double, the double sum rounded to float (to inspect)");
     r.history(kCompensation, Format::RGBA32F)
@@ -119,13 +132,28 @@ void AccumulatePass::declareParams(ParamList& p) {
     p.add("autoReset", &mAutoReset, true)
         .role(ParamRole::AutoReset)
         .doc(
-            "restart when the camera or a scene instance moved, or an animated light changed, in this frame (jitter "
-            "alone does not restart); "
+            "restart when the camera, a scene instance or a light moved, an animated light changed, or a parameter "
+            "of a pass upstream changed (not a seed or sample count), in this frame (jitter alone does not restart); "
             "`loom render --hold` keeps an animated scene at one frame's time, to converge that frame");
-    p.add("enabled", &mEnabled, true).doc("false: dst is a copy of src and the accumulated state is cleared");
+    p.add("enabled", &mEnabled, true)
+        .doc("false: dst is a copy of src (of denoised, when connected) and the accumulated state is cleared");
+    p.add("denoisedFrames", &mDenoisedFrames, 64.f)
+        .range(0.f, 1e6f)
+        .doc(
+            "with `denoised` connected: the frames of the mean the denoised image is worth. With n frames in the "
+            "mean, dst = (K denoised + (n-1) mean) / (K + n-1): the denoised image on the first frame after a reset, "
+            "then the mean's weight grows like n / (n + K)");
 }
 
 bool AccumulatePass::sceneMoved(const PassContext& ctx) {
+    // Punctual lights have no previous pose in the scene: the last frame's is kept here.
+    std::vector<glm::vec3> lightPoses;
+    if (const Scene* scene = ctx.scene())
+        for (const Light& light : scene->lights) lightPoses.insert(lightPoses.end(), {light.position, light.direction});
+    const bool lightMoved = lightPoses.size() == mLightPoses.size() && lightPoses != mLightPoses;
+    mLightPoses = std::move(lightPoses);
+
+    if (lightMoved || ctx.inputParamsChanged()) return true;  // a parameter upstream changed: a new image too
     if (const Camera* camera = ctx.camera(); camera && camera->world != camera->prevWorld) return true;
     if (const Scene* scene = ctx.scene()) {
         for (const Instance& instance : scene->instances)
@@ -146,9 +174,11 @@ void AccumulatePass::clearUnusedState(PassContext& ctx) const {
 void AccumulatePass::execute(PassContext& ctx) {
     const auto src = ctx.input(kSrc)->view<glm::vec4>();
     const auto dst = ctx.output(kDst)->view<glm::vec4>();
+    const Texture* denoised = ctx.input(kDenoised);
 
     if (!mEnabled) {
-        parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) { dst.at(x, y) = src.at(x, y); });
+        const auto pass = denoised ? denoised->view<glm::vec4>() : src;
+        parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) { dst.at(x, y) = pass.at(x, y); });
         for (const char* field : kStateFields) ctx.historyCur(field).clear();
         mRestartPending = true;
         ctx.stats().set(stat::kAccumulatedFrames, 0);
@@ -161,8 +191,9 @@ void AccumulatePass::execute(PassContext& ctx) {
     const uint32_t prevFrames = ctx.historyPrev(kFrames).view<uint32_t>().at(0, 0);
     const uint32_t maxFrames = uint32_t(mMaxFrames);
     const bool precisionChanged = mPrecision != mStatePrecision;
+    const bool moved = sceneMoved(ctx);  // every frame: it keeps the lights' poses for the next
     const bool reset = !ctx.historyValid() || mRestartPending || precisionChanged ||
-                       (maxFrames > 0 && prevFrames > maxFrames) || (mAutoReset && sceneMoved(ctx));
+                       (maxFrames > 0 && prevFrames > maxFrames) || (mAutoReset && moved);
     if (precisionChanged) mStaleFrames = 2;
     mStatePrecision = mPrecision;
     mRestartPending = false;
@@ -173,6 +204,8 @@ void AccumulatePass::execute(PassContext& ctx) {
 
     FrameViews v;
     v.src = src;
+    if (denoised) v.denoised = denoised->view<glm::vec4>();
+    v.denoisedFrames = mDenoisedFrames;
     v.dst = dst;
     v.prevSum = ctx.historyPrev(kSum).view<glm::vec4>();
     v.curSum = ctx.historyCur(kSum).view<glm::vec4>();
@@ -207,6 +240,9 @@ void AccumulatePass::execute(PassContext& ctx) {
     ctx.stats().set(stat::kAccumulatedFrames, frames);
     ctx.stats().set(kStatNonFinite, double(skipped));
     ctx.stats().set(kStatReset, reset ? 1 : 0);
+    if (v.denoised.data)
+        ctx.stats().set(kStatMeanWeight,
+                        frames > 1 ? double(frames - 1) / (double(frames - 1) + mDenoisedFrames) : 0.0);
 }
 
 }  // namespace loom
@@ -215,6 +251,7 @@ LOOM_DEFINE_PLUGIN(registrar) {
     registrar.registerPass<loom::AccumulatePass>(
         "AccumulatePass",
         "Running mean of its input since the last reset (references); float, Kahan or double precision. "
-        "Non-finite samples are skipped per pixel. Stats: frames (in the mean), nonFinite (samples skipped this "
-        "frame), reset (1 when this frame started a new mean).");
+        "Non-finite samples are skipped per pixel. With a denoised input, starts as it after every reset and "
+        "converges to the mean while nothing moves. Stats: frames (in the mean), nonFinite (samples skipped this "
+        "frame), reset (1 when this frame started a new mean), meanWeight (with denoised: the mean's share of dst).");
 }

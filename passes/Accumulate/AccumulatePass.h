@@ -18,8 +18,17 @@
 // A new mean starts when the graph resets history (ctx.historyValid() false:
 // first frame, resetHistory(), resize, new scene), when `precision` changes,
 // when the pass is enabled again, when maxFrames is lowered below `frames`, and,
-// with autoReset, when the camera or a scene instance moved, or an animated light
-// (emission, punctual light) changed, in this frame.
+// with autoReset, when the camera, a scene instance or a punctual light moved, an
+// animated light (emission, punctual light) changed, or a parameter of a pass it
+// reads from changed value (ctx.inputParamsChanged()), in this frame. Animation
+// time itself is not compared: on a still scene it runs on with nothing moving.
+//
+// With the optional `denoised` input (a denoiser's image of the same frames), dst
+// is that image on the first frame after a reset and turns into the mean while
+// nothing moves (accumulate::blendDenoised): a graph shows its denoiser in motion
+// and converges to the reference when still.
+#include <vector>
+
 #include "AccumulateKernels.h"
 #include "loom/RenderPass.h"
 
@@ -34,8 +43,9 @@ public:
     void execute(PassContext& ctx) override;
 
 private:
-    /// Has the camera or any scene instance moved, or the scene's lighting changed, in this frame?
-    static bool sceneMoved(const PassContext& ctx);
+    /// Has the camera, a scene instance or a punctual light moved, the scene's lighting changed, or a parameter
+    /// of a pass upstream changed, in this frame? Call once per frame: it remembers the lights' poses.
+    bool sceneMoved(const PassContext& ctx);
     /// Zeroes this frame's side of the history fields the current precision does not use.
     void clearUnusedState(PassContext& ctx) const;
 
@@ -44,6 +54,7 @@ private:
     int mMaxFrames = 0;
     bool mAutoReset = true;
     bool mEnabled = true;
+    float mDenoisedFrames = 64.f;
 
     // The precision the state in the history fields was accumulated with: a
     // different one cannot continue it.
@@ -53,6 +64,8 @@ private:
     // Frames for which the fields of a previous precision still need zeroing
     // (two: both sides of each history pair hold stale values).
     int mStaleFrames = 0;
+    // The scene's punctual lights last frame: position and direction of each.
+    std::vector<glm::vec3> mLightPoses;
 };
 
 }  // namespace loom

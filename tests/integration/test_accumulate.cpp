@@ -1,5 +1,5 @@
 // AccumulatePass: exact means, float vs Kahan vs double on long sequences, maxFrames, resets (explicit, precision
-// change, camera and instance motion, enable toggle), non-finite samples, determinism across thread counts,
+// change, camera, instance and light motion, enable toggle), non-finite samples, determinism across thread counts,
 // dumpable history, parameter independence of reflection. The per-pixel kernels on their own: passes/Accumulate/tests/.
 #include <gtest/gtest.h>
 
@@ -411,6 +411,27 @@ TEST(AccumulatePass, InstanceMotionRestartsWithAutoReset) {
     scene.instances[2].prevWorld = scene.instances[2].world;
     h.run();  // 4
     ASSERT_TRUE(dstEquals(h, [](uint32_t, uint32_t) { return glm::vec4(3.5f); }));
+}
+
+TEST(AccumulatePass, PunctualLightMotionRestartsWithAutoReset) {
+    // A light has no previous pose in the scene: the pass compares with the one it saw last frame.
+    Scene scene;
+    scene.lights.resize(2);
+    Harness h;
+    h.scene = &scene;
+    h.source->fn = [](uint64_t frame, uint32_t, uint32_t) { return glm::vec4(float(frame + 1)); };
+    h.run(2);
+    ASSERT_TRUE(dstEquals(h, [](uint32_t, uint32_t) { return glm::vec4(1.5f); }));
+    scene.lights[1].position = glm::vec3(0.f, 0.5f, 0.f);
+    h.run();  // 3, light 1 moved this frame
+    EXPECT_EQ(h.stat("reset"), 1);
+    ASSERT_TRUE(dstEquals(h, [](uint32_t, uint32_t) { return glm::vec4(3.f); }));
+    h.run();  // 4, still
+    ASSERT_TRUE(dstEquals(h, [](uint32_t, uint32_t) { return glm::vec4(3.5f); }));
+    scene.lights[0].direction = glm::vec3(0.f, -1.f, 0.f);
+    h.run();  // 5, light 0 turned
+    EXPECT_EQ(h.stat("reset"), 1);
+    ASSERT_TRUE(dstEquals(h, [](uint32_t, uint32_t) { return glm::vec4(5.f); }));
 }
 
 TEST(AccumulatePass, DisabledPassesSourceThroughAndRestartsWhenEnabledAgain) {

@@ -86,14 +86,6 @@ glm::vec4 image(uint32_t x, uint32_t y) {
     return {hash01(1, x, y), hash01(2, x, y) * 2.f, 0.25f + 0.01f * x, 1.f};
 }
 
-bool sameBits(const Texture& a, const Texture& b) {
-    if (a.width() != b.width() || a.height() != b.height() || a.format() != b.format()) return false;
-    const size_t rowBytes = size_t(a.width()) * formatInfo(a.format()).bytesPerPixel;
-    for (uint32_t y = 0; y < a.height(); ++y)
-        if (std::memcmp(a.row(y), b.row(y), rowBytes) != 0) return false;
-    return true;
-}
-
 bool planHasResource(const RenderGraph& g, const std::string& name) {
     for (const ResourceInfo& r : g.plan().resources)
         if (r.name == name) return true;
@@ -114,7 +106,7 @@ TEST(ErrorMeasure, IdenticalImagesGiveZeroErrorAndPassSrcThrough) {
     EXPECT_EQ(h.stat("psnr"), kPsnrCap);
     EXPECT_EQ(h.stat("nonFinite"), 0.0);
     EXPECT_FALSE(h.hasStat("temporal")) << "no temporal error on the first frame (history invalid)";
-    EXPECT_TRUE(sameBits(h.field("Measure.dst"), h.field("Src.color")));
+    EXPECT_TRUE(test::sameBits(h.field("Measure.dst"), h.field("Src.color")));
     const auto err = h.field("Measure.error").view<float>();
     for (uint32_t y = 0; y < kSize; ++y)
         for (uint32_t x = 0; x < kSize; ++x) ASSERT_EQ(err.at(x, y), 0.f) << x << ", " << y;
@@ -221,7 +213,7 @@ TEST(ErrorMeasure, TemporalErrorClosedForms) {
             EXPECT_NEAR(h.stat("temporal"), d, 1e-12) << "frame " << f;
         }
         // The history fields hold last frame's images.
-        EXPECT_TRUE(sameBits(h.field("Measure.prevSrc"), h.field("Src.color")));
+        EXPECT_TRUE(test::sameBits(h.field("Measure.prevSrc"), h.field("Src.color")));
     }
 }
 
@@ -281,7 +273,7 @@ TEST(ErrorMeasure, DisabledPassesSrcThroughAndReportsNothing) {
     h.run();
     EXPECT_FALSE(h.hasStat("flip"));
     EXPECT_FALSE(h.hasStat("temporal"));
-    EXPECT_TRUE(sameBits(h.field("Measure.dst"), h.field("Src.color")));
+    EXPECT_TRUE(test::sameBits(h.field("Measure.dst"), h.field("Src.color")));
     // Enabled again: history was kept, so the temporal error is there at once.
     h.graph.setParam("Measure", "enabled", true, "test");
     h.run();

@@ -1117,6 +1117,54 @@ TEST(RenderGraphDesc, SetParamTakesEffectWithoutRecompiling) {
     EXPECT_EQ(texel(g, "C.dst"), 0.5f);
 }
 
+TEST(RenderGraphDesc, PassesSeeParameterChangesOfThePassesTheyReadFrom) {
+    // A and B feed Mix, which feeds P; C feeds Q on its own. B also reaches P through last frame's value.
+    RenderGraph g(makeGraph(R"([{"name": "A", "type": "Constant"}, {"name": "B", "type": "Constant"},
+                                {"name": "Mix", "type": "Add"}, {"name": "P", "type": "Probe"},
+                                {"name": "C", "type": "Constant"}, {"name": "Q", "type": "Probe"}])",
+                            R"([["A.dst", "Mix.a"], ["B.dst@prev", "Mix.b"], ["Mix.dst", "P.src"],
+                                ["C.dst", "Q.src"]])",
+                            R"(["P.probe", "Q.probe"])"),
+                  registry());
+    g.compile(sized());
+    uint64_t frame = 0;
+    const auto changed = [&](const std::string& probe) {
+        return g.lastStats().at(probe).at("inputParamsChanged") != 0.0;
+    };
+    const auto run = [&] { g.execute(frameAt(frame++)); };
+    run();
+    run();
+    EXPECT_FALSE(changed("P"));
+    EXPECT_FALSE(changed("Q"));
+
+    const nlohmann::json grey = nlohmann::json::array({0.5, 0.5, 0.5, 1});
+    for (const char* upstream : {"A", "B", "Mix"}) {
+        SCOPED_TRACE(upstream);
+        g.setParam(upstream, upstream == std::string("Mix") ? "scaleA" : "color",
+                   upstream == std::string("Mix") ? nlohmann::json(0.25) : grey, "test");
+        run();
+        EXPECT_TRUE(changed("P"));  // through Mix, whatever the path
+        EXPECT_FALSE(changed("Q"));
+        run();
+        EXPECT_FALSE(changed("P"));  // one frame only
+    }
+    // The same value again is no change; another branch's change reaches only its own consumers.
+    g.setParam("A", "color", grey, "test");
+    run();
+    EXPECT_FALSE(changed("P"));
+    g.setParam("C", "color", grey, "test");
+    run();
+    EXPECT_FALSE(changed("P"));
+    EXPECT_TRUE(changed("Q"));
+    // A new description may rewire anything: every pass sees a change.
+    g.setDesc(g.desc());
+    run();
+    EXPECT_TRUE(changed("P"));
+    EXPECT_TRUE(changed("Q"));
+    run();
+    EXPECT_FALSE(changed("Q"));
+}
+
 }  // namespace
 
 // Plugin faults are errors, not crashes: a factory that returns no pass, and a pass that throws something that is

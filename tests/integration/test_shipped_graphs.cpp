@@ -91,7 +91,9 @@ TEST(ShippedGraphs, DefaultGraphFiltersTheCombinedColourAndTheSplitGraphTheSplit
     ASSERT_NE(wireTo(combined->plan(), "SVGF.color"), nullptr);
     EXPECT_EQ(wireTo(combined->plan(), "PathTracer.vbuffer")->src.str(), "GBuffer.vbuffer");
     const std::vector<std::string> order = combined->plan().order;
-    EXPECT_EQ(order, (std::vector<std::string>{"GBuffer", "PathTracer", "SVGF", "ToneMap"}));
+    EXPECT_EQ(order, (std::vector<std::string>{"GBuffer", "PathTracer", "SVGF", "Accumulate", "ToneMap"}));
+    EXPECT_EQ(wireTo(combined->plan(), "Accumulate.src")->src.str(), "PathTracer.color");
+    EXPECT_EQ(wireTo(combined->plan(), "Accumulate.denoised")->src.str(), "SVGF.filtered");
 
     auto split = compiled(graphPath("PathTracerSVGFDirectIndirect.json"), scene, 64, 48);
     ASSERT_NE(wireTo(split->plan(), "SVGF.direct"), nullptr);

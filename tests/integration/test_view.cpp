@@ -87,6 +87,19 @@ TEST_F(View, SwitchingTheShownFieldLeavesTheRenderUnchanged) {
     EXPECT_NE(plain, fileBytes(mDir / "early.exr"));
 }
 
+TEST_F(View, AHeadlessRunTellsTheFramesAccumulated) {
+    // The default graph converges on a still camera; a parameter change before frame 4 restarts its mean.
+    write("restart.txt", "4 set PathTracer.maxBounces=2\n");
+    const std::string run = "view --headless --graph " + shellQuoted(kGraphs + "PathTracerSVGF.json") + " --scene " +
+                            shellQuoted(loom::test::dataScene("cornell_box.gltf")) + " --size 32x32 --frames 6";
+    auto r = loom(run);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "after 6 frame(s): Accumulate: 6 frames x 1 spp accumulated");
+    r = loom(run + " --script restart.txt");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_CONTAINS(r.output, "after 6 frame(s): Accumulate: 2 frames x 1 spp accumulated");
+}
+
 TEST_F(View, TheDisplayIsTheExposedValueSrgbEncoded) {
     write("constant.json", R"({"loom_graph": 1, "name": "C",
         "passes": [{"name": "C", "type": "Constant", "params": {"color": [0.5, 0.25, 3.0, 0.5]}}],

@@ -166,7 +166,8 @@ public:
     }
 };
 
-/// Records that it ran (stats "executed") and, when it has an input, copies it.
+/// Records that it ran (stats "executed") and whether a parameter upstream changed ("inputParamsChanged") and,
+/// when it has an input, copies it.
 class ProbePass final : public RenderPass {
 public:
     void reflect(Reflection& r, const CompileInfo&) const override {
@@ -175,6 +176,7 @@ public:
     }
     void execute(PassContext& ctx) override {
         ctx.stats().add("executed", 1);
+        ctx.stats().set("inputParamsChanged", ctx.inputParamsChanged() ? 1 : 0);
         auto dst = ctx.output("probe")->view<glm::vec4>();
         const Texture* src = ctx.input(kSrc);
         parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) {

@@ -94,6 +94,8 @@ struct PassNode {
     std::vector<std::string> observeAfter;   // outputs, internals, history
     std::vector<Texture*> poisonAtStart;     // transients whose lifetime starts here
     std::vector<const bool*> validFlags;     // history validity this pass depends on
+    std::vector<PassNode*> sources;          // the passes whose outputs it reads (this frame's or @prev)
+    bool paramsChanged = true;               // a parameter that counts changed value since the last frame
 };
 
 struct RenderGraph::Impl {
@@ -212,6 +214,7 @@ void RenderGraph::Impl::bind(GraphPlan& plan) {
         n.observeAfter.clear();
         n.poisonAtStart.clear();
         n.validFlags.clear();
+        n.sources.clear();
         n.live = pp.live;
         n.position = pp.position;
         n.refl = std::move(pp.reflection);
@@ -226,6 +229,7 @@ void RenderGraph::Impl::bind(GraphPlan& plan) {
                 auto in = std::find_if(pp.inputs.begin(), pp.inputs.end(),
                                        [&](const PlannedInput& p) { return p.field == f.name; });
                 if (in != pp.inputs.end()) {
+                    if (in->srcPass != i) n.sources.push_back(nodes[in->srcPass].get());
                     const std::string srcKey = fieldKey(desc.passes[in->srcPass].name, in->srcField);
                     if (in->prev) {
                         HistoryEntry& e = *history.at(srcKey);
@@ -295,6 +299,8 @@ void RenderGraph::setDesc(GraphDesc desc) {
     mImpl->desc = next->desc;
     mImpl->nodes = std::move(nodes);
     mImpl->indexNodes();
+    // Kept passes may have new parameters or new wiring: every pass's consumers see a change.
+    for (auto& n : mImpl->nodes) n->paramsChanged = true;
     // Dropped passes are destroyed: the old plan must never run again.
     mCompiled = false;
     mImpl->order.clear();
@@ -322,7 +328,13 @@ void RenderGraph::setParam(const std::string& passName, const std::string& param
     if (!n)
         throwBadInput(where, "unknown pass '" + passName + "'", "one of: " + join(mImpl->passNames()),
                       didYouMean(passName, mImpl->passNames(), ""));
-    n->pass->params().set(param, value, where);
+    ParamList& params = n->pass->params();
+    const ParamDecl* decl = params.find(param);
+    const json before = decl ? decl->get() : json();
+    params.set(param, value, where);
+    // A new seed or sample count changes the noise, not the image the samples estimate (see inputParamsChanged).
+    if (decl && decl->role != ParamRole::Seed && decl->role != ParamRole::SampleCount && decl->get() != before)
+        n->paramsChanged = true;
 }
 
 GraphDesc RenderGraph::desc() const {
@@ -385,6 +397,16 @@ void RenderGraph::execute(const FrameInfo& frame) {
             e->pendingSwap = false;
         }
     }
+    // Which passes read, directly or through others, from a pass whose parameters changed: iterated to a fixed
+    // point, since an @prev edge may come from a pass later in the order.
+    for (PassNode* n : m.order) n->ctx.mInputParamsChanged = false;
+    for (bool grew = true; grew;) {
+        grew = false;
+        for (PassNode* n : m.order)
+            for (const PassNode* s : n->sources)
+                if (!n->ctx.mInputParamsChanged && (s->paramsChanged || s->ctx.mInputParamsChanged))
+                    n->ctx.mInputParamsChanged = grew = true;
+    }
     for (PassNode* n : m.order) {
         if (mOptions.poisonTransients)
             for (Texture* t : n->poisonAtStart) t->poison();
@@ -431,6 +453,7 @@ void RenderGraph::execute(const FrameInfo& frame) {
         }
     }
     for (auto& [_, e] : m.history) e->pendingSwap = true;
+    for (auto& n : m.nodes) n->paramsChanged = false;
 }
 
 void RenderGraph::resetHistory() {

@@ -7,5 +7,6 @@ __global__ void accumulate(loom::accumulate::PixelState* states, const glm::vec4
     addSample(Precision::Double, s, samples[threadIdx.x]);
     glm::uvec4 rg, ba;
     packDoubleSum(unpackDoubleSum(glm::uvec4(1u), glm::uvec4(2u)), rg, ba);
-    out[threadIdx.x] = mean(Precision::Kahan, s) + sumAsFloat(Precision::Float, s) + glm::vec4(rg);
+    out[threadIdx.x] = blendDenoised(samples[threadIdx.x], mean(Precision::Kahan, s), s.count, 64.f) +
+                       sumAsFloat(Precision::Float, s) + glm::vec4(rg);
 }

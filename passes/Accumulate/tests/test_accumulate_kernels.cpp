@@ -1,9 +1,10 @@
 // The accumulation kernels (AccumulateKernels.h) on their own: doubles packed in uint texels, Neumaier summation,
-// and samples that are non-finite or would overflow the sum.
+// samples that are non-finite or would overflow the sum, and the blend with a denoised image.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <glm/glm.hpp>
 #include <limits>
 
@@ -76,4 +77,47 @@ TEST(AccumulateKernels, HugeSamplesNeverMakeTheMeanNonFinite) {
         EXPECT_EQ(m, glm::vec4(big, 1.f, -big, 0.f)) << int(precision);
         EXPECT_EQ(kept, precision == accumulate::Precision::Double ? 5u : 1u) << int(precision);
     }
+}
+
+TEST(AccumulateKernels, BlendIsTheDenoisedImageBitForBitUntilASecondSample) {
+    const glm::vec4 denoised(0.1f, 1e-30f, -0.f, 7.f), mean(5.f, 6.f, 7.f, 8.f);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    for (uint32_t count : {0u, 1u})
+        for (float k : {0.f, 1.f, 64.f, 1e6f}) {
+            const glm::vec4 out = accumulate::blendDenoised(denoised, mean, count, k);
+            EXPECT_EQ(std::memcmp(&out, &denoised, sizeof out), 0) << "count " << count << ", K " << k;
+            // The denoiser's own output, as it is: a NaN it wrote is not the blend's to hide on this frame.
+            const glm::vec4 bad(nan, 1.f, 2.f, 3.f);
+            const glm::vec4 passed = accumulate::blendDenoised(bad, mean, count, k);
+            EXPECT_EQ(std::memcmp(&passed, &bad, sizeof passed), 0);
+        }
+}
+
+TEST(AccumulateKernels, BlendWeighsTheMeanAsCountMinusOneFramesAgainstK) {
+    // With D = 0 and M = 1 the output is the mean's weight: (n - 1) / (n - 1 + K), rising to 1.
+    for (float k : {1.f, 16.f, 64.f, 300.f}) {
+        float previous = 0.f;
+        for (uint32_t n = 2; n <= 4096; n *= 2) {
+            const float w = accumulate::blendDenoised(glm::vec4(0.f), glm::vec4(1.f), n, k).x;
+            EXPECT_NEAR(w, double(n - 1) / (double(n - 1) + k), 1e-6) << "n " << n << ", K " << k;
+            EXPECT_GT(w, previous);
+            EXPECT_LT(w, 1.f);
+            previous = w;
+        }
+        // Where both agree the blend is that value, and it always lies between them.
+        const glm::vec4 v(0.25f, 3.f, 1e4f, 1.f);
+        EXPECT_EQ(accumulate::blendDenoised(v, v, 37, k), v);
+        const glm::vec4 out = accumulate::blendDenoised(glm::vec4(2.f), glm::vec4(-1.f), 9, k);
+        for (int c = 0; c < 4; ++c) EXPECT_TRUE(out[c] >= -1.f && out[c] <= 2.f) << out[c];
+    }
+    // K = 0: the denoised image is worth nothing once there is a second sample.
+    EXPECT_EQ(accumulate::blendDenoised(glm::vec4(9.f), glm::vec4(0.5f), 2, 0.f), glm::vec4(0.5f));
+}
+
+TEST(AccumulateKernels, ANonFiniteDenoisedPixelLeavesTheMeanAfterTheFirstSample) {
+    const float inf = std::numeric_limits<float>::infinity();
+    const glm::vec4 mean(0.5f, 0.25f, 0.125f, 1.f);
+    for (const glm::vec4& bad : {glm::vec4(inf, 0.f, 0.f, 1.f), glm::vec4(0.f, -inf, 0.f, 1.f),
+                                 glm::vec4(0.f, 0.f, std::numeric_limits<float>::quiet_NaN(), 1.f)})
+        EXPECT_EQ(accumulate::blendDenoised(bad, mean, 2, 64.f), mean);
 }

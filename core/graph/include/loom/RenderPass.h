@@ -81,6 +81,12 @@ public:
     /// False on the first frame, after a reset, resize or camera cut: then
     /// the prev side of every history field (and of @prev inputs) is zero.
     bool historyValid() const { return mHistoryValid; }
+    /// Whether a parameter of a pass this one reads from, directly or through other passes, changed value since
+    /// the last frame, or the graph's description was replaced: what this pass receives may differ although
+    /// nothing in the scene moved. Parameters with the role Seed or SampleCount do not count (they change the
+    /// noise, not the image the samples estimate); nor do this pass's own. A pass that accumulates frames
+    /// restarts on it.
+    bool inputParamsChanged() const { return mInputParamsChanged; }
 
     uint64_t frameIndex() const { return mFrameIndex; }
     double time() const { return mTime; }
@@ -97,6 +103,7 @@ private:
     std::string mPassName;
     std::vector<BoundField> mFields;
     bool mHistoryValid = false;
+    bool mInputParamsChanged = false;
     uint64_t mFrameIndex = 0;
     double mTime = 0.0;
     uint32_t mFrameWidth = 0, mFrameHeight = 0;
