@@ -37,8 +37,12 @@ void runCheck(const CheckOptions& o) {
     PluginRegistry registry = makeRegistry();
     std::shared_ptr<Scene> scene = loadScene(o.scene);
     RenderGraph graph(loadGraph(o.graph), registry);
-    // With a scene, the plan also lists the work each pass leaves out for it (RenderPass::skippedWork).
-    if (scene) graph.setScene(scene);
+    // With a scene, the plan also lists the work each pass leaves out for it (RenderPass::skippedWork), for the
+    // scene as the first frame sees it (--env and the camera path applied).
+    if (scene) {
+        scene->update(0.0);
+        graph.setScene(scene);
+    }
     applySet(graph, o.set);
     CompileOptions copts;
     copts.width = width;

@@ -310,7 +310,8 @@ void PathTracer::compile(const CompileInfo&) {
                      mDevice == Device::Cuda ? "cuda" : "auto");
 }
 
-void PathTracer::setScene(const std::shared_ptr<const Scene>&) {
+void PathTracer::setScene(const std::shared_ptr<const Scene>& scene) {
+    mScene = scene;
     mEnvSource = nullptr;
     mEmissionSource = nullptr;
     mLightsSource = nullptr;
@@ -325,7 +326,20 @@ uint32_t PathTracer::kernelFeatures() const {
 
 std::vector<std::string> PathTracer::skippedWork() const {
     std::vector<std::string> lines;
-    if (!mSpecialize || !mLightsSource) return lines;
+    if (!mSpecialize) return lines;
+    if (!mLightsSource) {  // no frame yet (loom check): what the scene's features decide
+        if (!mScene) return lines;
+        const SceneFeatures& f = mScene->features();
+        if (!f.animatedNodes && !f.animatedLights)
+            lines.push_back("per-frame light list: nothing moves and no emission is animated (built once)");
+        if (!f.emissiveTriangles) lines.push_back("emissive-triangle sampling: the scene has no emissive triangles");
+        if (!f.punctualLights) lines.push_back("punctual-light sampling: the scene has no punctual light");
+        if (f.environment == EnvironmentKind::None)
+            lines.push_back("environment sampling: the environment is black");
+        else if (f.environment == EnvironmentKind::Constant)
+            lines.push_back("environment map lookups and importance sampling: the environment is a constant colour");
+        return lines;
+    }
     const SceneFeatures& f = static_cast<const Scene*>(mLightsSource)->features();
     if (mKernelFeatures == 0u) {
         lines.push_back("emitter material at light samples: no emissive texture or alpha-tested emitter");

@@ -65,6 +65,7 @@ private:
     pt::LightsView mLights;
     // The scene and parameters the light list was built for (a static scene's is built once).
     const void* mLightsSource = nullptr;
+    std::shared_ptr<const Scene> mScene;  // the scene set, for skippedWork before the first frame
     uint64_t mLightsVersion = 0;
     bool mLightsAlphaTest = true;
     EmissionWeights mLightsWeights = EmissionWeights::Texture;

@@ -327,6 +327,16 @@ TEST_F(Cli, CheckSaysWhatDoesNotRunAndWhy) {
     EXPECT_CONTAINS(set.output, "  Idle: resting: --set\n");
     EXPECT_EQ(set.output.find("idling"), std::string::npos) << set.output;
 
+    // The scene as the first frame sees it: --env lights a scene whose file has no environment.
+    const std::string pt = " " + quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/PathTracer.json");
+    RunResult dark = loom("check" + pt + " --size 64x64" + scene);
+    ASSERT_EQ(dark.code, 0) << dark.output;
+    EXPECT_CONTAINS(dark.output, "  PathTracer: environment sampling: the environment is black\n");
+    RunResult lit = loom("check" + pt + " --size 64x64" + scene + " --env 0.5,0.5,0.5");
+    ASSERT_EQ(lit.code, 0) << lit.output;
+    EXPECT_EQ(lit.output.find("the environment is black"), std::string::npos) << lit.output;
+    EXPECT_CONTAINS(lit.output, "the environment is a constant colour\n");
+
     // A graph where everything runs says so.
     RunResult all = loom("check " + quoted(kTestPattern) + " --size 64x64");
     ASSERT_EQ(all.code, 0) << all.output;

@@ -223,4 +223,11 @@ TEST(Specialize, SkippedWorkFollowsTheScene) {
         EXPECT_TRUE(lines(shipped("cornell_box.gltf"), type, false).empty()) << type;
     }
     for (const std::string& l : box) EXPECT_NE(l.find(": "), std::string::npos) << l;  // "what: why"
+    // Before the first frame (as loom check asks), the scene's features alone decide.
+    const auto before = passGraph("PathTracer", {{"specialize", true}}, {"color"}, shipped("cornell_box.gltf"));
+    const auto early = before->pass("P")->skippedWork();
+    EXPECT_TRUE(mentions(early, "punctual-light sampling"));
+    EXPECT_TRUE(mentions(early, "environment sampling"));
+    EXPECT_TRUE(mentions(early, "per-frame light list"));
+    EXPECT_FALSE(mentions(early, "emissive-triangle sampling"));
 }
