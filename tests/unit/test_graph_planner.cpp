@@ -400,3 +400,31 @@ TEST(GraphPlannerWhy, NothingLeftOutListsNothing) {
     const Planned p = plan({{"A", {"out:a", "opt-out:b"}}, {"B", {"in:a", "in:b", "out:c"}}}, {}, {"B.c"});
     EXPECT_TRUE(p.plan.summary.notRun.empty());
 }
+
+TEST(GraphPlanner, AFieldRoleFitsOneFieldOfItsKind) {
+    const auto planWith = [](Reflection r) {
+        GraphDesc desc;
+        desc.passes.push_back({"P", "T", nlohmann::json::object(), {}});
+        desc.outputs.push_back(parseChannelRef("P.out", "output"));
+        PlannerInput in;
+        in.desc = &desc;
+        in.width = in.height = 4;
+        in.reflections.push_back(std::move(r));
+        return planGraph(in);
+    };
+    Reflection good = reflectionOf({"opt-in:src", "out:out"});
+    good.input("display", Format::RGBA32F).optional().role(FieldRole::DisplayInput);
+    EXPECT_NO_THROW((void)planWith(good));
+    Reflection twice = good;
+    twice.input("again", Format::RGBA32F).optional().role(FieldRole::DisplayInput);
+    Error e = expectError([&] { (void)planWith(twice); });
+    EXPECT_TRUE(contains(e.what(), "a second field with the role 'displayInput'")) << e.what();
+    Reflection onOutput = reflectionOf({"opt-in:src"});
+    onOutput.output("out", Format::RGBA32F).role(FieldRole::DisplayInput);
+    e = expectError([&] { (void)planWith(onOutput); });
+    EXPECT_TRUE(contains(e.what(), "cannot play the role 'displayInput'")) << e.what();
+    Reflection wrongFormat = reflectionOf({"out:out"});
+    wrongFormat.input("src", Format::R32F).optional().role(FieldRole::DisplayInput);
+    e = expectError([&] { (void)planWith(wrongFormat); });
+    EXPECT_TRUE(contains(e.what(), "cannot play the role")) << e.what();
+}

@@ -21,7 +21,24 @@ namespace {
 /// are made of it).
 void checkFields(const Reflection& r, const PassDesc& pass) {
     std::set<std::string> seen;
+    std::set<FieldRole> roles;
     for (const auto& f : r.fields()) {
+        // A role names one field of a pass, of the kind and format the role defines (Reflection.h).
+        if (f.role != FieldRole::None) {
+            const bool fits =
+                f.role == FieldRole::DisplayInput && (f.kind == FieldKind::Input && f.format == Format::RGBA32F);
+            const char* problem = !roles.insert(f.role).second ? "a second field with the role"
+                                  : !fits                      ? "a field that cannot play the role"
+                                                               : nullptr;
+            if (problem)
+                throw Error(Error::Info{ErrorKind::Runtime,
+                                        {},
+                                        fieldKey(pass.name, f.name),
+                                        "pass type '" + pass.type + "' declares " + problem + " '" +
+                                            fieldRoleName(f.role) + "' (field '" + printable(f.name) + "')",
+                                        "at most one field per role: displayInput on an RGBA32F input",
+                                        "fix the pass's reflect()"});
+        }
         if (!isPlainName(f.name))
             throw Error(Error::Info{ErrorKind::Runtime,
                                     {},

@@ -26,7 +26,7 @@ enum class SizeMode : uint8_t {
 
 /// A standard meaning a field can declare, so a tool that drives graphs it does not know (`loom bench`) asks for
 /// "the field that plays this role" instead of a pass type and a field name. A pass gives a role to at most one of its
-/// fields.
+/// fields, of the kind and format the role names (the planner refuses a pass that does otherwise).
 enum class FieldRole : uint8_t {
     None,
     DisplayInput,  ///< input, RGBA32F: the linear, scene-referred image a display transform (tone mapping) maps
