@@ -326,34 +326,26 @@ uint32_t PathTracer::kernelFeatures() const {
 
 std::vector<std::string> PathTracer::skippedWork() const {
     std::vector<std::string> lines;
-    if (!mSpecialize) return lines;
-    if (!mLightsSource) {  // no frame yet (loom check): what the scene's features decide
-        if (!mScene) return lines;
-        const SceneFeatures& f = mScene->features();
-        if (!f.animatedNodes && !f.animatedLights)
-            lines.push_back("per-frame light list: nothing moves and no emission is animated (built once)");
-        if (!f.emissiveTriangles) lines.push_back("emissive-triangle sampling: the scene has no emissive triangles");
-        if (!f.punctualLights) lines.push_back("punctual-light sampling: the scene has no punctual light");
-        if (f.environment == EnvironmentKind::None)
-            lines.push_back("environment sampling: the environment is black");
-        else if (f.environment == EnvironmentKind::Constant)
-            lines.push_back("environment map lookups and importance sampling: the environment is a constant colour");
-        return lines;
-    }
-    const SceneFeatures& f = static_cast<const Scene*>(mLightsSource)->features();
-    if (mKernelFeatures == 0u) {
+    // The scene's features decide most of it; the kernel chosen and the shading path need a frame (loom check asks
+    // before the first one).
+    const Scene* scene = mLightsSource ? static_cast<const Scene*>(mLightsSource) : mScene.get();
+    if (!mSpecialize || !scene) return lines;
+    const SceneFeatures& f = scene->features();
+    const bool rendered = mLightsSource != nullptr;
+    if (rendered && mKernelFeatures == 0u)
         lines.push_back("emitter material at light samples: no emissive texture or alpha-tested emitter");
+    if (f.environment != EnvironmentKind::Map && (!rendered || mKernelFeatures == 0u))
         lines.push_back("environment map lookups: the environment is " +
                         std::string(f.environment == EnvironmentKind::None ? "black" : "a constant colour"));
-    }
-    if (mSimdUsed) lines.push_back("vector shading of batches of ended paths: misses end at the primary ray");
+    if (rendered && mSimdUsed)
+        lines.push_back("vector shading of batches of ended paths: misses end at the primary ray");
     if (!f.animatedNodes && !f.animatedLights)
         lines.push_back("per-frame light list: nothing moves and no emission is animated (built once)");
     else if (!f.animatedLights)
         lines.push_back("light list rebuilds while no instance moves: no emission is animated");
-    if (mTris.empty()) lines.push_back("emissive-triangle sampling: the scene has no emissive triangles");
-    if (mPunctual.empty()) lines.push_back("punctual-light sampling: the scene has no punctual light");
-    if (!mLights.hasEnv) lines.push_back("environment sampling: the environment is black");
+    if (!f.emissiveTriangles) lines.push_back("emissive-triangle sampling: the scene has no emissive triangles");
+    if (!f.punctualLights) lines.push_back("punctual-light sampling: the scene has no punctual light");
+    if (f.environment == EnvironmentKind::None) lines.push_back("environment sampling: the environment is black");
     return lines;
 }
 

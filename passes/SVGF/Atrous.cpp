@@ -25,6 +25,11 @@ void copyImage(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst) {
     });
 }
 
+/// Low-variance tiles along an axis of n pixels.
+uint32_t skipTilesAlong(uint32_t n) {
+    return (n + kSkipTile - 1) / kSkipTile;
+}
+
 ImageView<const glm::vec4> asConst(ImageView<glm::vec4> v) {
     return {v.data, v.width, v.height, v.rowPitch};
 }
@@ -92,11 +97,10 @@ AtrousFilter::FramePlanes AtrousFilter::preparePlanes(ImageView<const glm::vec2>
 }
 
 uint32_t AtrousFilter::classifyTiles(ImageView<const glm::vec4> src, const AtrousParams& params) {
-    mSkipTilesPerRow = (mWidth + kSkipTile - 1) / kSkipTile;
-    const uint32_t rows = (mHeight + kSkipTile - 1) / kSkipTile;
-    mSkipTiles.assign(size_t(mSkipTilesPerRow) * rows, 0);
     const float limit = params.skipRelVariance;
-    if (!(limit > 0.f)) return 0;
+    if (!(limit > 0.f)) return 0;  // off: no flags, and the levels read none
+    mSkipTilesPerRow = skipTilesAlong(mWidth);
+    mSkipTiles.assign(size_t(mSkipTilesPerRow) * skipTilesAlong(mHeight), 0);
     // One tile per task: each writes its own flag, so the result does not depend on the threads.
     parallelFor2D(
         mWidth, mHeight,
@@ -126,7 +130,7 @@ void AtrousFilter::run(ImageView<const glm::vec4> src, ImageView<glm::vec4> dst,
     const uint32_t skipped = iterations > 0 ? classifyTiles(src, params) : 0;
     if (timings) {
         timings->skippedTiles = skipped;
-        timings->tiles = uint32_t(mSkipTiles.size());
+        timings->tiles = skipTilesAlong(mWidth) * skipTilesAlong(mHeight);
     }
     const uint8_t* skipTiles = skipped ? mSkipTiles.data() : nullptr;
     if (iterations <= 0) {

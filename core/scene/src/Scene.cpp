@@ -244,6 +244,21 @@ std::string nodeLabel(const std::vector<Node>& nodes, size_t i) {
     return label;
 }
 
+/// Visits every node under a parentless one, parents before their children (depth first). Nodes on or under a
+/// cycle are not visited.
+template <class Fn>
+void visitParentsFirst(const std::vector<Node>& nodes, Fn&& visit) {
+    std::vector<int> stack;
+    for (size_t i = 0; i < nodes.size(); ++i)
+        if (nodes[i].parent < 0) stack.push_back(int(i));
+    while (!stack.empty()) {
+        const int n = stack.back();
+        stack.pop_back();
+        visit(size_t(n));
+        for (int c : nodes[size_t(n)].children) stack.push_back(c);
+    }
+}
+
 }  // namespace
 
 Scene::Scene() = default;
@@ -266,17 +281,10 @@ bool Instance::visible() const {
 
 void Scene::updateWorldTransforms() {
     mNodeWorld.assign(nodes.size(), glm::mat4(1.f));
-    // Parents before children: a stack seeded with every parentless node.
-    std::vector<int> stack;
-    for (size_t i = 0; i < nodes.size(); ++i)
-        if (nodes[i].parent < 0) stack.push_back(int(i));
-    while (!stack.empty()) {
-        const int n = stack.back();
-        stack.pop_back();
-        const Node& node = nodes[size_t(n)];
-        mNodeWorld[size_t(n)] = node.parent >= 0 ? mNodeWorld[size_t(node.parent)] * node.local() : node.local();
-        for (int c : node.children) stack.push_back(c);
-    }
+    visitParentsFirst(nodes, [&](size_t n) {
+        const Node& node = nodes[n];
+        mNodeWorld[n] = node.parent >= 0 ? mNodeWorld[size_t(node.parent)] * node.local() : node.local();
+    });
 }
 
 /// Parents from the children lists, checked to form a forest (a node with two parents, or a cycle, would make
@@ -299,15 +307,7 @@ void Scene::linkHierarchy() {
     {
         // With unique parents, a node that no parentless node reaches lies on or under a cycle.
         std::vector<bool> reached(nodes.size(), false);
-        std::vector<int> stack;
-        for (size_t i = 0; i < nodes.size(); ++i)
-            if (nodes[i].parent < 0) stack.push_back(int(i));
-        while (!stack.empty()) {
-            const int n = stack.back();
-            stack.pop_back();
-            reached[size_t(n)] = true;
-            for (int c : nodes[size_t(n)].children) stack.push_back(c);
-        }
+        visitParentsFirst(nodes, [&](size_t n) { reached[n] = true; });
         for (size_t i = 0; i < nodes.size(); ++i)
             if (!reached[i])
                 throwBadInput(nodeLabel(nodes, i), "node is part of a cycle in the hierarchy",
