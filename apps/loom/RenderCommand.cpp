@@ -19,6 +19,7 @@
 #include "loom/ImageIO.h"
 #include "loom/Parallel.h"
 #include "loom/RenderGraph.h"
+#include "loom/StatNames.h"
 
 namespace loom::cli {
 
@@ -116,9 +117,9 @@ void runRender(const RenderOptions& o) {
     const double heldTime = double(o.startFrame) / o.fps;
     if (o.hold) statsJson["heldFrame"] = {{"frame", o.startFrame}, {"time", heldTime}, {"iterations", o.frames}};
     uint64_t written = 0;
-    // Frames after the first on which a pass restarted an accumulation (a pass's "reset" counter: AccumulatePass
-    // restarts when the scene or the camera moves or an animated light changes), so a reference that cannot converge
-    // does not pass silently.
+    // Frames after the first on which a pass restarted the mean that is its output (stat::kOutputMeanRestarted:
+    // AccumulatePass restarts when the scene or the camera moves or an animated light changes), so a reference that
+    // cannot converge does not pass silently.
     uint64_t restarts = 0;
     uint64_t done = 0;  // frames finished
     const auto writeOutputs = [&](uint64_t named) {
@@ -136,11 +137,9 @@ void runRender(const RenderOptions& o) {
         graph.execute(frame);
         if (i > 0) {
             const auto stats = graph.lastStats();
-            // An accumulation blended with a denoised image (it reports "meanWeight", as the default graphs'
-            // does) restarts by design under motion: its output is the denoiser's then.
             restarts += std::any_of(stats.begin(), stats.end(), [](const auto& pass) {
-                const auto reset = pass.second.find("reset");
-                return reset != pass.second.end() && reset->second != 0.0 && !pass.second.count("meanWeight");
+                const auto restarted = pass.second.find(stat::kOutputMeanRestarted);
+                return restarted != pass.second.end() && restarted->second != 0.0;
             });
         }
         if (!o.hold || i + 1 == o.frames) writeOutputs(o.hold ? o.startFrame : frame.frameIndex);

@@ -184,6 +184,7 @@ void AccumulatePass::execute(PassContext& ctx) {
         ctx.stats().set(stat::kAccumulatedFrames, 0);
         ctx.stats().set(kStatNonFinite, 0);
         ctx.stats().set(kStatReset, 0);
+        ctx.stats().set(stat::kOutputMeanRestarted, 0);
         return;
     }
 
@@ -240,6 +241,7 @@ void AccumulatePass::execute(PassContext& ctx) {
     ctx.stats().set(stat::kAccumulatedFrames, frames);
     ctx.stats().set(kStatNonFinite, double(skipped));
     ctx.stats().set(kStatReset, reset ? 1 : 0);
+    ctx.stats().set(stat::kOutputMeanRestarted, reset && !v.denoised.data ? 1 : 0);
     if (v.denoised.data)
         ctx.stats().set(kStatMeanWeight,
                         frames > 1 ? double(frames - 1) / (double(frames - 1) + mDenoisedFrames) : 0.0);
@@ -253,5 +255,6 @@ LOOM_DEFINE_PLUGIN(registrar) {
         "Running mean of its input since the last reset (references); float, Kahan or double precision. "
         "Non-finite samples are skipped per pixel. With a denoised input, starts as it after every reset and "
         "converges to the mean while nothing moves. Stats: frames (in the mean), nonFinite (samples skipped this "
-        "frame), reset (1 when this frame started a new mean), meanWeight (with denoised: the mean's share of dst).");
+        "frame), reset (1 when this frame started a new mean), outputMeanRestarted (the same without denoised: dst "
+        "lost its mean), meanWeight (with denoised: the mean's share of dst).");
 }

@@ -7,4 +7,9 @@ namespace loom::stat {
 /// ParamRole::AutoReset), counted since its last restart.
 inline constexpr char kAccumulatedFrames[] = "frames";
 
+/// 1 on a frame where a pass threw away the running mean that is its output (a reference being accumulated) and
+/// started again, else 0; `loom render` warns when that happens after the first frame. A pass that blends its mean
+/// into a denoised image restarts under motion by design, and does not report it.
+inline constexpr char kOutputMeanRestarted[] = "outputMeanRestarted";
+
 }  // namespace loom::stat
