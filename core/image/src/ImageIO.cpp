@@ -3,7 +3,6 @@
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
-#include <ImfInputFile.h>
 #include <ImfOutputFile.h>
 #include <ImfStdIO.h>
 #include <ImfVersion.h>
@@ -29,6 +28,7 @@
 #include <vector>
 
 #include "loom/Error.h"
+#include "loom/ExrFile.h"
 #include "loom/Files.h"
 
 namespace loom {
@@ -122,83 +122,24 @@ std::array<char, 4> leadingBytes(const fs::path& path) {
     return magic;
 }
 
-/// The largest image read: sides of 64 Ki pixels (as the Radiance reader), 2^28 pixels (4 GiB as RGBA32F). A damaged
-/// header claims any size; OpenEXR checks the sides and the tiles when it opens the file, before it allocates.
-constexpr int kMaxReadSide = 1 << 16;
-constexpr int64_t kMaxReadPixels = int64_t(1) << 28;
-
+/// An EXR's R, G, B and A (or Y) channels: into RGBA32U when all of them are UINT, else into RGBA32F (ExrFile).
 Texture readExr(const fs::path& path) {
-    static const bool limited = [] {
-        Imf::Header::setMaxImageSize(kMaxReadSide, kMaxReadSide);
-        Imf::Header::setMaxTileSize(kMaxReadSide, kMaxReadSide);
-        return true;
-    }();
-    (void)limited;
-    try {
-        Imf::InputFile file(path.c_str());
-        const Imf::Header& header = file.header();
-        const Imath::Box2i dw = header.dataWindow();
-        const int64_t width = int64_t(dw.max.x) - dw.min.x + 1;
-        const int64_t height = int64_t(dw.max.y) - dw.min.y + 1;
-        if (width <= 0 || height <= 0) {
-            throwBadInput("", "the image's data window is empty", "a non-empty image", "", path.string());
-        }
-        if (width * height > kMaxReadPixels) {
-            throwBadInput("", "image size " + std::to_string(width) + "x" + std::to_string(height) + " out of range",
-                          "at most " + std::to_string(kMaxReadPixels) + " pixels", "", path.string());
-        }
-
-        const Imf::ChannelList& channels = header.channels();
-        bool anyRgba = false, allUint = true;
-        for (const char* name : kChannelNames) {
-            if (const Imf::Channel* ch = channels.findChannel(name)) {
-                anyRgba = true;
-                allUint = allUint && ch->type == Imf::UINT;
-            }
-        }
-        // A luminance-only image (channel Y) is read as grey.
-        const Imf::Channel* luminance = anyRgba ? nullptr : channels.findChannel("Y");
-        if (!anyRgba && !luminance) {
-            std::vector<std::string> found;
-            for (auto it = channels.begin(); it != channels.end(); ++it) found.emplace_back(it.name());
-            throwBadInput("", "the image has no R, G, B, A or Y channel (it has: " + join(found) + ")",
-                          "channels named R, G, B and A", "", path.string());
-        }
-        if (luminance) allUint = luminance->type == Imf::UINT;
-
-        const Format format = allUint ? Format::RGBA32U : Format::RGBA32F;
-        const Imf::PixelType type = allUint ? Imf::UINT : Imf::FLOAT;
-        Texture tex(uint32_t(width), uint32_t(height), format);
-        Imf::FrameBuffer frameBuffer;
-        auto slice = [&](uint32_t c, double fill) {
-            return Imf::Slice::Make(type, tex.data() + 4 * c, dw, 16, tex.rowPitch(), 1, 1, fill);
-        };
-        if (luminance) {
-            // OpenEXR reads a channel into one slice only: Y goes into R here and is copied to G and B below.
-            frameBuffer.insert("Y", slice(0, 0.0));
-            frameBuffer.insert("A", slice(3, 1.0));
-        } else {
-            // Slices of channels missing from the file are filled: 0 for colour, 1 for alpha.
-            for (uint32_t c = 0; c < 4; ++c) frameBuffer.insert(kChannelNames[c], slice(c, c == 3 ? 1.0 : 0.0));
-        }
-        file.setFrameBuffer(frameBuffer);
-        file.readPixels(dw.min.y, dw.max.y);
-        if (luminance) {
-            for (uint32_t y = 0; y < tex.height(); ++y) {
-                std::byte* row = tex.row(y);
-                for (uint32_t x = 0; x < tex.width(); ++x) {
-                    std::memcpy(row + 16 * x + 4, row + 16 * x, 4);
-                    std::memcpy(row + 16 * x + 8, row + 16 * x, 4);
-                }
-            }
-        }
-        return tex;
-    } catch (const Error&) {
-        throw;
-    } catch (const std::exception& e) {
-        throwBadInput("", std::string("cannot read the EXR image: ") + e.what(), "a valid OpenEXR file",
-                      "check that the file is a complete, single-part scanline or tiled EXR", path.string());
+    ExrFile file(path);
+    const std::vector<std::string> names = file.layerChannels("");
+    const bool allUint = !names.empty() && std::all_of(names.begin(), names.end(), [&](const std::string& n) {
+        return n.empty() || file.findChannel(n)->type == ExrSampleType::Uint;
+    });
+    if (!allUint) return file.readRgba("");
+    Texture tex(file.width(), file.height(), Format::RGBA32U);
+    std::vector<ExrChannelRead> reads;
+    for (size_t c = 0; c < 4; ++c) {
+        const std::string channel = names == std::vector<std::string>{"Y"} ? (c < 3 ? "Y" : "")
+                                    : c < names.size()                     ? names[c]
+                                                                           : "";
+        reads.push_back({channel, tex.data() + 4 * c, 16, tex.rowPitch(), true, c == 3 ? 1.0 : 0.0});
     }
+    file.read(reads);
+    return tex;
 }
 
 Texture readStb(const fs::path& path) {
