@@ -1,0 +1,485 @@
+#include "ImageSequencePass.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <map>
+
+#include "loom/Channels.h"
+#include "loom/Error.h"
+#include "loom/ExrFile.h"
+#include "loom/Plugin.h"
+
+namespace loom {
+
+namespace fs = std::filesystem;
+using sequence::MotionKind;
+
+namespace {
+
+/// What a consumed channel the sequence lacks becomes.
+enum class Missing { Error, Fill, FillWithWarning };
+
+struct OutputInfo {
+    const char* name;
+    Format format;
+    const char* doc;
+    Missing missing;
+    float fill;            ///< every component of a missing channel (Fill*)
+    float fillAlpha;       ///< the fourth component where the source has three
+    const char* loomPass;  ///< the pass whose dump the loom preset reads it from ("" = none)
+};
+
+constexpr char kReference[] = "reference";
+
+const std::array<OutputInfo, ImageSequencePass::kOutputCount> kOutputs = {{
+    {channel::kColor, Format::RGBA32F, "noisy radiance (Blender: Noisy Image, else Combined)", Missing::Error, 0.f, 1.f,
+     "PathTracer"},
+    {channel::kAlbedo, Format::RGBA32F,
+     "diffuse reflectance for demodulation (Blender: Denoising Albedo); 1 where the sequence has none (no "
+     "demodulation, with a warning)",
+     Missing::FillWithWarning, 1.f, 1.f, "PathTracer"},
+    {channel::kSpecAlbedo, Format::RGBA32F, "specular albedo; 0 where the sequence has none", Missing::Fill, 0.f, 1.f,
+     "PathTracer"},
+    {channel::kEmission, Format::RGBA32F, "emitted radiance at the primary hit; 0 where the sequence has none",
+     Missing::Fill, 0.f, 1.f, "PathTracer"},
+    {channel::kNormW, Format::RGBA32F,
+     "shading normal, world space (camera space turned with the file's worldToCamera; Blender: Normal)", Missing::Error,
+     0.f, 0.f, "GBuffer"},
+    {channel::kLinearZ, Format::RG32F,
+     "view depth (-1 on a miss) and its derivative; from a one-channel depth (Blender: Depth) the derivative is "
+     "computed from neighbours",
+     Missing::Error, 0.f, 0.f, "GBuffer"},
+    {channel::kMvec, Format::RG32F, "uvPrev - uvCur (Blender: Vector, converted from pixels)", Missing::Error, 0.f, 0.f,
+     "GBuffer"},
+    {channel::kMeshId, Format::R32U, "object id for the disocclusion test (Blender: IndexOB); 0 where none",
+     Missing::Fill, 0.f, 0.f, "GBuffer"},
+    {channel::kGradient, Format::RG32F, "temporal gradients (Loom's own dumps); (0, 0), no samples, where none",
+     Missing::Fill, 0.f, 0.f, "PathTracer"},
+    {kReference, Format::RGBA32F, "a reference image of the frame, e.g. for ErrorMeasure", Missing::Error, 0.f, 1.f,
+     ""},
+}};
+
+/// Blender's pass names for the blender preset ('|' separates alternatives: the first the file has is read).
+constexpr std::array<const char*, ImageSequencePass::kOutputCount> kBlenderLayers = {
+    "Noisy Image|Combined", "Denoising Albedo", "", "", "Normal", "Depth", "Vector", "IndexOB", "", ""};
+
+std::vector<std::string> splitAlternatives(const std::string& s) {
+    std::vector<std::string> out;
+    size_t start = 0;
+    while (true) {
+        const size_t bar = s.find('|', start);
+        out.push_back(s.substr(start, bar == std::string::npos ? std::string::npos : bar - start));
+        if (bar == std::string::npos) return out;
+        start = bar + 1;
+    }
+}
+
+bool mentionsExr(const std::string& s) {
+    std::string lower = s;
+    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return lower.find(".exr") != std::string::npos;
+}
+
+std::string where(const std::string& param) {
+    return "ImageSequence." + param;
+}
+
+}  // namespace
+
+/// A channel's source once the files are known: the pattern, and the file's channel of each component ("" fills).
+struct ImageSequencePass::Resolved {
+    std::array<std::string, kOutputCount> pattern;  ///< empty: the sequence has no such channel
+    std::array<std::vector<std::string>, kOutputCount> channels;
+    std::array<std::string, kOutputCount> described;  ///< "file: layer (components)" for the log
+};
+
+ImageSequencePass::ImageSequencePass() = default;
+ImageSequencePass::~ImageSequencePass() = default;
+
+void ImageSequencePass::reflect(Reflection& r, const CompileInfo&) const {
+    for (const OutputInfo& o : kOutputs) r.output(o.name, o.format).optional().doc(o.doc);
+}
+
+void ImageSequencePass::declareParams(ParamList& p) {
+    p.addEnum("preset", &mPreset, Preset::Blender, {"none", "loom", "blender"})
+        .doc(
+            "where each channel comes from unless its own parameter says: blender = one multilayer EXR per frame "
+            "(path) with a Cycles View Layer's passes (Noisy Image or Combined, Denoising Albedo, Normal, Depth, "
+            "Vector, IndexOB); loom = the files `loom render --dump` writes into the folder path "
+            "(PathTracer.<channel>.NNNN.exr, GBuffer.<channel>.NNNN.exr); none = only the channel parameters");
+    p.add("path", &mPath, std::string())
+        .doc(
+            "blender and none: the numbered multilayer file, e.g. frames/noisy_####.exr or beauty.%04d.exr (#### "
+            "and %04d stand for the frame number); loom: the folder of the dumps");
+    p.add("layer", &mLayer, std::string("ViewLayer"))
+        .doc("the View Layer prefixed to layer names given without a file (\"\" for files whose layers have none)");
+    for (int o = 0; o < kOutputCount; ++o)
+        p.add(kOutputs[size_t(o)].name, &mSource[size_t(o)], std::string())
+            .doc(fmt::format(
+                "source of {}: \"\" = the preset's; \"none\" = not in the sequence; a layer of path's file "
+                "(\"Denoising "
+                "Normal\"), or PATTERN:LAYER for another file (\"refs/ref_####.exr:ViewLayer.Combined\"; no layer = R, "
+                "G, B, A); '|' separates alternatives, the first found is read",
+                kOutputs[size_t(o)].name));
+    p.add("firstFrame", &mFirstFrame, 0)
+        .range(0, 1e9)
+        .doc("the file number of the graph's frame 0 (Blender numbers frames from 1)");
+    p.addEnum("normals", &mNormals, NormalSpace::Auto, {"auto", "world", "camera"})
+        .doc(
+            "space of the normals: camera ones are turned into world space with the file's worldToCamera attribute "
+            "(without it they stay in camera space, which only the temporal normal test notices); auto = world");
+    p.addEnum("depth", &mDepth, DepthKind::Auto, {"auto", "linearZ", "depth"})
+        .doc(
+            "linearZ = Loom's two channels (depth, derivative); depth = one channel of distance along the camera "
+            "axis, at least missDepth where there is no surface; auto = linearZ for loom, depth for blender");
+    p.add("missDepth", &mMissDepth, 1e9f)
+        .range(1e-3, 3.4e38)
+        .doc("depth: values at or above this (Blender writes 1e10 on the background) are misses");
+    p.addEnum("motion", &mMotion, Motion::Auto, {"auto", "uv", "pixelsFromPrevious", "pixelsToPrevious"})
+        .doc(
+            "motion vectors: uv = Loom's uvPrev - uvCur; pixelsFromPrevious = current minus previous position in "
+            "pixels (Blender's Vector); pixelsToPrevious = previous minus current in pixels; auto = uv for loom, "
+            "pixelsFromPrevious for blender");
+    p.addEnum("motionY", &mMotionY, MotionY::Auto, {"auto", "down", "up"})
+        .doc("direction of the motion's +y in the image: down (Loom) or up (Blender); auto = the preset's");
+}
+
+ImageSequencePass::Settings ImageSequencePass::settings() const {
+    Settings s;
+    s.path = mPath;
+    s.layerPrefix = mLayer;
+    s.firstFrame = mFirstFrame;
+    s.missDepth = mMissDepth;
+    const bool blender = mPreset == Preset::Blender;
+    s.normals = mNormals == NormalSpace::Camera ? NormalSpace::Camera : NormalSpace::World;
+    s.depth = mDepth != DepthKind::Auto ? mDepth : blender ? DepthKind::Depth : DepthKind::LinearZ;
+    s.motion = mMotion != Motion::Auto ? sequence::MotionKind(int(mMotion) - 1)
+               : blender               ? MotionKind::PixelsFromPrevious
+                                       : MotionKind::Uv;
+    s.motionYUp = mMotionY != MotionY::Auto ? mMotionY == MotionY::Up : blender;
+    for (int o = 0; o < kOutputCount; ++o) {
+        const size_t i = size_t(o);
+        if (!mSource[i].empty()) {
+            s.source[i] = mSource[i] == "none" ? std::string() : mSource[i];
+            s.optional[i] = false;
+            continue;
+        }
+        s.optional[i] = true;
+        if (blender) {
+            s.source[i] = kBlenderLayers[i];
+        } else if (mPreset == Preset::Loom && *kOutputs[i].loomPass) {
+            s.source[i] =
+                (fs::path(mPath) / fmt::format("{}.{}.%04d.exr", kOutputs[i].loomPass, kOutputs[i].name)).string() +
+                ":";
+        }
+    }
+    return s;
+}
+
+ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_t number) {
+    Resolved out;
+    std::map<std::string, std::unique_ptr<ExrFile>> files;
+    const auto open = [&](const std::string& path) -> ExrFile* {
+        auto& f = files[path];
+        if (!f) f = std::make_unique<ExrFile>(path);
+        return f.get();
+    };
+    for (int o = 0; o < kOutputCount; ++o) {
+        const size_t i = size_t(o);
+        if (s.source[i].empty()) continue;
+        std::vector<std::string> tried;
+        for (const std::string& alternative : splitAlternatives(s.source[i])) {
+            std::string pattern, layer;
+            if (mentionsExr(alternative)) {
+                const SequenceSource src = parseSequenceSource(alternative);
+                pattern = src.pattern;
+                layer = src.layer;
+            } else {
+                if (s.path.empty())
+                    throwBadInput(where("path"),
+                                  fmt::format("{} is read from the layer '{}' of path, and path is empty",
+                                              kOutputs[i].name, alternative),
+                                  "the numbered EXR file of each frame",
+                                  "set path, e.g. --set Frames.path=frames/####.exr");
+                pattern = s.path;
+                layer = s.layerPrefix.empty() || alternative.empty() ? alternative : s.layerPrefix + "." + alternative;
+            }
+            const std::string file = sequenceFramePath(pattern, number, where(kOutputs[i].name));
+            std::error_code ec;
+            if (s.optional[i] && !fs::exists(file, ec)) {
+                tried.push_back("no file " + file);
+                continue;
+            }
+            ExrFile* exr = open(file);
+            std::vector<std::string> channels = exr->layerChannels(layer);
+            if (channels.empty()) {
+                if (s.optional[i]) {
+                    tried.push_back(fmt::format("no layer '{}' in {}", layer, file));
+                    continue;
+                }
+                std::vector<std::string> quoted;
+                for (const std::string& l : exr->layers()) quoted.push_back(l.empty() ? "R, G, B, A" : "'" + l + "'");
+                throwBadInput(
+                    where(kOutputs[i].name),
+                    fmt::format("{} has no layer '{}' for {} (it has {})", file, layer, kOutputs[i].name, join(quoted)),
+                    "a layer of the file", didYouMean(layer, exr->layers(), ""), file);
+            }
+            out.pattern[i] = pattern;
+            out.channels[i] = std::move(channels);
+            std::vector<std::string> shown;
+            for (const std::string& c : out.channels[i]) shown.push_back(c.empty() ? "-" : c);
+            out.described[i] = fmt::format("{} [{}]", pattern, join(shown));
+            break;
+        }
+        if (out.pattern[i].empty() && !tried.empty())
+            out.described[i] = fmt::format("not in the sequence ({})", join(tried, "; "));
+    }
+    return out;
+}
+
+namespace {
+
+[[noreturn]] void frameError(const std::string& file, int64_t number, const std::string& what,
+                             const std::string& expected, const std::string& suggestion = {}) {
+    throwBadInput("ImageSequence", fmt::format("frame {}: {}", number, what), expected, suggestion, file);
+}
+
+}  // namespace
+
+ImageSequencePass::Frame ImageSequencePass::readFrame(const Settings& s, const Resolved& r, int64_t number,
+                                                      uint32_t width, uint32_t height,
+                                                      const std::array<bool, kOutputCount>& wanted) {
+    Frame frame;
+    frame.number = number;
+    // The reads of each file, so every file is opened and decoded once.
+    std::map<std::string, std::vector<ExrChannelRead>> reads;
+    std::map<std::string, std::unique_ptr<ExrFile>> files;
+    std::array<Texture, kOutputCount> floatIds;  // a float object index, before it becomes a mesh id
+    for (int o = 0; o < kOutputCount; ++o) {
+        const size_t i = size_t(o);
+        if (!wanted[i] || r.pattern[i].empty()) continue;
+        const std::string file = sequenceFramePath(r.pattern[i], number, where(kOutputs[i].name));
+        auto& exr = files[file];
+        if (!exr) {
+            std::error_code ec;
+            if (!fs::exists(file, ec))
+                frameError(file, number, fmt::format("the file of {} does not exist", kOutputs[i].name),
+                           fmt::format("file {} for every frame the graph renders", r.pattern[i]),
+                           "render fewer frames (--frames), or check firstFrame and the numbering");
+            exr = std::make_unique<ExrFile>(file);
+            if (exr->width() != width || exr->height() != height)
+                frameError(file, number,
+                           fmt::format("the image is {}x{}, the graph renders {}x{}", exr->width(), exr->height(),
+                                       width, height),
+                           "frames of the graph's size",
+                           fmt::format("render at the sequence's size: --size {}x{}", exr->width(), exr->height()));
+        }
+        const OutputInfo& info = kOutputs[i];
+        const std::vector<std::string>& channels = r.channels[i];
+        bool allUint = true;
+        for (const std::string& c : channels) {
+            if (c.empty()) continue;
+            const ExrChannel* ch = exr->findChannel(c);
+            if (!ch)
+                frameError(file, number, fmt::format("the file has no channel '{}' for {}", c, info.name),
+                           "the same channels in every frame");
+            allUint = allUint && ch->type == ExrSampleType::Uint;
+            if (ch->type == ExrSampleType::Uint && isFloatFormat(info.format))
+                frameError(file, number,
+                           fmt::format("channel '{}' holds UINT samples; {} needs HALF or FLOAT", c, info.name),
+                           "HALF or FLOAT samples", "map the channel to a layer of float samples");
+        }
+        const bool depthOnly = o == LinearZ && s.depth == DepthKind::Depth;
+        const bool idFromFloat = o == MeshId && !allUint;
+        Texture& tex = frame.channels[i];
+        tex = Texture(width, height, info.format);
+        Texture* target = &tex;
+        if (idFromFloat) target = &(floatIds[i] = Texture(width, height, Format::R32F));
+        const uint32_t components = formatInfo(target->format()).channels;
+        for (uint32_t c = 0; c < components; ++c) {
+            std::string channel = c < channels.size() && !(depthOnly && c > 0) ? channels[c] : std::string();
+            const double fill = c == 3 ? info.fillAlpha : 0.0;
+            reads[file].push_back({channel, target->data() + 4 * c, formatInfo(target->format()).bytesPerPixel,
+                                   target->rowPitch(), !isFloatFormat(target->format()), fill});
+        }
+    }
+    for (auto& [file, list] : reads) files[file]->read(list);
+
+    // Conversions, then the count of what was not finite.
+    if (!frame.channels[MeshId].empty() && !floatIds[MeshId].empty()) {
+        const auto src = floatIds[MeshId].view<float>();
+        const auto dst = frame.channels[MeshId].view<uint32_t>();
+        for (uint32_t y = 0; y < height; ++y)
+            for (uint32_t x = 0; x < width; ++x) dst.at(x, y) = sequence::objectIndexToMeshId(src.at(x, y));
+    }
+    if (Texture& z = frame.channels[LinearZ]; !z.empty()) {
+        const auto view = z.view<glm::vec2>();
+        for (uint32_t y = 0; y < height; ++y)
+            for (uint32_t x = 0; x < width; ++x)
+                if (!std::isfinite(view.at(x, y).x)) ++frame.nonFinite;
+        if (s.depth == DepthKind::Depth) {
+            sequence::depthToLinearZ(view, s.missDepth);
+        } else {
+            for (uint32_t y = 0; y < height; ++y)
+                for (uint32_t x = 0; x < width; ++x) {
+                    glm::vec2& p = view.at(x, y);
+                    if (!std::isfinite(p.x)) p = {-1.f, 0.f};
+                    if (!std::isfinite(p.y)) p.y = 0.f;
+                }
+        }
+    }
+    for (int o = 0; o < kOutputCount; ++o)
+        if (o != LinearZ && !frame.channels[size_t(o)].empty() && isFloatFormat(kOutputs[size_t(o)].format))
+            frame.nonFinite += sequence::zeroNonFinite(frame.channels[size_t(o)]);
+    if (Texture& m = frame.channels[Mvec]; !m.empty() && s.motion != MotionKind::Uv) {
+        const auto view = m.view<glm::vec2>();
+        for (uint32_t y = 0; y < height; ++y)
+            for (uint32_t x = 0; x < width; ++x)
+                view.at(x, y) = sequence::motionToUv(view.at(x, y), s.motion, s.motionYUp, width, height);
+    }
+    if (Texture& n = frame.channels[NormW]; !n.empty() && s.normals == NormalSpace::Camera) {
+        const auto worldToCamera = files[sequenceFramePath(r.pattern[NormW], number, "")]->worldToCamera();
+        if (worldToCamera) {
+            const auto view = n.view<glm::vec4>();
+            for (uint32_t y = 0; y < height; ++y)
+                for (uint32_t x = 0; x < width; ++x)
+                    view.at(x, y) =
+                        glm::vec4(sequence::cameraNormalToWorld(glm::vec3(view.at(x, y)), *worldToCamera), 0.f);
+        } else {
+            frame.cameraNormalsKept = true;
+        }
+    }
+    return frame;
+}
+
+void ImageSequencePass::compile(const CompileInfo& info) {
+    mWidth = info.frameWidth;
+    mHeight = info.frameHeight;
+    // An observed output counts as consumed: one that is only observed shows what the sequence lacks as zeros.
+    for (int o = 0; o < kOutputCount; ++o) {
+        const char* name = kOutputs[size_t(o)].name;
+        mConsumed[size_t(o)] = info.isOutputConsumed(name) && !info.isObserved(name);
+    }
+    mPending.reset();  // a read of another size or of other channels
+}
+
+ImageSequencePass::Frame ImageSequencePass::take(int64_t number, const Settings& s,
+                                                 const std::array<bool, kOutputCount>& wanted) {
+    if (!mResolved || !(mResolvedFor == s)) {
+        mPending.reset();
+        mResolved = std::make_unique<Resolved>(resolve(s, number));
+        mResolvedFor = s;
+        mLogged = false;
+    }
+    if (mPending) {
+        std::unique_ptr<Pending> p = std::move(mPending);
+        if (p->number == number && p->wanted == wanted && p->width == mWidth && p->height == mHeight)
+            return p->frame.get();  // rethrows what the read threw
+        if (p->frame.valid()) p->frame.wait();
+    }
+    return readFrame(s, *mResolved, number, mWidth, mHeight, wanted);
+}
+
+void ImageSequencePass::prefetch(int64_t number, const Settings& s, const std::array<bool, kOutputCount>& wanted) {
+    auto p = std::make_unique<Pending>();
+    p->number = number;
+    p->wanted = wanted;
+    p->width = mWidth;
+    p->height = mHeight;
+    p->frame = std::async(std::launch::async, [s, r = *mResolved, number, w = mWidth, h = mHeight, wanted] {
+        return readFrame(s, r, number, w, h, wanted);
+    });
+    mPending = std::move(p);
+}
+
+void ImageSequencePass::execute(PassContext& ctx) {
+    const Settings s = settings();
+    std::array<bool, kOutputCount> wanted{};
+    for (int o = 0; o < kOutputCount; ++o) wanted[size_t(o)] = ctx.output(kOutputs[size_t(o)].name) != nullptr;
+    const int64_t number = int64_t(s.firstFrame) + int64_t(ctx.frameIndex());
+    Frame frame = take(number, s, wanted);
+    if (!mLogged) {
+        mLogged = true;
+        std::vector<std::string> lines;
+        for (int o = 0; o < kOutputCount; ++o)
+            if (wanted[size_t(o)])
+                lines.push_back(fmt::format("{} <- {}", kOutputs[size_t(o)].name,
+                                            mResolved->described[size_t(o)].empty() ? std::string("not in the sequence")
+                                                                                    : mResolved->described[size_t(o)]));
+        spdlog::info("{}: graph frame {} is file number {}: {}", ctx.passName(), ctx.frameIndex(), number,
+                     join(lines, "; "));
+        if (frame.cameraNormalsKept)
+            spdlog::warn(
+                "{}: the normals are in camera space and the files have no worldToCamera attribute: they stay in "
+                "camera space (the spatial filter does not mind; the temporal normal test compares frames whose "
+                "cameras turned)",
+                ctx.passName());
+    }
+    for (int o = 0; o < kOutputCount; ++o) {
+        const size_t i = size_t(o);
+        Texture* out = ctx.output(kOutputs[i].name);
+        if (!out) continue;
+        if (!frame.channels[i].empty()) {
+            out->copyFrom(frame.channels[i]);
+            continue;
+        }
+        const OutputInfo& info = kOutputs[i];
+        // Observed only (a dump, the viewer): what the sequence lacks shows as the fill, or as zeros.
+        const Missing missing = mConsumed[i] ? info.missing : Missing::Fill;
+        const float fill = mConsumed[i] || info.missing != Missing::Error ? info.fill : 0.f;
+        if (missing == Missing::Error)
+            throwBadInput(where(info.name),
+                          fmt::format("the graph reads {}.{}, and the sequence has none: {}", ctx.passName(), info.name,
+                                      mResolved->described[i].empty() ? "no source given" : mResolved->described[i]),
+                          fmt::format("a source of {}", info.name),
+                          fmt::format("set it, e.g. --set {}.{}=LAYER or PATTERN:LAYER", ctx.passName(), info.name));
+        if (!mConsumed[i] && info.missing == Missing::Error && !mFillWarned[i]) {
+            mFillWarned[i] = true;
+            spdlog::warn("{}: the sequence has no {}; the dump shows zeros", ctx.passName(), info.name);
+        }
+        if (missing == Missing::FillWithWarning && !mFillWarned[i]) {
+            mFillWarned[i] = true;
+            spdlog::warn(
+                "{}: the sequence has no {}: it is {} everywhere, so the denoiser filters without "
+                "demodulation (textures get blurred)",
+                ctx.passName(), info.name, info.fill);
+        }
+        const uint32_t components = formatInfo(out->format()).channels;
+        for (uint32_t y = 0; y < out->height(); ++y) {
+            std::byte* row = out->row(y);
+            for (uint32_t k = 0; k < out->width() * components; ++k) {
+                if (isFloatFormat(out->format())) {
+                    const float v = fill;
+                    std::memcpy(row + 4 * k, &v, 4);
+                } else {
+                    const uint32_t v = uint32_t(fill);
+                    std::memcpy(row + 4 * k, &v, 4);
+                }
+            }
+        }
+    }
+    ctx.stats().set("nonFinite", double(frame.nonFinite));
+    if (frame.nonFinite > 0 && !mNonFiniteWarned) {
+        mNonFiniteWarned = true;
+        spdlog::warn(
+            "{}: frame {} holds {} non-finite samples; they read as 0 (a depth as a miss); the stat "
+            "nonFinite counts them every frame",
+            ctx.passName(), number, frame.nonFinite);
+    }
+    prefetch(number + 1, s, wanted);
+}
+
+}  // namespace loom
+
+LOOM_DEFINE_PLUGIN(registrar) {
+    registrar.registerPass<loom::ImageSequencePass>(
+        "ImageSequence",
+        "Frames read from EXR files (another renderer's, or Loom's own dumps) into the standard channels, so the "
+        "denoising graphs take them unchanged: a numbered file pattern and a layer per channel, presets for "
+        "Blender's multilayer EXRs and Loom's dumps, conversions of normals, depth and motion; the next frame is "
+        "read on a background thread. Stats: nonFinite (samples that were NaN or infinite and read as 0).");
+}

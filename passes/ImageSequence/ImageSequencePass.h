@@ -1,0 +1,128 @@
+#pragma once
+// ImageSequence: frames another renderer (or an earlier Loom run) wrote as EXR files, read into the standard
+// channels, so the graphs that denoise Loom's own frames take them unchanged (wiring by name).
+//
+// Each output channel has a source: a numbered file pattern and the layer of that file to read
+// (loom/ExrFile.h). Presets give every source at once: `blender` reads one multilayer EXR per frame with the pass
+// names of a Cycles View Layer, `loom` reads the files `loom render --dump` writes ("<Pass>.<field>.NNNN.exr").
+// A channel parameter overrides its preset's source; "none" leaves the channel out.
+//
+// Conversions: normals from camera space (with the file's worldToCamera attribute), a one-channel depth into
+// linearZ (miss -1, the derivative computed from neighbours), motion in pixels of either sign and y direction
+// into uvPrev - uvCur, float object indices into mesh ids. Non-finite samples become 0 (depth: a miss) and are
+// counted (stat nonFinite). A consumed channel the sequence lacks is filled: albedo 1 (filtering without
+// demodulation, with a warning), specAlbedo, emission, gradient and meshId 0; colour, normals, depth, motion
+// and reference are required (an error names the channel and what the file holds).
+//
+// Frame k of the graph reads file number firstFrame + k. The files of the next frame are read on a background
+// thread while the graph runs the current one, so the pass itself copies memory.
+#include <array>
+#include <future>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "SequenceConversions.h"
+#include "loom/RenderPass.h"
+
+namespace loom {
+
+class ImageSequencePass final : public RenderPass {
+public:
+    enum class Preset : int { None, Loom, Blender };
+    // Parameter values; Auto takes the preset's.
+    enum class NormalSpace : int { Auto, World, Camera };
+    enum class DepthKind : int { Auto, LinearZ, Depth };
+    enum class Motion : int { Auto, Uv, PixelsFromPrevious, PixelsToPrevious };
+    enum class MotionY : int { Auto, Down, Up };
+
+    /// The output channels, in the order of kOutputs (ImageSequencePass.cpp).
+    enum Output : int {
+        Color,
+        Albedo,
+        SpecAlbedo,
+        Emission,
+        NormW,
+        LinearZ,
+        Mvec,
+        MeshId,
+        Gradient,
+        Reference,
+        kOutputCount
+    };
+
+    /// Everything a frame's reading depends on: the parameters with the preset applied (no Auto left).
+    struct Settings {
+        std::array<std::string, kOutputCount> source;  ///< "[PATTERN:]LAYER" alternatives split by '|', or ""
+        std::array<bool, kOutputCount> optional{};     ///< the preset's source: absent is allowed
+        std::string path;
+        std::string layerPrefix;
+        int firstFrame = 0;
+        NormalSpace normals = NormalSpace::World;
+        DepthKind depth = DepthKind::LinearZ;
+        float missDepth = 1e9f;
+        sequence::MotionKind motion = sequence::MotionKind::Uv;
+        bool motionYUp = false;
+        bool operator==(const Settings&) const = default;
+    };
+    struct Resolved;
+
+    /// One frame as read and converted: a texture per channel the sequence has (empty otherwise).
+    struct Frame {
+        int64_t number = -1;
+        std::array<Texture, kOutputCount> channels;
+        uint64_t nonFinite = 0;
+        bool cameraNormalsKept = false;  ///< camera-space normals without a worldToCamera to turn them
+    };
+
+    ImageSequencePass();
+    ~ImageSequencePass() override;
+    void reflect(Reflection& r, const CompileInfo& info) const override;
+    void declareParams(ParamList& p) override;
+    void compile(const CompileInfo& info) override;
+    void execute(PassContext& ctx) override;
+
+    /// The sources of every channel: the preset's, then the channel parameters.
+    Settings settings() const;
+    /// Which alternative of each source the files hold, from frame `number`'s files. Throws loom::Error
+    /// (BadInput) for a file or layer that a channel parameter names and that is not there.
+    static Resolved resolve(const Settings& s, int64_t number);
+    /// Reads frame `number` (no pass state: this runs on the reader thread). Throws loom::Error (BadInput) for a
+    /// missing file or channel, a wrong size or sample type, a damaged file.
+    static Frame readFrame(const Settings& s, const Resolved& r, int64_t number, uint32_t width, uint32_t height,
+                           const std::array<bool, kOutputCount>& wanted);
+
+private:
+    Frame take(int64_t number, const Settings& s, const std::array<bool, kOutputCount>& wanted);
+    void prefetch(int64_t number, const Settings& s, const std::array<bool, kOutputCount>& wanted);
+
+    Preset mPreset = Preset::Blender;
+    std::string mPath;
+    std::string mLayer = "ViewLayer";
+    std::array<std::string, kOutputCount> mSource;
+    int mFirstFrame = 0;
+    NormalSpace mNormals = NormalSpace::Auto;
+    DepthKind mDepth = DepthKind::Auto;
+    float mMissDepth = 1e9f;
+    Motion mMotion = Motion::Auto;
+    MotionY mMotionY = MotionY::Auto;
+
+    uint32_t mWidth = 0, mHeight = 0;
+    std::unique_ptr<Resolved> mResolved;
+    Settings mResolvedFor;
+    std::array<bool, kOutputCount> mConsumed{};  ///< read by a pass and not observed
+    std::array<bool, kOutputCount> mFillWarned{};
+    bool mLogged = false;
+    bool mNonFiniteWarned = false;
+
+    struct Pending {
+        int64_t number = -1;
+        Settings settings;
+        std::array<bool, kOutputCount> wanted{};
+        uint32_t width = 0, height = 0;
+        std::future<Frame> frame;
+    };
+    std::unique_ptr<Pending> mPending;
+};
+
+}  // namespace loom
