@@ -47,8 +47,9 @@ const std::array<OutputInfo, ImageSequencePass::kOutputCount> kOutputs = {{
     {channel::kEmission, Format::RGBA32F, "emitted radiance at the primary hit; 0 where the sequence has none",
      Missing::Fill, 0.f, 1.f, "PathTracer"},
     {channel::kNormW, Format::RGBA32F,
-     "shading normal, world space (camera space turned with the file's worldToCamera; Blender: Normal)", Missing::Error,
-     0.f, 0.f, "GBuffer"},
+     "shading normal, world space (camera space turned with the file's worldToCamera; Blender: Normal, in "
+     "Blender's Z-up world), rescaled to unit length where it is off by more than 1e-3; w = 0",
+     Missing::Error, 0.f, 0.f, "GBuffer"},
     {channel::kLinearZ, Format::RG32F,
      "view depth (-1 on a miss) and its derivative; from a one-channel depth (Blender: Depth) the derivative is "
      "computed from neighbours",
@@ -141,9 +142,9 @@ void ImageSequencePass::declareParams(ParamList& p) {
         .doc("depth: values at or above this (Blender writes 1e10 on the background) are misses");
     p.addEnum("motion", &mMotion, Motion::Auto, {"auto", "uv", "pixelsFromPrevious", "pixelsToPrevious"})
         .doc(
-            "motion vectors: uv = Loom's uvPrev - uvCur; pixelsFromPrevious = current minus previous position in "
-            "pixels (Blender's Vector); pixelsToPrevious = previous minus current in pixels; auto = uv for loom, "
-            "pixelsFromPrevious for blender");
+            "motion vectors (the first two components): uv = Loom's uvPrev - uvCur; pixelsToPrevious = previous "
+            "minus current position in pixels (Blender's Vector); pixelsFromPrevious = current minus previous in "
+            "pixels; auto = uv for loom, pixelsToPrevious for blender");
     p.addEnum("motionY", &mMotionY, MotionY::Auto, {"auto", "down", "up"})
         .doc("direction of the motion's +y in the image: down (Loom) or up (Blender); auto = the preset's");
 }
@@ -158,7 +159,7 @@ ImageSequencePass::Settings ImageSequencePass::settings() const {
     s.normals = mNormals == NormalSpace::Camera ? NormalSpace::Camera : NormalSpace::World;
     s.depth = mDepth != DepthKind::Auto ? mDepth : blender ? DepthKind::Depth : DepthKind::LinearZ;
     s.motion = mMotion != Motion::Auto ? sequence::MotionKind(int(mMotion) - 1)
-               : blender               ? MotionKind::PixelsFromPrevious
+               : blender               ? MotionKind::PixelsToPrevious
                                        : MotionKind::Uv;
     s.motionYUp = mMotionY != MotionY::Auto ? mMotionY == MotionY::Up : blender;
     for (int o = 0; o < kOutputCount; ++o) {
@@ -208,7 +209,8 @@ ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_
                 pattern = s.path;
                 layer = s.layerPrefix.empty() || alternative.empty() ? alternative : s.layerPrefix + "." + alternative;
             }
-            const std::string file = sequenceFramePath(pattern, number, where(kOutputs[i].name));
+            const std::string file =
+                sequenceFramePath(pattern, number, where(mentionsExr(alternative) ? kOutputs[i].name : "path"));
             std::error_code ec;
             if (s.optional[i] && !fs::exists(file, ec)) {
                 tried.push_back("no file " + file);
@@ -230,9 +232,15 @@ ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_
             }
             out.pattern[i] = pattern;
             out.channels[i] = std::move(channels);
+            // "ViewLayer.Vector (X Y Z W)": the channels by their component names.
             std::vector<std::string> shown;
-            for (const std::string& c : out.channels[i]) shown.push_back(c.empty() ? "-" : c);
-            out.described[i] = fmt::format("{} [{}]", pattern, join(shown));
+            for (const std::string& c : out.channels[i]) {
+                const size_t dot = c.rfind('.');
+                shown.push_back(c.empty() ? "-" : dot == std::string::npos ? c : c.substr(dot + 1));
+            }
+            const size_t dot = out.channels[i].front().rfind('.');
+            const std::string prefix = dot == std::string::npos ? "" : out.channels[i].front().substr(0, dot) + " ";
+            out.described[i] = fmt::format("{}({})", prefix, join(shown, " "));
             break;
         }
         if (out.pattern[i].empty() && !tried.empty())
@@ -341,6 +349,13 @@ ImageSequencePass::Frame ImageSequencePass::readFrame(const Settings& s, const R
             for (uint32_t x = 0; x < width; ++x)
                 view.at(x, y) = sequence::motionToUv(view.at(x, y), s.motion, s.motionYUp, width, height);
     }
+    if (Texture& n = frame.channels[NormW]; !n.empty()) {
+        // Blended at silhouettes (Blender's are down to 0.68 long there): back to unit length. Unit ones, as
+        // Loom's own, keep their bits.
+        const auto view = n.view<glm::vec4>();
+        for (uint32_t y = 0; y < height; ++y)
+            for (uint32_t x = 0; x < width; ++x) view.at(x, y) = sequence::unitNormal(view.at(x, y));
+    }
     if (Texture& n = frame.channels[NormW]; !n.empty() && s.normals == NormalSpace::Camera) {
         const auto worldToCamera = files[sequenceFramePath(r.pattern[NormW], number, "")]->worldToCamera();
         if (worldToCamera) {
@@ -401,17 +416,34 @@ void ImageSequencePass::execute(PassContext& ctx) {
     std::array<bool, kOutputCount> wanted{};
     for (int o = 0; o < kOutputCount; ++o) wanted[size_t(o)] = ctx.output(kOutputs[size_t(o)].name) != nullptr;
     const int64_t number = int64_t(s.firstFrame) + int64_t(ctx.frameIndex());
-    Frame frame = take(number, s, wanted);
+    Frame frame;
+    try {
+        frame = take(number, s, wanted);
+    } catch (const Error& e) {
+        // The reader names parameters by the pass type; the graph knows this pass by its name.
+        Error::Info info = e.info();
+        const std::string type = "ImageSequence";
+        if (info.where.compare(0, type.size(), type) == 0) info.where = ctx.passName() + info.where.substr(type.size());
+        throw Error(info);
+    }
     if (!mLogged) {
         mLogged = true;
-        std::vector<std::string> lines;
-        for (int o = 0; o < kOutputCount; ++o)
-            if (wanted[size_t(o)])
-                lines.push_back(fmt::format("{} <- {}", kOutputs[size_t(o)].name,
-                                            mResolved->described[size_t(o)].empty() ? std::string("not in the sequence")
-                                                                                    : mResolved->described[size_t(o)]));
-        spdlog::info("{}: graph frame {} is file number {}: {}", ctx.passName(), ctx.frameIndex(), number,
-                     join(lines, "; "));
+        // One line per file pattern, then what the sequence lacks.
+        std::map<std::string, std::vector<std::string>> byPattern;
+        std::vector<std::string> absent;
+        for (int o = 0; o < kOutputCount; ++o) {
+            const size_t i = size_t(o);
+            if (!wanted[i]) continue;
+            if (mResolved->pattern[i].empty())
+                absent.push_back(kOutputs[i].name);
+            else
+                byPattern[mResolved->pattern[i]].push_back(
+                    fmt::format("{} <- {}", kOutputs[i].name, mResolved->described[i]));
+        }
+        for (const auto& [pattern, lines] : byPattern)
+            spdlog::info("{}: {} (graph frame {} is file {}): {}", ctx.passName(), pattern, ctx.frameIndex(), number,
+                         join(lines, ", "));
+        if (!absent.empty()) spdlog::info("{}: not in the sequence: {}", ctx.passName(), join(absent));
         if (frame.cameraNormalsKept)
             spdlog::warn(
                 "{}: the normals are in camera space and the files have no worldToCamera attribute: they stay in "

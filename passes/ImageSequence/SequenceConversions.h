@@ -15,8 +15,8 @@ namespace loom::sequence {
 /// How a sequence stores motion.
 enum class MotionKind : int {
     Uv,                  ///< Loom's mvec: uvPrev - uvCur, in [0, 1] units of the frame
-    PixelsFromPrevious,  ///< current minus previous position, in pixels (Blender's Vector, x and y)
-    PixelsToPrevious,    ///< previous minus current position, in pixels
+    PixelsFromPrevious,  ///< current minus previous position, in pixels
+    PixelsToPrevious,    ///< previous minus current position, in pixels (Blender's Vector, x and y, y up)
 };
 
 /// Loom's mvec from a stored motion (x, y). `yUp`: the stored y grows upwards in the image (rows of the file run
@@ -75,6 +75,15 @@ inline glm::vec3 cameraNormalToWorld(glm::vec3 n, const std::array<float, 16>& w
                  n.z * worldToCamera[size_t(j * 4 + 2)];
     const float len = glm::length(out);
     return len > 0.f ? out / len : glm::vec3(0.f);
+}
+
+/// A normal of unit length with w = 0: one blended over a pixel (shorter at silhouettes) is rescaled; one within
+/// 1e-3 of unit length keeps its bits (Loom's own); zero stays zero (no surface).
+inline glm::vec4 unitNormal(glm::vec4 n) {
+    const glm::vec3 v(n);
+    const float len = glm::length(v);
+    if (!(len > 0.f) || std::fabs(len - 1.f) <= 1e-3f) return {v, 0.f};
+    return {v / len, 0.f};
 }
 
 /// A mesh id from a float object index (Blender's IndexOB): the nearest integer; negative or non-finite values

@@ -272,8 +272,10 @@ void ExrFile::read(const std::vector<ExrChannelRead>& reads) {
                                                        r.yStride, 1, 1, r.fill));
     }
     try {
-        mImpl->file->setFrameBuffer(frameBuffer);
-        mImpl->file->readPixels(dw.min.y, dw.max.y);
+        if (!first.empty()) {  // OpenEXR refuses to read into no slice at all
+            mImpl->file->setFrameBuffer(frameBuffer);
+            mImpl->file->readPixels(dw.min.y, dw.max.y);
+        }
     } catch (const std::exception& e) {
         fail(mImpl->path, std::string("cannot read the EXR image's pixels: ") + e.what(), "a complete OpenEXR file",
              "the file is truncated or damaged; write it again");
