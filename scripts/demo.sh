@@ -7,13 +7,15 @@
 #   denoised/   the default graph (PathTracerSVGF: G-buffer, 1 spp path tracing, SVGF, tone mapping) on the
 #               animated Cornell box, 30 frames (PNG), and side_by_side.png of the last frame:
 #               1 spp input | SVGF | reference (256 spp), all through the same tone map
+#   sequence/   another renderer's frames: Blender's 8-frame Cornell sequence (data/sequences) through
+#               DenoiseSequence (PNG), and side_by_side.png of its last frame: 4 spp | SVGF | 4096 spp
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/build.sh release
 loom=build/release/bin/loom
 out=out/demo
 rm -rf "$out"
-mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced" "$out/denoised"
+mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced" "$out/denoised" "$out/sequence"
 
 "$loom" check graphs/TestPattern.json --size 512x512 --dot "$out/pattern/graph.dot" > "$out/pattern/plan.txt"
 "$loom" render --graph graphs/TestPattern.json --size 512x512 --frames 8 --out "$out/pattern" \
@@ -43,9 +45,20 @@ frame=$(printf '%04d' "$last")
 "$loom" image montage "$out/denoised/noisy/ToneMap.dst.$frame.png" "$out/denoised/ToneMap.dst.$frame.png" \
   "$out/denoised/reference/ToneMap.dst.$frame.png" -o "$out/denoised/side_by_side.png"
 
+# Frames Blender rendered (multilayer EXR), denoised by the same SVGF; the noisy input and Blender's reference go
+# through the same graph with SVGF off, so all three share the tone map.
+seq=(--graph graphs/DenoiseSequence.json --size 64x48 --frames 8 --quiet)
+"$loom" render "${seq[@]}" --out "$out/sequence"
+"$loom" render "${seq[@]}" --set SVGF.enabled=false --out "$out/sequence/noisy"
+"$loom" render "${seq[@]}" --set SVGF.enabled=false --out "$out/sequence/reference" \
+  --set 'Frames.color=data/sequences/blender_cornell/reference_####.exr:ViewLayer.Combined'
+"$loom" image montage "$out/sequence/noisy/ToneMap.dst.0007.png" "$out/sequence/ToneMap.dst.0007.png" \
+  "$out/sequence/reference/ToneMap.dst.0007.png" -o "$out/sequence/side_by_side.png"
+
 echo
 echo "Images written to $out/:"
-for d in pattern gbuffer pathtraced denoised; do
+for d in pattern gbuffer pathtraced denoised sequence; do
   echo "  $d/: $(ls "$out/$d" | wc -l) files, e.g. $(ls "$out/$d" | grep -E '\.(png|exr)$' | tail -1)"
 done
 echo "  side by side (1 spp | SVGF | 256 spp reference): $out/denoised/side_by_side.png"
+echo "  Blender's frames (4 spp | SVGF | 4096 spp reference): $out/sequence/side_by_side.png"
