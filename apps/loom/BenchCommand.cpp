@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,8 +16,10 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 
 #include "BenchLag.h"
@@ -26,6 +29,7 @@
 #include "SceneSetup.h"
 #include "loom/Channels.h"
 #include "loom/Error.h"
+#include "loom/ExrFile.h"
 #include "loom/Files.h"
 #include "loom/ImageIO.h"
 #include "loom/Log.h"
@@ -87,7 +91,18 @@ struct BenchOptions {
     std::string python = "/usr/bin/python3";
     unsigned threads = 0;
     std::vector<uint32_t> eventFrames;  ///< --event-frame: lighting steps the lag figures measure the recovery after
+    std::string referenceSequence;      ///< --reference-sequence: given reference frames, "PATTERN[:LAYER]"
+    int64_t referenceFirstFrame = 0;    ///< --reference-first-frame: the file number of bench frame 0
+    std::set<std::string> given;        ///< which of the options below were given (not only their values)
 };
+
+/// Options whose presence (not only their value) matters: those that apply to a scene, to the brute-force curve or
+/// to rendered references, refused where they would do nothing.
+const char* const kSceneOptions[] = {"--camera-path",           "--camera-speed", "--jitter",
+                                     "--jitter-count",          "--env",          "--texture-budget",
+                                     "--allow-missing-textures"};
+const char* const kBruteForceOptions[] = {"--brute-force-graph", "--brute-force-max"};
+const char* const kRenderedReferenceOptions[] = {"--reference-graph", "--reference-spp", "--reference-bounces"};
 
 /// One parameter sweep: Pass.param over values.
 struct Sweep {
@@ -221,7 +236,7 @@ PreparedGraph prepareGraph(const GraphDesc& desc, const std::string& file, Plugi
                            const std::string& measure, uint32_t width, uint32_t height) {
     PreparedGraph p;
     p.graph = std::make_unique<RenderGraph>(desc, registry);
-    p.graph->setScene(scene);
+    if (scene) p.graph->setScene(scene);
     applySet(*p.graph, set, onlyKnownPasses);
     if (configure) configure(*p.graph);
     CompileOptions copts;
@@ -302,11 +317,108 @@ struct ReferenceSpec {
     std::string label = "reference";
 };
 
-/// A reference sequence's images by frame index: a shared (static) reference is one image that serves every frame,
-/// held once rather than copied per frame (memory that grew with --frames).
+/// Reference frames given as files (--reference-sequence): bench frame i is the file numbered i + first of the
+/// pattern, its layer read as RGBA32F. Every frame is checked once up front (it exists, has the bench's size and
+/// the layer, reads whole and holds only finite values), so bad input fails before anything runs; afterwards a
+/// frame is read again when a run needs it, and the last kSlots stay in memory (a frame and its predecessor are what
+/// a run reads together), so memory does not grow with --frames.
+class SequenceReferences {
+public:
+    SequenceReferences(const std::string& spec, int64_t first, uint64_t frames, uint32_t width, uint32_t height)
+        : mSource(parseSequenceSource(spec)), mFirst(first), mWidth(width), mHeight(height) {
+        for (uint64_t i = 0; i < frames; ++i) {
+            throwIfStopRequested();
+            (void)load(i);
+        }
+        spdlog::info("reference: {} frame(s) of {}{}", frames, mSource.pattern,
+                     mSource.layer.empty() ? std::string() : " (layer " + mSource.layer + ")");
+    }
+
+    /// The image of bench frame i; valid until kSlots other frames have been asked for.
+    const Texture& frame(uint64_t i) {
+        Slot* slot = nullptr;
+        for (Slot& s : mSlots)
+            if (s.frame == i) slot = &s;
+        if (!slot) {
+            slot = &*std::min_element(mSlots.begin(), mSlots.end(),
+                                      [](const Slot& a, const Slot& b) { return a.used < b.used; });
+            slot->frame = i;
+            slot->image = load(i);
+        }
+        slot->used = ++mClock;
+        return slot->image;
+    }
+
+private:
+    static constexpr size_t kSlots = 3;
+    struct Slot {
+        uint64_t frame = std::numeric_limits<uint64_t>::max();
+        uint64_t used = 0;
+        Texture image;
+    };
+
+    /// Reads bench frame i's file; loom::Error (BadInput) naming the file and the frame for every problem.
+    Texture load(uint64_t i) const {
+        const int64_t number = int64_t(i) + mFirst;
+        const std::string file = sequenceFramePath(mSource.pattern, number, "--reference-sequence");
+        const std::string frameText = fmt::format("the reference of frame {} (file number {})", i, number);
+        std::error_code ec;
+        if (!fs::is_regular_file(file, ec))
+            throwBadInput("--reference-sequence",
+                          frameText + (fs::exists(file, ec) ? " is not a regular file" : " does not exist"),
+                          "one EXR file per bench frame, frame i numbered i + --reference-first-frame",
+                          mFirst == 0 ? "if the sequence is numbered from 1 (Blender), add --reference-first-frame 1"
+                                      : "check the pattern, --reference-first-frame and --frames",
+                          file);
+        Texture image;
+        try {
+            ExrFile exr(file);
+            if (exr.width() != mWidth || exr.height() != mHeight)
+                throwBadInput("--reference-sequence",
+                              fmt::format("{} is {}x{}, the bench renders at {}x{}", frameText, exr.width(),
+                                          exr.height(), mWidth, mHeight),
+                              "references of the bench's size",
+                              fmt::format("use --size {}x{}", exr.width(), exr.height()), file);
+            image = exr.readRgba(mSource.layer);
+        } catch (const Error& e) {
+            // ExrFile names the file and the layer; the frame is said here.
+            if (e.info().where == "--reference-sequence") throw;
+            Error::Info info = e.info();
+            info.where = "--reference-sequence";
+            info.what = frameText + ": " + info.what;
+            if (info.file.empty()) info.file = file;
+            throw Error(info);
+        }
+        const auto v = image.view<glm::vec4>();
+        uint64_t nonFinite = 0;
+        for (uint32_t y = 0; y < image.height(); ++y)
+            for (uint32_t x = 0; x < image.width(); ++x) {
+                const glm::vec4 c = v.at(x, y);
+                nonFinite += !(std::isfinite(c.x) && std::isfinite(c.y) && std::isfinite(c.z) && std::isfinite(c.w));
+            }
+        if (nonFinite)
+            throwBadInput("--reference-sequence",
+                          fmt::format("{} has {} pixel(s) with a NaN or infinite value", frameText, nonFinite),
+                          "a reference of finite values only", "", file);
+        return image;
+    }
+
+    SequenceSource mSource;
+    int64_t mFirst;
+    uint32_t mWidth, mHeight;
+    std::array<Slot, kSlots> mSlots;
+    uint64_t mClock = 0;
+};
+
+/// A reference sequence's images by frame index: rendered ones (a shared, static, reference is one image that
+/// serves every frame, held once rather than copied per frame: memory that grew with --frames), or given ones.
 struct ReferenceFrames {
-    const std::vector<Texture>& images;
-    const Texture& operator[](size_t i) const { return images.size() == 1 ? images.front() : images[i]; }
+    const std::vector<Texture>* images = nullptr;
+    SequenceReferences* sequence = nullptr;
+    const Texture& operator[](size_t i) const {
+        if (sequence) return sequence->frame(i);
+        return images->size() == 1 ? images->front() : (*images)[i];
+    }
 };
 
 /// A reference sequence: one image per frame (empty before the spec's first frame), the per-frame noise estimate
@@ -571,10 +683,11 @@ FrameMetrics measure(const Texture& test, const Texture& ref, const Texture* tes
     return m;
 }
 
-/// Runs a prepared graph over frames [first, frames) from the start of its history, measuring every frame. With
+/// Runs a prepared graph over frames [first, frames) from the start of its history, measuring every frame; `scene`
+/// is nullptr for a graph that reads its inputs from files (the frames follow the clock alone). With
 /// `flicker`, the frames from `warmup` on also go into a FlickerAccumulator whose value lands there. With `ages`, every
 /// frame's G-buffer goes to the age tracker of the disocclusion lag.
-std::vector<FrameResult> runSequence(PreparedGraph& p, Scene& scene, ReferenceFrames refs, uint64_t first,
+std::vector<FrameResult> runSequence(PreparedGraph& p, Scene* scene, ReferenceFrames refs, uint64_t first,
                                      uint64_t frames, double fps, uint32_t width, uint32_t height,
                                      const std::string& label, uint64_t warmup = 0,
                                      std::optional<double>* flicker = nullptr,
@@ -760,10 +873,16 @@ BruteForceCurve bruteForceCurve(const BenchOptions& o, PreparedGraph& brute, con
     return out;
 }
 
+/// Whether --brute-force-spp asks for no curve ("none" or "0").
+bool noBruteForce(const BenchOptions& o) {
+    return o.bruteForceSpp == "none" || o.bruteForceSpp == "0";
+}
+
 /// --brute-force-spp, or powers of two up to --brute-force-max (the curve stops earlier once it reaches every
-/// graph's error).
+/// graph's error); none for "none" or "0", and none without a scene (nothing to path-trace).
 std::vector<uint32_t> bruteForceSpps(const BenchOptions& o) {
     std::vector<uint32_t> spps;
+    if (noBruteForce(o) || o.scene.scene.empty()) return spps;
     if (!o.bruteForceSpp.empty()) {
         for (const auto& v : splitValues(o.bruteForceSpp)) {
             uint32_t n = 0;
@@ -776,7 +895,7 @@ std::vector<uint32_t> bruteForceSpps(const BenchOptions& o) {
             }
             if (used != v.size() || n == 0)
                 throwBadInput("--brute-force-spp", "'" + v + "' is not a sample count",
-                              "integers in 1..4096, e.g. 1,2,4,8");
+                              "integers in 1..4096, e.g. 1,2,4,8, or none (no curve)");
             spps.push_back(n);
         }
     } else {
@@ -862,8 +981,42 @@ void runBench(BenchOptions o) {
     const StopOnSignal stopOnSignal;
     uint32_t width, height;
     parseSize(o.size, "--size", width, height);
-    if (o.scene.scene.empty())
-        throwBadInput("--scene", "no scene given", "a glTF scene, e.g. data/scenes/cornell_box.gltf");
+    const bool givenReference = !o.referenceSequence.empty();
+    const bool hasScene = !o.scene.scene.empty();
+    if (!hasScene && !givenReference)
+        throwBadInput("--scene", "no scene given",
+                      "a glTF scene, e.g. data/scenes/cornell_box.gltf, or --reference-sequence with graphs that read "
+                      "their inputs from files");
+    // Options that would do nothing are refused rather than ignored.
+    if (!hasScene) {
+        for (const char* name : kSceneOptions)
+            if (o.given.count(name))
+                throwBadInput(name, std::string(name) + " applies to a scene, and there is none (no --scene)", "",
+                              std::string("add --scene, or leave out ") + name);
+        for (const char* name : kBruteForceOptions)
+            if (o.given.count(name))
+                throwBadInput(name,
+                              std::string(name) +
+                                  " applies to the brute-force curve, which path-traces the scene: "
+                                  "without --scene there is none",
+                              "", std::string("add --scene, or leave out ") + name);
+        if (!o.bruteForceSpp.empty() && !noBruteForce(o))
+            throwBadInput("--brute-force-spp",
+                          "the brute-force curve path-traces the scene: without --scene there is none",
+                          "no --brute-force-spp, or none", "add --scene, or leave out --brute-force-spp");
+    }
+    if (givenReference) {
+        for (const char* name : kRenderedReferenceOptions)
+            if (o.given.count(name))
+                throwBadInput(name,
+                              std::string(name) + " applies to a rendered reference; --reference-sequence gives them",
+                              "", std::string("leave out ") + name + " or --reference-sequence");
+    } else if (o.given.count("--reference-first-frame")) {
+        throwBadInput("--reference-first-frame",
+                      "--reference-first-frame numbers the files of --reference-sequence, "
+                      "which is not given",
+                      "", "add --reference-sequence, or leave out --reference-first-frame");
+    }
     if (o.frames == 0) throwBadInput("--frames", "frame count is 0", "more frames than --warmup");
     if (o.frames > 100000) throwBadInput("--frames", "too many frames", "at most 100000");
     if (o.frames <= o.warmup)
@@ -879,8 +1032,11 @@ void runBench(BenchOptions o) {
         throwBadInput("--reference-spp", "reference sample count out of range", "1 to 1048576");
     if (o.graphs.empty()) throwBadInput("--graph", "no graph to benchmark", "one or more --graph options");
     std::error_code ec;
-    if (!fs::is_regular_file(o.scene.scene, ec))
+    if (hasScene && !fs::is_regular_file(o.scene.scene, ec))
         throwBadInput("--scene", "scene '" + o.scene.scene + "' does not exist", "a glTF 2.0 file (.gltf or .glb)");
+    if (givenReference)  // a pattern without a frame field fails here, before anything is loaded
+        (void)sequenceFramePath(parseSequenceSource(o.referenceSequence).pattern, o.referenceFirstFrame,
+                                "--reference-sequence");
     o.referenceGraph = o.referenceGraph.empty() ? sourcePath("graphs/Reference.json")
                                                 : resolveGraph(o.referenceGraph, "--reference-graph");
     o.bruteForceGraph = o.bruteForceGraph.empty() ? sourcePath("graphs/PathTracer.json")
@@ -908,10 +1064,12 @@ void runBench(BenchOptions o) {
 
     bench::BenchInfo info;
     info.loomVersion = loom::version();
-    info.scene = fs::path(o.scene.scene).filename().string();
-    info.cameraPath = o.scene.cameraPath;
-    info.cameraSpeed = o.scene.cameraSpeed;
-    info.jitter = o.scene.jitter;
+    if (hasScene) {
+        info.scene = fs::path(o.scene.scene).filename().string();
+        info.cameraPath = o.scene.cameraPath;
+        info.cameraSpeed = o.scene.cameraSpeed;
+        info.jitter = o.scene.jitter;
+    }
     info.width = width;
     info.height = height;
     info.frames = o.frames;
@@ -919,16 +1077,23 @@ void runBench(BenchOptions o) {
     info.fps = o.fps;
     info.eventFrames = o.eventFrames;
     // The scene's own lighting steps (animated lights): the first frame at or after each.
-    for (const float t : scene->lightStepTimes()) {
-        const double frame = std::ceil(double(t) * o.fps);
-        if (frame >= 1.0 && frame < double(o.frames)) info.eventFrames.push_back(uint32_t(frame));
+    if (scene) {
+        for (const float t : scene->lightStepTimes()) {
+            const double frame = std::ceil(double(t) * o.fps);
+            if (frame >= 1.0 && frame < double(o.frames)) info.eventFrames.push_back(uint32_t(frame));
+        }
     }
     std::sort(info.eventFrames.begin(), info.eventFrames.end());
     info.eventFrames.erase(std::unique(info.eventFrames.begin(), info.eventFrames.end()), info.eventFrames.end());
     info.set = o.set;
-    info.referenceGraph = fs::path(o.referenceGraph).filename().string();
-    info.referenceSpp = o.referenceSpp;
-    info.bruteForceGraph = fs::path(o.bruteForceGraph).filename().string();
+    if (givenReference) {
+        info.referenceSequence = o.referenceSequence;
+        info.referenceFirstFrame = o.referenceFirstFrame;
+    } else {
+        info.referenceGraph = fs::path(o.referenceGraph).filename().string();
+        info.referenceSpp = o.referenceSpp;
+    }
+    if (!spps.empty()) info.bruteForceGraph = fs::path(o.bruteForceGraph).filename().string();
     info.threads = o.threads;
     info.loadBefore = loadAverage();
 
@@ -951,27 +1116,37 @@ void runBench(BenchOptions o) {
                                  std::make_pair(roleInt(*p.graph, tracer, ParamRole::MaxBounces),
                                                 roleInt(*p.graph, tracer, ParamRole::RussianRouletteStart)));
     }
-    const GraphDesc bruteDesc = loadGraph(o.bruteForceGraph);
-    PreparedGraph brute =
-        prepareGraph(bruteDesc, o.bruteForceGraph, registry, scene, o.set, true, {}, "", width, height);
-    const std::string bruteTracer = tracerOf(bruteDesc, registry);
-    if (bruteTracer.empty())
-        throwBadInput("--brute-force-graph", "the brute-force graph has no path tracer",
-                      "a graph like graphs/PathTracer.json", "", o.bruteForceGraph);
+    // The brute-force curve path-traces the scene: none without one, or with --brute-force-spp none.
+    std::optional<PreparedGraph> brute;
+    std::string bruteTracer;
+    if (!spps.empty()) {
+        const GraphDesc bruteDesc = loadGraph(o.bruteForceGraph);
+        brute = prepareGraph(bruteDesc, o.bruteForceGraph, registry, scene, o.set, true, {}, "", width, height);
+        bruteTracer = tracerOf(bruteDesc, registry);
+        if (bruteTracer.empty())
+            throwBadInput("--brute-force-graph", "the brute-force graph has no path tracer",
+                          "a graph like graphs/PathTracer.json", "", o.bruteForceGraph);
+    } else {
+        spdlog::info("no brute-force curve ({}): no equal-error speedups",
+                     hasScene ? "--brute-force-spp none" : "no scene to path-trace");
+    }
 
     // The graphs' common path length: the reference (and the brute force) trace it, so the errors measure noise and
-    // the denoisers' bias, not the truncation of paths. Graphs of different lengths need --reference-bounces.
+    // the denoisers' bias, not the truncation of paths. Graphs of different lengths need --reference-bounces (given
+    // references: the brute force alone, and only when they agree).
     std::optional<std::pair<int, int>> graphBounces;
     bool graphsDiffer = false;
     for (const auto& [label, b] : bounces) {
         if (!graphBounces) graphBounces = b;
         graphsDiffer = graphsDiffer || b.first != graphBounces->first;
     }
-    if (!graphBounces)
-        graphBounces = std::make_pair(roleInt(*brute.graph, bruteTracer, ParamRole::MaxBounces),
-                                      roleInt(*brute.graph, bruteTracer, ParamRole::RussianRouletteStart));
+    if (!graphBounces && brute)
+        graphBounces = std::make_pair(roleInt(*brute->graph, bruteTracer, ParamRole::MaxBounces),
+                                      roleInt(*brute->graph, bruteTracer, ParamRole::RussianRouletteStart));
     ReferenceSpec spec;
-    if (o.referenceBounces == "graph") {
+    if (givenReference) {
+        // Nothing to match: the references are what they are.
+    } else if (o.referenceBounces == "graph") {
         if (graphsDiffer) {
             std::vector<std::string> list;
             for (const auto& [label, b] : bounces) list.push_back(fmt::format("{} {}", label, b.first));
@@ -980,8 +1155,12 @@ void runBench(BenchOptions o) {
                           "graphs of one path length, so one matched reference serves them all",
                           "bench them in separate runs, or give --reference-bounces N");
         }
-        spec.maxBounces = graphBounces->first;
-        info.referenceBouncesFrom = "the graphs";
+        if (graphBounces) {
+            spec.maxBounces = graphBounces->first;
+            info.referenceBouncesFrom = "the graphs";
+        } else {
+            info.referenceBouncesFrom = "the reference graph";  // no graph and no brute force traces paths
+        }
     } else if (o.referenceBounces != "reference") {
         int n = -1;
         size_t used = 0;
@@ -999,28 +1178,39 @@ void runBench(BenchOptions o) {
     } else {
         info.referenceBouncesFrom = "the reference graph";
     }
-    // Brute force traces what the graphs trace (when they agree), so it shares their bias.
-    if (!graphsDiffer) {
-        brute.graph->setParam(bruteTracer, roleParam(*brute.graph, bruteTracer, ParamRole::MaxBounces),
-                              graphBounces->first, "--reference-bounces");
-        brute.graph->setParam(bruteTracer, roleParam(*brute.graph, bruteTracer, ParamRole::RussianRouletteStart),
-                              graphBounces->second, "--reference-bounces");
-    }
     // Jittered sequences are anti-aliased by TAA: their reference (and brute force) average over the pixel's area.
     spec.pixelFilter = o.scene.jitter == "none" ? kPixelFilterCenter : kPixelFilterBox;
-    brute.graph->setParam(bruteTracer, roleParam(*brute.graph, bruteTracer, ParamRole::PixelFilter), spec.pixelFilter,
-                          "--jitter");
-    info.pixelFilter = spec.pixelFilter;
+    if (brute) {
+        // Brute force traces what the graphs trace (when they agree), so it shares their bias.
+        if (!graphsDiffer) {
+            brute->graph->setParam(bruteTracer, roleParam(*brute->graph, bruteTracer, ParamRole::MaxBounces),
+                                   graphBounces->first, "--reference-bounces");
+            brute->graph->setParam(bruteTracer, roleParam(*brute->graph, bruteTracer, ParamRole::RussianRouletteStart),
+                                   graphBounces->second, "--reference-bounces");
+        }
+        brute->graph->setParam(bruteTracer, roleParam(*brute->graph, bruteTracer, ParamRole::PixelFilter),
+                               spec.pixelFilter, "--jitter");
+    }
+    if (!givenReference || brute) info.pixelFilter = spec.pixelFilter;
 
-    const ReferenceSet refSet = references(o, registry, scene, width, height, spec);
-    const ReferenceFrames refs{refSet.frames};
-    info.referenceShared = refSet.shared;
-    info.referenceCache = refSet.cache;
-    info.referenceFramesCached = refSet.cached;
-    info.referenceFramesRendered = refSet.rendered;
-    info.referenceBounces = refSet.maxBounces;
-    info.referenceRrStart = refSet.rrStartBounce;
-    info.referenceNoise = refSet.meanNoise(o.warmup);
+    // The references: given frames (read when a run needs them), or rendered and cached ones.
+    std::optional<SequenceReferences> sequence;
+    ReferenceSet refSet;
+    ReferenceFrames refs;
+    if (givenReference) {
+        sequence.emplace(o.referenceSequence, o.referenceFirstFrame, o.frames, width, height);
+        refs.sequence = &*sequence;
+    } else {
+        refSet = references(o, registry, scene, width, height, spec);
+        refs.images = &refSet.frames;
+        info.referenceShared = refSet.shared;
+        info.referenceCache = refSet.cache;
+        info.referenceFramesCached = refSet.cached;
+        info.referenceFramesRendered = refSet.rendered;
+        info.referenceBounces = refSet.maxBounces;
+        info.referenceRrStart = refSet.rrStartBounce;
+        info.referenceNoise = refSet.meanNoise(o.warmup);
+    }
 
     // The bias of the matched path length: the matched reference against the reference graph's own length, over
     // the measured frames only.
@@ -1045,7 +1235,7 @@ void runBench(BenchOptions o) {
             b.framesCached = fullSet.cached;
             b.framesRendered = fullSet.rendered;
             b.fullNoise = fullSet.meanNoise(o.warmup);
-            const ReferenceFrames full{fullSet.frames};
+            const ReferenceFrames full{&fullSet.frames};
             for (uint64_t i = o.warmup; i < o.frames; ++i) {
                 b.relMSE += relMSE(refs[i], full[i]).value;
                 b.trimmedRelMSE += trimmedRelMSE(refs[i], full[i]).value;
@@ -1073,7 +1263,7 @@ void runBench(BenchOptions o) {
         std::optional<double> flicker;
         bench::DisocclusionTracker ages;
         bench::DisocclusionTracker* tracked = p.ageFields.empty() ? nullptr : &ages;
-        r.frames = runSequence(p, *scene, refs, 0, o.frames, o.fps, width, height,
+        r.frames = runSequence(p, scene.get(), refs, 0, o.frames, o.fps, width, height,
                                r.graph + (r.params.empty() ? "" : " " + r.params), o.warmup,
                                info.referenceShared ? &flicker : nullptr, tracked);
         r.lag = runLag(r.frames, info.eventFrames, tracked);
@@ -1082,26 +1272,31 @@ void runBench(BenchOptions o) {
         results.push_back(std::move(r));
     }
 
-    // The brute-force cache key: the sequence, the brute-force graph as configured (its parameters after --set,
-    // the matched path length and the pixel filter) and the reference frames' timing.
-    std::string bruteKey =
-        sequenceKeyText(o, width, height) + fmt::format("brute-force graph {} bytes {:016x}\nfps {}\n",
-                                                        fs::path(o.bruteForceGraph).filename().string(),
-                                                        fnv1a(readBytes(o.bruteForceGraph)), o.fps);
-    for (const PassDesc& p : brute.graph->desc().passes) {
-        const ParamList& declared = brute.graph->pass(p.name)->params();
-        nlohmann::json params = declared.toJson(false);
-        if (const ParamDecl* d = declared.findRole(ParamRole::SampleCount)) params.erase(d->name);  // the curve sets it
-        bruteKey += "pass " + p.name + " " + params.dump() + "\n";
+    BruteForceCurve bf;
+    if (brute) {
+        // The brute-force cache key: the sequence, the brute-force graph as configured (its parameters after --set,
+        // the matched path length and the pixel filter) and the reference frames' timing.
+        std::string bruteKey =
+            sequenceKeyText(o, width, height) + fmt::format("brute-force graph {} bytes {:016x}\nfps {}\n",
+                                                            fs::path(o.bruteForceGraph).filename().string(),
+                                                            fnv1a(readBytes(o.bruteForceGraph)), o.fps);
+        for (const PassDesc& p : brute->graph->desc().passes) {
+            const ParamList& declared = brute->graph->pass(p.name)->params();
+            nlohmann::json params = declared.toJson(false);
+            if (const ParamDecl* d = declared.findRole(ParamRole::SampleCount))
+                params.erase(d->name);  // the curve sets it
+            bruteKey += "pass " + p.name + " " + params.dump() + "\n";
+        }
+        bf = bruteForceCurve(o, *brute, bruteTracer, bruteKey, *scene, refs, spps, o.bruteForceSpp.empty(), results,
+                             width, height, info.referenceShared);
     }
-    BruteForceCurve bf = bruteForceCurve(o, brute, bruteTracer, bruteKey, *scene, refs, spps, o.bruteForceSpp.empty(),
-                                         results, width, height, info.referenceShared);
     for (Run& r : bf.runs) r.lag = runLag(r.frames, info.eventFrames, nullptr);
     const std::vector<Run>& curve = bf.runs;
     info.bruteForceCache = bf.cache;
     info.bruteForceFramesCached = bf.cached;
     info.bruteForceFramesRendered = bf.rendered;
-    info.bruteForceTimingFrames = uint32_t(std::min<uint64_t>(kBruteForceTimingFrames, o.frames - o.warmup));
+    info.bruteForceTimingFrames =
+        brute ? uint32_t(std::min<uint64_t>(kBruteForceTimingFrames, o.frames - o.warmup)) : 0u;
     for (Run& r : results) {
         r.speedupRelMSE = bench::equalErrorSpeedup(curve, r.summary.relMSE, r.summary.totalMs, &bench::Summary::relMSE);
         r.speedupFlip = bench::equalErrorSpeedup(curve, r.summary.flip, r.summary.totalMs, &bench::Summary::flip);
@@ -1114,7 +1309,7 @@ void runBench(BenchOptions o) {
             "some speedups are bounds",
             curve.back().spp);
 
-    // The reference's noise against the smallest error measured against it.
+    // The reference's noise against the smallest error measured against it (unknown for given references).
     if (info.referenceNoise) {
         double smallest = std::numeric_limits<double>::infinity();
         for (const Run& r : results) smallest = std::min(smallest, r.summary.relMSE);
@@ -1143,7 +1338,9 @@ void runBench(BenchOptions o) {
 void addBenchCommand(CLI::App& app) {
     auto o = std::make_shared<BenchOptions>();
     CLI::App* cmd = app.add_subcommand(
-        "bench", "Run time against error: graphs and brute-force path tracing against a cached per-frame reference");
+        "bench",
+        "Run time against error: graphs and brute-force path tracing against a cached per-frame reference, or "
+        "against given reference frames (--reference-sequence; then --scene is optional)");
     addSceneOptions(cmd, o->scene);
     cmd->add_option("--frames,-n", o->frames, "frames in the sequence (warm-up included)")->capture_default_str();
     cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT")->capture_default_str();
@@ -1154,6 +1351,15 @@ void addBenchCommand(CLI::App& app) {
     cmd->add_option("--set", o->set, "set a parameter on every graph: Pass.param=value (repeatable)");
     cmd->add_option("--measure", o->measure,
                     "field to measure in every graph (default: the input of ToneMap.src, else the first output)");
+    cmd->add_option("--reference-sequence", o->referenceSequence,
+                    "reference frames given as files instead of rendered ones: 'PATTERN[:LAYER]', a numbered EXR "
+                    "sequence (#### or %04d) and, for a multilayer EXR, the layer to read (e.g. "
+                    "'frames/reference_####.exr:ViewLayer.Combined'); bench frame i (warm-up included) is file "
+                    "number i + --reference-first-frame. Nothing is rendered or cached for the reference and its noise "
+                    "is unknown; --scene becomes optional (without it: no brute-force curve)");
+    cmd->add_option("--reference-first-frame", o->referenceFirstFrame,
+                    "file number of bench frame 0 in --reference-sequence (Blender numbers frames from 1)")
+        ->capture_default_str();
     cmd->add_option("--reference-graph", o->referenceGraph, "reference graph (default graphs/Reference.json)");
     cmd->add_option("--reference-spp", o->referenceSpp, "samples per pixel of each frame's reference")
         ->capture_default_str();
@@ -1164,8 +1370,8 @@ void addBenchCommand(CLI::App& app) {
                     "own) or N")
         ->capture_default_str();
     cmd->add_option("--brute-force-spp", o->bruteForceSpp,
-                    "brute-force sample counts, e.g. 1,2,4,8 (default: powers of two up to --brute-force-max, "
-                    "stopping once every graph's error is reached)");
+                    "brute-force sample counts, e.g. 1,2,4,8, or none (no curve, no speedups) (default: powers of two "
+                    "up to --brute-force-max, stopping once every graph's error is reached; none without --scene)");
     cmd->add_option("--brute-force-max", o->bruteForceMax, "largest default brute-force sample count (at most 4096)")
         ->capture_default_str();
     cmd->add_option("--warmup", o->warmup, "frames excluded from the summaries")->capture_default_str();
@@ -1180,7 +1386,16 @@ void addBenchCommand(CLI::App& app) {
     cmd->add_option("--plot-script", o->plotScript, "plot script (default tools/plot_bench.py of the source tree)");
     cmd->add_option("--python", o->python, "Python interpreter for --plot")->capture_default_str();
     cmd->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
-    cmd->callback([o] { runBench(*o); });
+    cmd->callback([o, cmd] {
+        auto note = [&](const char* name) {
+            if (cmd->count(name)) o->given.insert(name);
+        };
+        for (const char* name : kSceneOptions) note(name);
+        for (const char* name : kBruteForceOptions) note(name);
+        for (const char* name : kRenderedReferenceOptions) note(name);
+        note("--reference-first-frame");
+        runBench(*o);
+    });
 }
 
 }  // namespace loom::cli

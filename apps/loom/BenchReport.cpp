@@ -140,16 +140,27 @@ std::string csvText(const std::vector<Run>& variants, const std::vector<Run>& cu
 
 std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& variants, const std::vector<Run>& curve) {
     std::ostringstream s;
-    s << fmt::format("### {} — {}x{}, camera {}", info.scene, info.width, info.height, info.cameraPath);
-    if (info.cameraPath != "static") s << fmt::format(" (speed {})", info.cameraSpeed);
+    const bool given = !info.referenceSequence.empty();
+    if (info.scene.empty()) {
+        s << fmt::format("### no scene — {}x{}", info.width, info.height);
+    } else {
+        s << fmt::format("### {} — {}x{}, camera {}", info.scene, info.width, info.height, info.cameraPath);
+        if (info.cameraPath != "static") s << fmt::format(" (speed {})", info.cameraSpeed);
+    }
     s << "\n\n";
+    const std::string reference =
+        given
+            ? fmt::format(
+                  "the given frames `{}` (frame i is file number i{}), not rendered", info.referenceSequence,
+                  info.referenceFirstFrame == 0 ? std::string() : fmt::format(" + {}", info.referenceFirstFrame))
+            : fmt::format("{} at {} spp per frame{} ({} frame(s) from the cache, {} rendered)", info.referenceGraph,
+                          info.referenceSpp, info.referenceShared ? ", one image for every frame (nothing moves)" : "",
+                          info.referenceFramesCached, info.referenceFramesRendered);
     s << fmt::format(
         "Loom {}; {} frames at {} fps, the first {} are warm-up; times are medians and metrics means over the {} "
-        "frames after it. Reference: {} at {} spp per frame{} ({} frame(s) from the cache, {} rendered). "
-        "Jitter: {}. Threads: {}. Load average (1, 5, 15 min) before: {}; after: {}.",
-        info.loomVersion, info.frames, info.fps, info.warmup, info.frames - info.warmup, info.referenceGraph,
-        info.referenceSpp, info.referenceShared ? ", one image for every frame (nothing moves)" : "",
-        info.referenceFramesCached, info.referenceFramesRendered, info.jitter,
+        "frames after it. Reference: {}.{} Threads: {}. Load average (1, 5, 15 min) before: {}; after: {}.",
+        info.loomVersion, info.frames, info.fps, info.warmup, info.frames - info.warmup, reference,
+        info.scene.empty() ? std::string() : " Jitter: " + info.jitter + ".",
         info.threads ? std::to_string(info.threads) : std::string("all cores"), info.loadBefore, info.loadAfter);
     if (!info.set.empty()) {
         std::vector<std::string> quoted;
@@ -157,13 +168,23 @@ std::string summaryMarkdown(const BenchInfo& info, const std::vector<Run>& varia
         s << " Set on every graph: " << fmt::format("{}", fmt::join(quoted, ", ")) << ".";
     }
     s << "\n\n";
-    s << fmt::format(
-        "Reference path length: maxBounces {} (from {}), Russian roulette from bounce {}; pixel filter {}. "
-        "Reference noise (RelMSE): {}. Brute force: times are medians of {} frame(s) rendered at each spp; its "
-        "images are built as means of cached batches ({} frame(s) from the cache, {} rendered).",
-        info.referenceBounces, info.referenceBouncesFrom, info.referenceRrStart, info.pixelFilter,
-        info.referenceNoise ? fmt::format("{:.3g}", *info.referenceNoise) : std::string("n/a (one batch)"),
-        info.bruteForceTimingFrames, info.bruteForceFramesCached, info.bruteForceFramesRendered);
+    if (given)
+        s << "Reference noise (RelMSE): unknown (given frames): there is no noise floor, and whatever noise the "
+             "references hold adds to every error below.";
+    else
+        s << fmt::format(
+            "Reference path length: maxBounces {} (from {}), Russian roulette from bounce {}; pixel filter {}. "
+            "Reference noise (RelMSE): {}.",
+            info.referenceBounces, info.referenceBouncesFrom, info.referenceRrStart, info.pixelFilter,
+            info.referenceNoise ? fmt::format("{:.3g}", *info.referenceNoise) : std::string("n/a (one batch)"));
+    if (!curve.empty())
+        s << fmt::format(
+            " Brute force: times are medians of {} frame(s) rendered at each spp; its images are built as means of "
+            "cached batches ({} frame(s) from the cache, {} rendered).",
+            info.bruteForceTimingFrames, info.bruteForceFramesCached, info.bruteForceFramesRendered);
+    else
+        s << (info.scene.empty() ? " Brute force: none (no scene to path-trace), so no speedups."
+                                 : " Brute force: none (--brute-force-spp none), so no speedups.");
     s << "\n\n";
     if (!info.noiseWarning.empty()) s << "**Warning:** " << info.noiseWarning << "\n\n";
     s << "| graph | params | measured | ms/frame | per pass (ms) | RelMSE | trimmed RelMSE | SMAPE | PSNR (dB) | SSIM "
@@ -316,10 +337,12 @@ void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const
     nlohmann::json j;
     j["loom_bench"] = 1;
     j["loom_version"] = info.loomVersion;
-    j["scene"] = info.scene;
-    j["camera_path"] = info.cameraPath;
-    j["camera_speed"] = info.cameraSpeed;
-    j["jitter"] = info.jitter;
+    const bool given = !info.referenceSequence.empty();
+    const bool scene = !info.scene.empty();
+    j["scene"] = scene ? nlohmann::json(info.scene) : nlohmann::json();
+    j["camera_path"] = scene ? nlohmann::json(info.cameraPath) : nlohmann::json();
+    j["camera_speed"] = scene ? nlohmann::json(info.cameraSpeed) : nlohmann::json();
+    j["jitter"] = scene ? nlohmann::json(info.jitter) : nlohmann::json();
     j["width"] = info.width;
     j["height"] = info.height;
     j["frames"] = info.frames;
@@ -330,18 +353,29 @@ void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const
     j["threads"] = info.threads;
     j["load_before"] = info.loadBefore;
     j["load_after"] = info.loadAfter;
-    j["reference"] = {{"graph", info.referenceGraph},
-                      {"spp", info.referenceSpp},
-                      {"cache", info.referenceCache},
+    // "noise": how the reference's own noise is known: "estimated" (noise_relmse), "one batch" (a rendered
+    // reference of a single batch: no spread to estimate it from) or "unknown" (given frames).
+    const char* noise = given ? "unknown" : info.referenceNoise ? "estimated" : "one batch";
+    // Given references have none of a rendered one's settings: those are null.
+    auto rendered = [given](const nlohmann::json& v) { return given ? nlohmann::json() : v; };
+    j["reference"] = {{"source", given ? "sequence" : "rendered"},
+                      {"graph", rendered(info.referenceGraph)},
+                      {"spp", rendered(info.referenceSpp)},
+                      {"cache", rendered(info.referenceCache)},
                       {"frames_cached", info.referenceFramesCached},
                       {"frames_rendered", info.referenceFramesRendered},
                       {"shared", info.referenceShared},
-                      {"max_bounces", info.referenceBounces},
-                      {"rr_start_bounce", info.referenceRrStart},
-                      {"bounces_from", info.referenceBouncesFrom},
-                      {"pixel_filter", info.pixelFilter},
+                      {"max_bounces", rendered(info.referenceBounces)},
+                      {"rr_start_bounce", rendered(info.referenceRrStart)},
+                      {"bounces_from", rendered(info.referenceBouncesFrom)},
+                      {"pixel_filter", rendered(info.pixelFilter)},
+                      {"noise", noise},
                       {"noise_relmse", optionalJson(info.referenceNoise)},
                       {"noise_warning", info.noiseWarning}};
+    if (given) {
+        j["reference"]["sequence"] = info.referenceSequence;
+        j["reference"]["first_frame"] = info.referenceFirstFrame;
+    }
     if (info.bias) {
         const BiasRow& b = *info.bias;
         j["bias"] = {{"label", b.label()},
@@ -358,10 +392,11 @@ void writeResults(const std::filesystem::path& dir, const BenchInfo& info, const
         j["bias"] = nullptr;
     }
     j["brute_force_timing_frames"] = info.bruteForceTimingFrames;
-    j["brute_force_cache"] = {{"folder", info.bruteForceCache},
-                              {"frames_cached", info.bruteForceFramesCached},
-                              {"frames_rendered", info.bruteForceFramesRendered}};
-    j["brute_force_graph"] = info.bruteForceGraph;
+    j["brute_force_cache"] = {
+        {"folder", info.bruteForceCache.empty() ? nlohmann::json() : nlohmann::json(info.bruteForceCache)},
+        {"frames_cached", info.bruteForceFramesCached},
+        {"frames_rendered", info.bruteForceFramesRendered}};
+    j["brute_force_graph"] = info.bruteForceGraph.empty() ? nlohmann::json() : nlohmann::json(info.bruteForceGraph);
     j["equal_error_metrics"] = {"relmse", "trimmed_relmse", "flip"};
     j["variants"] = nlohmann::json::array();
     for (const Run& r : variants) j["variants"].push_back(runJson(r, true));

@@ -82,7 +82,7 @@ struct BiasRow {
 /// Everything about the run that is not a result: written at the top of every output.
 struct BenchInfo {
     std::string loomVersion;
-    std::string scene;
+    std::string scene;  ///< the scene file's name; empty without a scene (given references, graphs of files)
     std::string cameraPath;
     float cameraSpeed = 0;
     std::string jitter;
@@ -93,6 +93,10 @@ struct BenchInfo {
     /// after each, and the per-frame plot marks them.
     std::vector<uint32_t> eventFrames;
     std::vector<std::string> set;  ///< --set assignments applied to every graph
+    /// --reference-sequence as given: the references are these files, not rendered (empty: rendered). Their noise
+    /// is unknown; the rendered reference's fields below are then unset.
+    std::string referenceSequence;
+    int64_t referenceFirstFrame = 0;  ///< the file number of frame 0
     std::string referenceGraph;
     uint32_t referenceSpp = 0;
     std::string referenceCache;  ///< the cache entry folder
@@ -109,7 +113,7 @@ struct BenchInfo {
     uint32_t bruteForceTimingFrames = 0;
     std::string bruteForceCache;
     uint64_t bruteForceFramesCached = 0, bruteForceFramesRendered = 0;
-    std::string bruteForceGraph;
+    std::string bruteForceGraph;  ///< empty when there is no curve
     unsigned threads = 0;
     std::string loadBefore, loadAfter;  ///< /proc/loadavg at the start and the end
 };

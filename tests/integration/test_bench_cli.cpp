@@ -2,7 +2,11 @@
 // results (finite, the brute-force error falling with spp, a denoiser below 1 spp, the curve extended until it
 // reaches every graph), the matched-length reference and its bias row, the reference noise estimate, box-filtered
 // references for jittered sequences, the reference and brute-force caches (a second run hits them and gives
-// bit-identical metrics, also with another thread count), sweeps, and bad input (exit 2).
+// bit-identical metrics, also with another thread count), sweeps, and bad input (exit 2). Then given references
+// (--reference-sequence): a round trip through bench's own reference cache gives the same metrics bit for bit; a
+// graph that needs no scene, measured against the frames `loom render` wrote of it, has no error (and some against
+// other frames); every bad reference (missing frame, wrong size, no frame field, missing layer, truncated file, NaN
+// or infinite pixels) and every option that would do nothing is refused with exit code 2.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
@@ -10,6 +14,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <glm/vec4.hpp>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -18,6 +24,8 @@
 #include <vector>
 
 #include "TestUtil.h"
+#include "loom/ImageIO.h"
+#include "loom/Texture.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -26,6 +34,7 @@ namespace {
 
 const std::string kDynamic = loom::test::dataScene("cornell_dynamic.gltf");
 const std::string kBox = loom::test::dataScene("cornell_box.gltf");
+const std::string kTestPattern = std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/TestPattern.json";
 
 /// The tiny case: the moving-object scene (a reference per frame), 8 frames, 2 of them warm-up.
 std::string tinyArgs(const std::string& out) {
@@ -105,7 +114,12 @@ protected:
         }
         std::string command = "bench";
         for (const auto& [name, value] : args) command += " " + name + " " + value;
-        const auto r = run(command);
+        expectRefused(run(command), parts, command);
+    }
+
+    /// Expects exit code 2, an "error:" message containing every part, and no results.csv in "out".
+    void expectRefused(const loom::test::CliResult& r, const std::vector<std::string>& parts,
+                       const std::string& command = "") const {
         EXPECT_EQ(r.code, 2) << command << "\n" << r.output;
         EXPECT_NE(r.output.find("error:"), std::string::npos) << r.output;
         for (const auto& p : parts)
@@ -423,6 +437,196 @@ TEST_F(BenchCli, BadInputExitsWithCode2AndAMessage) {
     fs::create_directories(mDir / "out");
     fs::copy_file(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/PathTracerATrous.json", mDir / "out" / "results.json");
     expectBadInput({{"--graph", "out/results.json"}}, {"would overwrite its input"});
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Given references: --reference-sequence
+
+class BenchRefSeq : public BenchCli {
+protected:
+    std::string readText(const std::string& rel) const {
+        std::ifstream in(mDir / rel, std::ios::binary);
+        std::stringstream s;
+        s << in.rdbuf();
+        return s.str();
+    }
+
+    /// Renders `frames` frames of TestPattern at 64x64 into `dir`, dumping its linear image Mix.dst
+    /// (dir/Mix.dst.0000.exr, ...): the frames a scene-less bench of the same graph measures.
+    void renderPattern(const std::string& dir, int frames) const {
+        const auto r = run("render --graph " + loom::test::shellQuoted(kTestPattern) + " --size 64x64 --frames " +
+                           std::to_string(frames) + " --dump Mix.dst --out " + dir);
+        ASSERT_EQ(r.code, 0) << r.output;
+        ASSERT_TRUE(fs::exists(mDir / dir / "Mix.dst.0000.exr")) << r.output;
+    }
+
+    /// A scene-less bench of TestPattern (measuring Mix.dst) at `size`, `frames` frames of which 2 are warm-up,
+    /// into `out`, with extra options.
+    loom::test::CliResult benchPattern(const std::string& out, const std::string& extra, int frames = 6,
+                                       const std::string& size = "64x64") const {
+        return run("bench --graph " + loom::test::shellQuoted(kTestPattern) + " --measure Mix.dst --size " + size +
+                   " --frames " + std::to_string(frames) + " --warmup 2 --out " + out + " " + extra);
+    }
+};
+
+TEST_F(BenchRefSeq, CachedReferencesGivenBackAsASequenceGiveIdenticalMetrics) {
+    // A run that renders its references (one per frame: the sphere moves), then the same run reading them back
+    // from the cache as a sequence: every metric of every frame, of the graph and of the brute-force points, is the
+    // same bit for bit.
+    const std::string common = "bench --scene " + loom::test::shellQuoted(kDynamic) +
+                               " --size 64x64 --frames 5 --warmup 2 --brute-force-spp 1,2 --graph PathTracerATrous "
+                               "--cache cache ";
+    const auto first = run(common + "--reference-spp 16 --out rendered");
+    ASSERT_EQ(first.code, 0) << first.output;
+    const json rendered = readJson("rendered/results.json");
+    EXPECT_EQ(rendered["reference"]["source"], "rendered");
+    EXPECT_EQ(rendered["reference"]["frames_rendered"].get<int>(), 5);
+    const fs::path entry = rendered["reference"]["cache"].get<std::string>();
+    for (int i = 0; i < 5; ++i)
+        ASSERT_TRUE(fs::is_regular_file(mDir / entry / ("frame_00000" + std::to_string(i) + ".exr"))) << i;
+    size_t entries = 0;
+    for (const auto& e : fs::directory_iterator(mDir / "cache")) entries += e.is_directory();
+
+    const auto second = run(common + "--reference-sequence " +
+                            loom::test::shellQuoted((entry / "frame_######.exr").string()) + " --out given");
+    ASSERT_EQ(second.code, 0) << second.output;
+    const json given = readJson("given/results.json");
+    const auto a = frameMetrics(rendered), b = frameMetrics(given);
+    EXPECT_EQ(a.size(), 5u + 2u * 4u);
+    EXPECT_EQ(a, b);
+    // Nothing rendered or cached for the reference: its noise is unknown, and there is no bias row (no rendered
+    // reference to compare lengths with). The brute force is the same images, from the cache.
+    EXPECT_EQ(given["reference"]["source"], "sequence");
+    EXPECT_EQ(given["reference"]["sequence"], (entry / "frame_######.exr").string());
+    EXPECT_EQ(given["reference"]["first_frame"].get<int>(), 0);
+    EXPECT_EQ(given["reference"]["noise"], "unknown");
+    EXPECT_TRUE(given["reference"]["noise_relmse"].is_null());
+    EXPECT_TRUE(given["reference"]["cache"].is_null());
+    EXPECT_EQ(given["reference"]["frames_rendered"].get<int>(), 0);
+    EXPECT_TRUE(given["bias"].is_null());
+    EXPECT_EQ(given["brute_force_cache"]["frames_rendered"].get<int>(), 0);
+    size_t entriesAfter = 0;
+    for (const auto& e : fs::directory_iterator(mDir / "cache")) entriesAfter += e.is_directory();
+    EXPECT_EQ(entriesAfter, entries);
+    // The speedups are read from the same curve at the same errors.
+    EXPECT_EQ(given["variants"][0]["speedup_relmse"]["kind"], rendered["variants"][0]["speedup_relmse"]["kind"]);
+    const std::string summary = readText("given/summary.md");
+    EXPECT_NE(summary.find("frame_######.exr"), std::string::npos) << summary;
+    EXPECT_NE(summary.find("Reference noise (RelMSE): unknown"), std::string::npos) << summary;
+}
+
+TEST_F(BenchRefSeq, SceneLessGraphAgainstItsOwnFramesHasNoError) {
+    // TestPattern needs no scene: bench runs it on the clock alone, against the frames `loom render` wrote of it.
+    renderPattern("seq", 7);
+    const auto same = benchPattern("same", "--reference-sequence " + loom::test::shellQuoted("seq/Mix.dst.%04d.exr"));
+    ASSERT_EQ(same.code, 0) << same.output;
+    EXPECT_NE(same.output.find("no brute-force curve"), std::string::npos) << same.output;
+    const json r = readJson("same/results.json");
+    EXPECT_TRUE(r["scene"].is_null());
+    EXPECT_TRUE(r["brute_force"].empty());
+    ASSERT_EQ(r["variants"].size(), 1u);
+    const json& v = r["variants"][0];
+    EXPECT_EQ(v["measured"], "Mix.dst");
+    ASSERT_EQ(v["frames"].size(), 6u);
+    for (const json& f : v["frames"]) {
+        EXPECT_EQ(f["relmse"].get<double>(), 0.0) << f["frame"];
+        EXPECT_EQ(f["trimmed_relmse"].get<double>(), 0.0) << f["frame"];
+        EXPECT_EQ(f["smape"].get<double>(), 0.0) << f["frame"];
+        EXPECT_EQ(f["ssim"].get<double>(), 1.0) << f["frame"];
+        EXPECT_EQ(f["flip"].get<double>(), 0.0) << f["frame"];
+        if (f["temporal"].is_number()) {
+            EXPECT_EQ(f["temporal"].get<double>(), 0.0) << f["frame"];
+        }
+        EXPECT_EQ(f["non_finite"].get<int>(), 0);
+    }
+    // No curve, so no speedup; the lag figures of the per-frame error are still there.
+    EXPECT_EQ(v["speedup_relmse"]["kind"], "none");
+    EXPECT_TRUE(v["lag"].is_object());
+    EXPECT_NE(readText("same/summary.md").find("no scene"), std::string::npos);
+
+    // The frames one later (file i + 1 for frame i): the frame counter differs everywhere, so every frame has an
+    // error.
+    const auto shifted =
+        benchPattern("shifted", "--reference-sequence " + loom::test::shellQuoted("seq/Mix.dst.####.exr") +
+                                    " --reference-first-frame 1");
+    ASSERT_EQ(shifted.code, 0) << shifted.output;
+    const json s = readJson("shifted/results.json");
+    EXPECT_EQ(s["reference"]["first_frame"].get<int>(), 1);
+    for (const json& f : s["variants"][0]["frames"]) {
+        EXPECT_GT(f["relmse"].get<double>(), 0.0) << f["frame"];
+        EXPECT_LT(f["ssim"].get<double>(), 1.0) << f["frame"];
+    }
+    // --brute-force-spp none is accepted without a scene (it asks for what happens anyway).
+    EXPECT_EQ(benchPattern("none", "--reference-sequence " + loom::test::shellQuoted("seq/Mix.dst.%04d.exr") +
+                                       " --brute-force-spp none")
+                  .code,
+              0);
+}
+
+TEST_F(BenchRefSeq, BadReferencesAreRefusedWithExitCode2) {
+    renderPattern("seq", 6);
+    const std::string seq = "--reference-sequence " + loom::test::shellQuoted("seq/Mix.dst.%04d.exr");
+    // A frame past the end of the sequence, named with its file and frame.
+    expectRefused(benchPattern("out", seq, 8), {"Mix.dst.0006.exr", "frame 6", "does not exist"});
+    // Blender numbers from 1: the hint says so.
+    expectRefused(benchPattern("out", seq + " --reference-first-frame 3"),
+                  {"Mix.dst.0006.exr", "frame 3 (file number 6)"});
+    // Another size than --size: both sizes, and the --size that fits.
+    expectRefused(benchPattern("out", seq, 6, "32x32"), {"64x64", "32x32", "--size 64x64"});
+    // A pattern with no frame field.
+    expectRefused(benchPattern("out", "--reference-sequence seq/Mix.dst.0000.exr"),
+                  {"--reference-sequence", "no frame field"});
+    // A layer the files do not have.
+    expectRefused(benchPattern("out", "--reference-sequence " +
+                                          loom::test::shellQuoted("seq/Mix.dst.%04d.exr:ViewLayer.Combined")),
+                  {"ViewLayer.Combined", "frame 0"});
+    // A truncated file.
+    fs::create_directories(mDir / "cut");
+    for (int i = 0; i < 6; ++i) {
+        const std::string name = "Mix.dst.000" + std::to_string(i) + ".exr";
+        fs::copy_file(mDir / "seq" / name, mDir / "cut" / name);
+    }
+    fs::resize_file(mDir / "cut" / "Mix.dst.0003.exr", fs::file_size(mDir / "cut" / "Mix.dst.0003.exr") / 2);
+    expectRefused(benchPattern("out", "--reference-sequence " + loom::test::shellQuoted("cut/Mix.dst.%04d.exr")),
+                  {"Mix.dst.0003.exr", "frame 3"});
+    // NaN and infinite pixels: a reference must be finite.
+    fs::create_directories(mDir / "nan");
+    for (int i = 0; i < 6; ++i) {
+        const std::string name = "Mix.dst.000" + std::to_string(i) + ".exr";
+        loom::Texture t = loom::readImage(mDir / "seq" / name);
+        if (i == 4) {
+            auto v = t.view<glm::vec4>();
+            v.at(1, 2).x = std::numeric_limits<float>::quiet_NaN();
+            v.at(5, 6).z = std::numeric_limits<float>::infinity();
+            v.at(7, 7) = glm::vec4(-std::numeric_limits<float>::infinity());
+        }
+        loom::writeImage(mDir / "nan" / name, t);
+    }
+    expectRefused(benchPattern("out", "--reference-sequence " + loom::test::shellQuoted("nan/Mix.dst.%04d.exr")),
+                  {"Mix.dst.0004.exr", "frame 4", "3 pixel(s) with a NaN or infinite value"});
+}
+
+TEST_F(BenchRefSeq, OptionsThatWouldDoNothingAreRefused) {
+    renderPattern("seq", 6);
+    const std::string seq = "--reference-sequence " + loom::test::shellQuoted("seq/Mix.dst.%04d.exr");
+    // No scene and no references: nothing to measure against.
+    expectRefused(benchPattern("out", ""), {"no scene given", "--reference-sequence"});
+    // Without a scene: its options, and the brute-force curve (which path-traces it).
+    expectRefused(benchPattern("out", seq + " --jitter halton"), {"--jitter", "no --scene"});
+    expectRefused(benchPattern("out", seq + " --env 1,1,1"), {"--env", "no --scene"});
+    expectRefused(benchPattern("out", seq + " --brute-force-spp 1,2"), {"--brute-force-spp", "without --scene"});
+    expectRefused(benchPattern("out", seq + " --brute-force-max 8"), {"--brute-force-max", "without --scene"});
+    // Given references are not rendered.
+    expectRefused(benchPattern("out", seq + " --reference-spp 64"), {"--reference-spp", "--reference-sequence"});
+    expectRefused(benchPattern("out", seq + " --reference-bounces 3"), {"--reference-bounces", "--reference-sequence"});
+    // A graph that needs a scene, run without one: a clear error, not a crash.
+    expectRefused(run("bench --graph PathTracerATrous --size 64x64 --frames 6 --warmup 2 --out out " + seq),
+                  {"needs a scene"});
+    // Numbering without a sequence.
+    expectRefused(run("bench --scene " + loom::test::shellQuoted(kDynamic) +
+                      " --graph PathTracerATrous --size 64x64 --frames 4 --warmup 1 --reference-first-frame 1 --out "
+                      "out"),
+                  {"--reference-first-frame", "--reference-sequence"});
 }
 
 }  // namespace
