@@ -5,6 +5,7 @@
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 #include <ImfStandardAttributes.h>
+#include <ImfThreading.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 #include <cstring>
 #include <map>
 #include <set>
+#include <thread>
 
 #include "loom/Error.h"
 
@@ -31,6 +33,8 @@ void limitImageSize() {
     static const bool limited = [] {
         Imf::Header::setMaxImageSize(kMaxReadSide, kMaxReadSide);
         Imf::Header::setMaxTileSize(kMaxReadSide, kMaxReadSide);
+        // Blocks of scanlines decompress in parallel (zlib is most of a read); the pixels are the same.
+        Imf::setGlobalThreadCount(int(std::max(1u, std::thread::hardware_concurrency())));
         return true;
     }();
     (void)limited;
