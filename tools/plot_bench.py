@@ -74,9 +74,13 @@ def main():
 
     with open(args.results) as f:
         data = json.load(f)
-    title = args.title or "{} {}x{}, camera {}, {} frames ({} warm-up), reference {} spp".format(
-        data["scene"], data["width"], data["height"], data["camera_path"], data["frames"], data["warmup"],
-        data["reference"]["spp"])
+    reference = data["reference"]
+    # Given reference frames (--reference-sequence) have no sample count, and a scene-less run no camera.
+    ref_text = ("reference {} spp".format(reference["spp"]) if reference.get("spp") is not None
+                else "reference {}".format(reference.get("sequence") or "given"))
+    shot = ("{} {}x{}, camera {}".format(data["scene"], data["width"], data["height"], data["camera_path"])
+            if data.get("scene") else "{}x{}".format(data["width"], data["height"]))
+    title = args.title or "{}, {} frames ({} warm-up), {}".format(shot, data["frames"], data["warmup"], ref_text)
 
     metrics = [("relmse", "RelMSE"), ("flip", "FLIP")]
     fig, axes = plt.subplots(1, len(metrics), figsize=(12, 6))

@@ -2,7 +2,8 @@
 // buffer and the images embedded), the EXR reader (every OpenEXR compression, scanline and tiled, float, half, uint
 // and luminance channels), the Radiance .hdr reader and the PNG/JPEG decoders (alone and inside a scene).
 //
-// The seeds are built here from the shipped scenes (data/scenes/*.gltf) and from images written here. Each
+// The seeds are built here from the shipped scenes (data/scenes/*.gltf), a Blender multilayer EXR
+// (data/sequences) and from images written here. Each
 // iteration takes a seed, applies one to four mutations (bit flips, bytes set to 0/0x7F/0x80/0xFF, truncation,
 // inserted, deleted or repeated bytes, 32-bit counts set to 0/-1/huge, and finite-but-extreme or non-finite floats
 // written into the float data of a buffer or an uncompressed EXR), writes the bytes to a file and reads it. The
@@ -49,6 +50,7 @@
 #include <vector>
 
 #include "loom/Error.h"
+#include "loom/ExrFile.h"
 #include "loom/ImageIO.h"
 #include "loom/Scene.h"
 
@@ -417,7 +419,17 @@ std::string readAndCheck(const fs::path& path, const std::string& ext, bool& rej
         if (ext == ".exr" || ext == ".hdr") {
             loom::Scene scene;
             scene.loadEnvironmentMap(path);
-            if (ext == ".exr") loom::readImage(path);  // the montage's reading: uint and 8-bit channels too
+            if (ext == ".exr") {
+                loom::readImage(path);  // the montage's reading: uint and 8-bit channels too
+                // ImageSequence's and bench's reading: every layer of a multilayer file.
+                loom::ExrFile file(path);
+                for (const std::string& layer : file.layers()) {
+                    bool uint = false;
+                    for (const std::string& c : file.layerChannels(layer))
+                        uint = uint || (!c.empty() && file.findChannel(c)->type == loom::ExrSampleType::Uint);
+                    if (!uint) file.readRgba(layer);
+                }
+            }
             return checkEnvironment(scene);
         }
         loom::readImage(path);
@@ -485,6 +497,12 @@ int main(int argc, char** argv) {
         Json doc = Json::parse(text);
         if (doc.contains("images") && !doc["images"].empty()) uriScenes.emplace_back(stem, std::move(doc));
     }
+    // A multilayer EXR as Blender writes it (ViewLayer.Combined.R, ViewLayer.Depth.Z, ...).
+    seeds.push_back(Seed{"blender_multilayer.exr",
+                         ".exr",
+                         readAll(source / "data" / "sequences" / "blender_cornell" / "noisy_0001.exr"),
+                         {},
+                         {}});
     std::sort(seeds.begin(), seeds.end(), [](const Seed& a, const Seed& b) { return a.name < b.name; });
     std::sort(uriScenes.begin(), uriScenes.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     const Imf::Compression compressions[] = {Imf::NO_COMPRESSION,  Imf::RLE_COMPRESSION,  Imf::ZIPS_COMPRESSION,
