@@ -23,6 +23,8 @@
 #include <vector>
 
 #include "TestUtil.h"
+#include "loom/Bvh.h"
+#include "loom/BvhTraversal.h"
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
 #include "loom/RayScene.h"
@@ -224,8 +226,8 @@ Texture renderField(RenderGraph& graph, Scene& scene, uint64_t frameIndex, const
 /// A graph of the passes given (name, type, params) marking `outputs`, compiled at kW x kH for `scene`.
 std::unique_ptr<RenderGraph> makeGraph(const json& passes, const std::vector<std::string>& outputs,
                                        const std::shared_ptr<Scene>& scene) {
-    return test::compiledGraph({{"loom_graph", 1}, {"name", "alpha"}, {"passes", passes}, {"outputs", outputs}},
-                               scene, kW, kH);
+    return test::compiledGraph({{"loom_graph", 1}, {"name", "alpha"}, {"passes", passes}, {"outputs", outputs}}, scene,
+                               kW, kH);
 }
 
 /// PathTracer's colour for one frame; with `viaVBuffer` its primary hits come from GBufferRT's vbuffer.
@@ -305,6 +307,52 @@ TEST(AlphaMode, OnlyAlphaTestedGeometryIsFiltered) {
         EXPECT_TRUE(seeThroughScene(dirs, name, &look)->rayScene().hasAlphaTestedGeometry()) << name;
     const QuadLook blend = blendLook();
     EXPECT_TRUE(seeThroughScene(dirs, "blend", &blend)->rayScene().hasAlphaTestedGeometry());
+}
+
+// The BVH the CUDA device traverses (BvhTraversal.h) gives Embree's answers on alpha-tested and single-sided
+// geometry: closest hits with and without the alpha test and back-face culling, and any hits, for rays from both
+// sides of the test quad. The rules change some answers in each case, so the comparison means something.
+TEST(AlphaMode, BvhAgreesWithEmbreeUnderEveryRule) {
+    TempDirs dirs;
+    std::vector<std::pair<std::string, QuadLook>> looks = maskLooks(true);
+    for (auto& [name, look] : maskLooks(false)) looks.emplace_back(name + "_above", look);
+    looks.emplace_back("blend", blendLook());
+    QuadLook away;
+    away.facingAway = true;
+    looks.emplace_back("single_sided", away);
+    for (const auto& [name, look] : looks) {
+        auto scene = seeThroughScene(dirs, name, &look);
+        const Bvh bvh(*scene);
+        const BvhView view = bvh.view(scene->view());
+        const RayScene& rays = scene->rayScene();
+        const uint32_t rules[3] = {0u, kRayAlphaTest, kRayAlphaTest | kRayCullBackFaces};
+        uint32_t hits[3] = {0, 0, 0}, disagree = 0;
+        const uint32_t count = 20000;
+        for (uint32_t i = 0; i < count; ++i) {
+            auto r = [&](uint32_t k) { return test::hash01(7, i, k); };
+            // Origins on both sides of the quad (z = 0), aimed through it at the emitter's plane (z = -1) or beyond.
+            const glm::vec3 o(6.f * r(0) - 3.f, 6.f * r(1) - 3.f, -0.9f + 4.f * r(2));
+            const glm::vec3 target(9.f * r(3) - 4.5f, 9.f * r(4) - 4.5f, -1.5f + 2.f * r(5));
+            const glm::vec3 d = target - o;
+            for (int k = 0; k < 3; ++k) {
+                const RayHit e = rays.intersect(o, d, 0.f, 1e30f, rules[k]);
+                const RayHit h = bvhIntersect(view, o, d, 0.f, 1e30f, rules[k]);
+                hits[k] += e.hit() ? 1 : 0;
+                const bool same =
+                    e.hit() == h.hit() && (!e.hit() || (e.instance == h.instance && e.primitive == h.primitive &&
+                                                        std::abs(e.t - h.t) <= 1e-5f * e.t));
+                disagree += same ? 0 : 1;
+            }
+            disagree += rays.occluded(o, d, 0.f, 1.f) == bvhOccluded(view, o, d, 0.f, 1.f) ? 0 : 1;
+        }
+        EXPECT_LE(disagree, 4u * count / 10000) << name << ": 4 queries a ray, at least 99.99 % agreeing";
+        const float alpha = look.alpha * (look.texelAlpha >= 0 ? float(look.texelAlpha) / 255.f : 1.f);
+        const bool masked = look.alphaMode == "MASK" && alpha < look.cutoff;
+        if (look.alphaMode == "BLEND" || masked)
+            EXPECT_LT(hits[1], hits[0]) << name << ": the alpha test lets rays through";
+        // (The emitter's back faces no ray here sees: culling shows on the test quad, where the alpha test keeps it.)
+        if (!look.doubleSided && !masked) EXPECT_LT(hits[2], hits[1]) << name << ": culling lets rays past back faces";
+    }
 }
 
 // Below the cutoff the quad is not there for any ray: every image is bit-identical to the scene without it (the
