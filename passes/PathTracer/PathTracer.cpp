@@ -8,8 +8,11 @@
 #include <cmath>
 #include <vector>
 
+#include "CudaBackend.h"
 #include "PathTracerKernels.h"
+#include "PixelKernel.h"
 #include "ShadeSimd.h"
+#include "loom/Bvh.h"
 #include "loom/CameraKernels.h"
 #include "loom/CameraRays.h"
 #include "loom/Channels.h"
@@ -39,7 +42,8 @@ const char kGradientLuminance[] = "gradientLuminance";
 /// of the block's pixels at random (a hash of block and frame), so the samples do not form a fixed pattern.
 glm::uvec2 gradientPixel(uint32_t bx, uint32_t by, uint64_t frameIndex, uint32_t w, uint32_t h) {
     const uint64_t k = pt::mix64((uint64_t(by) << 32 | bx) ^ pt::mix64(frameIndex + 0x6A09E667F3BCC909ull)) % 9u;
-    return {std::min(bx * kGradientBlock + uint32_t(k % 3), w - 1), std::min(by * kGradientBlock + uint32_t(k / 3), h - 1)};
+    return {std::min(bx * kGradientBlock + uint32_t(k % 3), w - 1),
+            std::min(by * kGradientBlock + uint32_t(k / 3), h - 1)};
 }
 
 /// Rec. 709 luminance, what the temporal gradients compare.
@@ -47,8 +51,8 @@ float gradientLuminance(glm::vec3 c) {
     return luminance(c);
 }
 
-/// Mixed into a path's key for its point in the pixel under pixelFilter "box".
-constexpr uint64_t kPixelSampleKey = 0x5851F42D4C957F2Dull;
+using pt::kPixelSampleKey;
+using pt::PixelSum;
 
 /// Paths of one tile kept in flight together (see execute()).
 constexpr uint32_t kPathBatch = 256;
@@ -198,22 +202,6 @@ void runPaths(const BatchContext& b, TileScratch& ts, uint32_t count) {
 }
 
 /// Sums a pixel's samples as the colour output does: in sample order, in double, non-finite samples dropped.
-struct PixelSum {
-    glm::dvec3 sum{0.0}, direct{0.0}, indirect{0.0};
-    uint32_t kept = 0;
-    /// Adds one path's result; false when it was dropped.
-    bool add(const pt::PathResult& r) {
-        if (!isFinite(r.color) || !isFinite(r.direct) || !isFinite(r.indirect)) return false;
-        sum += glm::dvec3(r.color);
-        direct += glm::dvec3(r.direct);
-        indirect += glm::dvec3(r.indirect);
-        ++kept;
-        return true;
-    }
-    double inverse() const { return kept ? 1.0 / double(kept) : 0.0; }
-    glm::vec3 color() const { return glm::vec3(sum * inverse()); }
-};
-
 }  // namespace
 
 void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
@@ -229,7 +217,8 @@ void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
         .doc(
             "temporal gradients (A-SVGF), on last frame's pixel grid: for one pixel of each 3x3 block, (luminance of "
             "its samples re-shaded this frame at the same surface points with the same random numbers, their "
-            "luminance last frame), replicated over the block; (0, 0) without history, on a miss or with pixelFilter box. "
+            "luminance last frame), replicated over the block; (0, 0) without history, on a miss or with pixelFilter "
+            "box. "
             "Equal where the "
             "shading did not change");
     if (!info.wired || info.isOutputConsumed(kGradient)) {
@@ -267,8 +256,13 @@ void PathTracer::declareParams(ParamList& p) {
         .doc(
             "multiple-scattering energy compensation of the glTF BRDF (a white furnace reflects 1 at every "
             "roughness and view); false: glTF 2.0 Appendix B exactly, single scattering");
-    p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda"})
-        .doc("where to run; without a usable CUDA device, auto and cuda run on the CPU");
+    p.addEnum("device", &mDevice, Device::Auto, {"auto", "cpu", "cuda", "emulated"})
+        .doc(
+            "where to run: auto = the CUDA backend where a usable NVIDIA GPU is present, else the CPU (the log says "
+            "which, once); cpu = Embree on the CPU threads; cuda = the CUDA backend, an error without a usable "
+            "device; emulated = the CUDA backend's kernels (BVH traversal, one path per pixel and sample) run on "
+            "the CPU threads, to validate them (slower than cpu; the image agrees with cpu's where both traversals "
+            "find the same hits)");
     p.add("seed", &mSeed, 0).range(0, 1 << 30).role(ParamRole::Seed).doc("decorrelates runs that share frame indices");
     p.addEnum("emissionWeights", &mEmissionWeights, EmissionWeights::Texture, {"texture", "area"})
         .doc(
@@ -276,8 +270,9 @@ void PathTracer::declareParams(ParamList& p) {
             "texture's footprint included; black ones are no lights), or by area times the emissive factor alone "
             "(ignores the texture, for comparison)");
     p.add("simdShading", &mSimdShading, true)
-        .doc("CPU: shade several paths at once in SIMD lanes (MIS with the glTF BRDF; other modes always run per "
-             "path); false runs the per-path kernel, for comparison");
+        .doc(
+            "CPU: shade several paths at once in SIMD lanes (MIS with the glTF BRDF; other modes always run per "
+            "path); false runs the per-path kernel, for comparison");
     p.addEnum("cullMode", &mCullMode, CullMode::Back, {"none", "back"})
         .doc(
             "camera rays skip back faces of single-sided materials, as the G-buffers' cullMode (bounce and shadow "
@@ -302,12 +297,47 @@ void PathTracer::declareParams(ParamList& p) {
 }
 
 void PathTracer::compile(const CompileInfo&) {
-    // This build has no CUDA backend (the kernel headers compile with nvcc; a test checks that). Say so once per
-    // process, not once per pass or frame.
+    switch (mDevice) {
+        case Device::Cpu:
+            mActive = Backend::Cpu;
+            return;
+        case Device::Emulated:
+            mActive = Backend::Emulated;
+            return;
+        case Device::Cuda:
+        case Device::Auto:
+            break;
+    }
+    const pt::CudaDeviceStatus& cuda = pt::cudaDeviceStatus();
+    if (mDevice == Device::Cuda && !cuda.usable)
+        throwBadInput("PathTracer.device", "device 'cuda' was asked for, and " + cuda.description,
+                      "a usable NVIDIA GPU with its driver, in a build with the CUDA backend",
+                      "set device to auto (CUDA where usable, else the CPU) or cpu");
+    mActive = cuda.usable ? Backend::Cuda : Backend::Cpu;
+    if (mActive == Backend::Cuda && !mCuda) mCuda = std::make_unique<pt::CudaBackend>();
+    // Said once per process, not once per pass or frame.
     static std::atomic<bool> reported{false};
-    if (mDevice != Device::Cpu && !reported.exchange(true))
-        spdlog::info("PathTracer: device '{}' requested but no usable CUDA device; running on the CPU",
-                     mDevice == Device::Cuda ? "cuda" : "auto");
+    if (!reported.exchange(true)) {
+        if (cuda.usable)
+            spdlog::info("PathTracer: running on the CUDA device {}", cuda.description);
+        else
+            spdlog::info("PathTracer: {}; running on the CPU", cuda.description);
+    }
+}
+
+PathTracer::PathTracer() = default;
+PathTracer::~PathTracer() = default;
+
+const Bvh& PathTracer::sceneBvh(const Scene& scene) {
+    if (!mBvh || mBvhScene != &scene || mBvhGeometryVersion != scene.geometryVersion()) {
+        mBvh = std::make_unique<Bvh>(scene);
+        mBvhScene = &scene;
+        mBvhGeometryVersion = scene.geometryVersion();
+        ++mBvhBuilds;
+    } else {
+        mBvh->updateInstances(scene);
+    }
+    return *mBvh;
 }
 
 void PathTracer::setScene(const std::shared_ptr<const Scene>& scene) {
@@ -551,8 +581,8 @@ void fillBlock(ImageView<glm::vec2> out, glm::uvec2 block, glm::vec2 value) {
 /// The temporal gradients (output `gradient`): last frame's gradient sample of every block re-shaded now, at the
 /// same surface point (its hit follows animated instances) along last frame's camera ray with last frame's random
 /// numbers, next to its luminance then. Where nothing changed both are the same. Returns the rays traced.
-uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camera& camera, uint32_t spp,
-                        uint64_t frame, ImageView<glm::vec2> out) {
+uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camera& camera, uint32_t spp, uint64_t frame,
+                        ImageView<glm::vec2> out) {
     const uint32_t w = out.width, h = out.height;
     if (!ctx.historyValid() || ctx.frameIndex() == 0) {
         ctx.output(kGradient)->clear();
@@ -567,7 +597,8 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
     prev.aspect = float(w) / float(h);
     const CameraData prevCam = makeCameraData(prev, w, h);
     const SceneView& view = batch.view;
-    const uint32_t blocksX = (w + kGradientBlock - 1) / kGradientBlock, blocksY = (h + kGradientBlock - 1) / kGradientBlock;
+    const uint32_t blocksX = (w + kGradientBlock - 1) / kGradientBlock,
+                   blocksY = (h + kGradientBlock - 1) / kGradientBlock;
     std::vector<uint64_t> tileRays;
     const uint32_t tileBlocks = 16;
     const uint32_t tilesX = (blocksX + tileBlocks - 1) / tileBlocks, tilesY = (blocksY + tileBlocks - 1) / tileBlocks;
@@ -583,8 +614,8 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
                 for (uint32_t bx = tile.x0; bx < tile.x1; ++bx) {
                     const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex() - 1, w, h);
                     const glm::uvec4 e = prevHits.at(q.x, q.y);
-                    const bool valid = e.x < view.instanceCount &&
-                                       e.y < view.meshes[view.instances[e.x].mesh].triangleCount;
+                    const bool valid =
+                        e.x < view.instanceCount && e.y < view.meshes[view.instances[e.x].mesh].triangleCount;
                     if (!valid) {
                         fillBlock(out, glm::uvec2(bx, by), glm::vec2(0.f));
                         continue;
@@ -606,7 +637,8 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
                     const uint64_t item = first + k;
                     const GradientSample& g = samples[size_t(item / spp)];
                     const uint32_t s = uint32_t(item % spp);
-                    pt::beginPath(ts.paths[k], prevCam.origin, glm::normalize(pixelRayDir(prevCam, g.pixel.x, g.pixel.y)),
+                    pt::beginPath(ts.paths[k], prevCam.origin,
+                                  glm::normalize(pixelRayDir(prevCam, g.pixel.x, g.pixel.y)),
                                   pt::PathRng(g.pixel.y * w + g.pixel.x, frame - 1, s));
                     ts.hits[k] = g.hit;
                 }
@@ -629,6 +661,26 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
     for (uint64_t r : tileRays) rays += r;
     ctx.stats().set("gradientSamples", double(uint64_t(blocksX) * blocksY));
     return rays;
+}
+
+/// The end of a frame on any backend: the temporal gradients (on the CPU), then the frame's stats.
+void finishFrame(PassContext& ctx, const BatchContext& batch, const Camera& camera, uint32_t spp, uint64_t frame,
+                 Texture* gradientTex, bool boxFilter, uint64_t rays, uint64_t dropped,
+                 const std::vector<pt::EmissiveTri>& tris, std::chrono::steady_clock::time_point start) {
+    const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
+    if (gradientTex && boxFilter)
+        gradientTex->clear();  // the samples stored are the centre filter's: no exact replay of box samples
+    else if (gradientTex)
+        rays += traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
+    ctx.stats().set("rays", double(rays));
+    ctx.stats().set("paths", double(uint64_t(w) * h * spp));
+    ctx.stats().set("nonFiniteSamplesDropped", double(dropped));
+    ctx.stats().set("emissiveTriangles", double(tris.size()));
+    ctx.stats().set("lightTriangles", double(std::count_if(tris.begin(), tris.end(),
+                                                           [](const pt::EmissiveTri& t) { return t.pdfArea > 0.f; })));
+    // Throughput of this frame (timing only; it never changes the image).
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (seconds > 0.0) ctx.stats().set("pathsPerSecond", double(uint64_t(w) * h * spp) / seconds);
 }
 
 }  // namespace
@@ -692,6 +744,67 @@ void PathTracer::execute(PassContext& ctx) {
         gradientTex ? ctx.historyCur(kGradientLuminance).view<float>() : ImageView<float>{};
     const bool split = direct.data || indirect.data;
 
+    if (mActive != Backend::Cpu) {
+        // The CUDA backend's kernels (PixelKernel.h): on the GPU, or on the CPU threads (emulated).
+        const Bvh& bvh = sceneBvh(*scene);
+        pt::FrameKernel k;
+        k.bvh = bvh.view(view);
+        k.scene = view;
+        k.lights = lights;
+        k.set = set;
+        k.cam = cam;
+        k.width = w;
+        k.height = h;
+        k.spp = spp;
+        k.frame = frame;
+        k.coverageFrame = uint32_t(ctx.frameIndex());
+        k.cameraRules = cameraRules;
+        k.secondaryRules = alphaRules;
+        k.keyed = secondary.keyed;
+        k.boxFilter = boxFilter;
+        if (vbuffer.data) {
+            k.vbuffer = vbuffer.data;
+            k.vbufferPitch = uint32_t(vbuffer.rowPitch / sizeof(glm::uvec4));
+        }
+        const auto out = [](ImageView<glm::vec4> v) {
+            return pt::PixelOut<glm::vec4>{v.data, uint32_t(v.rowPitch / sizeof(glm::vec4))};
+        };
+        k.color = out(color);
+        k.direct = out(direct);
+        k.indirect = out(indirect);
+        k.albedo = out(albedo);
+        k.specAlbedo = out(specAlbedo);
+        k.emission = out(emission);
+        std::vector<glm::uvec4> primaryHits(gradientTex ? size_t(w) * h : 0);
+        if (gradientTex) k.primaryHit = {primaryHits.data(), w};
+        std::vector<glm::uvec2> counts(size_t(w) * h);
+        k.counts = {counts.data(), w};
+        if (mActive == Backend::Cuda) {
+            mCuda->render(k, mBvhBuilds);
+        } else {
+            parallelFor2D(w, h, [&](const Tile& tile) {
+                for (uint32_t y = tile.y0; y < tile.y1; ++y)
+                    for (uint32_t x = tile.x0; x < tile.x1; ++x) pt::renderPixel(k, x, y);
+            });
+        }
+        uint64_t rays = 0, dropped = 0;
+        for (const glm::uvec2& c : counts) {
+            rays += c.x;
+            dropped += c.y;
+        }
+        if (gradientTex) {
+            // Each block's sample of this frame, for the next frame's gradients (as the CPU path keeps them).
+            for (uint32_t by = 0; by * kGradientBlock < h; ++by)
+                for (uint32_t bx = 0; bx * kGradientBlock < w; ++bx) {
+                    const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
+                    gradientHits.at(q.x, q.y) = primaryHits[size_t(q.y) * w + q.x];
+                    gradientLum.at(q.x, q.y) = gradientLuminance(glm::vec3(color.at(q.x, q.y)));
+                }
+        }
+        finishFrame(ctx, batch, camera, spp, frame, gradientTex, boxFilter, rays, dropped, mTris, start);
+        return;
+    }
+
     // Per-tile counters, summed in tile order afterwards (deterministic).
     const uint32_t tilesX = (w + kDefaultTileSize - 1) / kDefaultTileSize;
     const uint32_t tilesY = (h + kDefaultTileSize - 1) / kDefaultTileSize;
@@ -751,11 +864,11 @@ void PathTracer::execute(PassContext& ctx) {
                 if (indirect.data) indirect.at(x, y) = glm::vec4(glm::vec3(acc.indirect * inv), 1.f);
             }
             // This frame's gradient sample of the pixel's block, for the next frame.
-            if (gradientHits.data && gradientPixel(x / kGradientBlock, y / kGradientBlock, ctx.frameIndex(), w, h) ==
-                                         glm::uvec2(x, y)) {
+            if (gradientHits.data &&
+                gradientPixel(x / kGradientBlock, y / kGradientBlock, ctx.frameIndex(), w, h) == glm::uvec2(x, y)) {
                 const RayHit& p = ts.primary[i];
-                gradientHits.at(x, y) = glm::uvec4(p.hit() ? p.instance : kInvalidId, p.primitive, floatBits(p.u),
-                                                   floatBits(p.v));
+                gradientHits.at(x, y) =
+                    glm::uvec4(p.hit() ? p.instance : kInvalidId, p.primitive, floatBits(p.u), floatBits(p.v));
                 gradientLum.at(x, y) = gradientLuminance(acc.color());
             }
             acc = PixelSum{};
@@ -818,23 +931,11 @@ void PathTracer::execute(PassContext& ctx) {
         tileDropped[tileIndex] = dropped;
     });
     uint64_t rays = 0, dropped = 0;
-    if (gradientTex && boxFilter)
-        gradientTex->clear();  // the samples stored are the centre filter's: no exact replay of box samples
-    else if (gradientTex)
-        rays += traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
     for (size_t i = 0; i < tileRays.size(); ++i) {
         rays += tileRays[i];
         dropped += tileDropped[i];
     }
-    ctx.stats().set("rays", double(rays));
-    ctx.stats().set("paths", double(uint64_t(w) * h * spp));
-    ctx.stats().set("nonFiniteSamplesDropped", double(dropped));
-    ctx.stats().set("emissiveTriangles", double(mTris.size()));
-    ctx.stats().set("lightTriangles", double(std::count_if(mTris.begin(), mTris.end(),
-                                                           [](const pt::EmissiveTri& t) { return t.pdfArea > 0.f; })));
-    // Throughput of this frame (timing only; it never changes the image).
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (seconds > 0.0) ctx.stats().set("pathsPerSecond", double(uint64_t(w) * h * spp) / seconds);
+    finishFrame(ctx, batch, camera, spp, frame, gradientTex, boxFilter, rays, dropped, mTris, start);
 }
 
 }  // namespace loom

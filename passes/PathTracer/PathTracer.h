@@ -1,8 +1,9 @@
 #pragma once
 // PathTracer (also registered as CUDAPathTracer): unidirectional path tracing
 // with NEE and MIS over emissive triangles, punctual lights and the
-// environment. Runs on the CPU (Embree + oneTBB); `device` selects a CUDA
-// backend where one is usable.
+// environment. Runs on the CPU (Embree + oneTBB), or on an NVIDIA GPU through
+// the CUDA backend (CudaBackend.h, PixelKernel.h: the same kernels over a BVH of
+// its own, loom/Bvh.h), which `device` selects.
 #include <glm/glm.hpp>
 #include <memory>
 #include <string>
@@ -14,6 +15,11 @@
 
 namespace loom {
 
+class Bvh;
+namespace pt {
+class CudaBackend;
+}
+
 class PathTracer final : public RenderPass {
 public:
     void reflect(Reflection& r, const CompileInfo& info) const override;
@@ -21,9 +27,11 @@ public:
     void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
     void setScene(const std::shared_ptr<const Scene>& scene) override;
+    PathTracer();
+    ~PathTracer() override;
     std::vector<std::string> skippedWork() const override;
 
-    enum class Device { Auto, Cpu, Cuda };
+    enum class Device { Auto, Cpu, Cuda, Emulated };
     enum class CullMode { None, Back };
     enum class EmissionWeights { Texture, Area };
     enum class PixelFilter { Center, Box };
@@ -34,6 +42,17 @@ private:
     const std::vector<float>& triangleEmission(const Scene& scene, uint32_t instance);
     /// The pt::KernelFeature bits of the kernel the current light list needs (kAllFeatures unless specialize).
     uint32_t kernelFeatures() const;
+    /// The BVH of `scene` with its instances where they are now (built on the first call for a scene or geometry).
+    const Bvh& sceneBvh(const Scene& scene);
+
+    /// Where frames run, decided at compile from `device`.
+    enum class Backend { Cpu, Cuda, Emulated };
+    Backend mActive = Backend::Cpu;
+    std::unique_ptr<pt::CudaBackend> mCuda;
+    std::unique_ptr<Bvh> mBvh;
+    const void* mBvhScene = nullptr;
+    uint64_t mBvhGeometryVersion = 0;
+    uint64_t mBvhBuilds = 0;  ///< BVHs built so far: with the scene's address, the CUDA backend's upload key
 
     // Parameters.
     /// maxBounces, rrStartBounce, lightSampling, lambertOnly, energyCompensation, indirectClamp: the kernel's struct
