@@ -2,11 +2,13 @@
 // and the outputs copied back into the graph's host textures. No decision about a pixel is made here.
 #include <cuda_runtime.h>
 
+#include <cstring>
 #include <string>
 #include <vector>
 
 #include "CudaBackend.h"
 #include "loom/Error.h"
+#include "loom/Parallel.h"
 
 namespace loom::pt {
 
@@ -58,14 +60,64 @@ private:
     size_t mSize = 0;
 };
 
+/// Page-locked host memory that grows to the largest size asked of it: the device copies into it at full speed.
+class PinnedBuffer {
+public:
+    PinnedBuffer() = default;
+    PinnedBuffer(const PinnedBuffer&) = delete;
+    PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+    ~PinnedBuffer() {
+        if (mPtr) cudaFreeHost(mPtr);
+    }
+    void* reserve(size_t bytes) {
+        if (bytes > mSize) {
+            if (mPtr) cudaFreeHost(mPtr);
+            mPtr = nullptr;
+            mSize = 0;
+            check(cudaMallocHost(&mPtr, bytes), "cudaMallocHost");
+            mSize = bytes;
+        }
+        return mPtr;
+    }
+
+private:
+    void* mPtr = nullptr;
+    size_t mSize = 0;
+};
+
 template <class T>
 BvhSpan<T> uploadSpan(DeviceBuffer& b, BvhSpan<T> s) {
     return {b.upload(s.data, s.count), s.count};
 }
 
-__global__ void renderFrame(FrameKernel k) {
+/// Every pixel's path, then its warp's counters summed into sums[0] (rays) and sums[1] (dropped samples): integer
+/// sums, the same in any order.
+__global__ void renderFrame(FrameKernel k, unsigned long long* sums) {
     const uint32_t x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
-    if (x < k.width && y < k.height) renderPixel(k, x, y);
+    uint32_t rays = 0, dropped = 0;
+    if (x < k.width && y < k.height) {
+        renderPixel(k, x, y);
+        const glm::uvec2 c = k.counts.data[size_t(y) * k.counts.pitch + x];
+        rays = c.x;
+        dropped = c.y;
+    }
+    for (int offset = 16; offset > 0; offset /= 2) {
+        rays += __shfl_down_sync(0xffffffffu, rays, offset);
+        dropped += __shfl_down_sync(0xffffffffu, dropped, offset);
+    }
+    if ((threadIdx.y * blockDim.x + threadIdx.x) % 32 == 0) {
+        atomicAdd(&sums[0], (unsigned long long)rays);
+        atomicAdd(&sums[1], (unsigned long long)dropped);
+    }
+}
+
+/// Each 3x3 block's primary hit at gradientPixel, row-major.
+__global__ void gatherGradientHits(const glm::uvec4* primary, uint32_t w, uint32_t h, uint64_t frame, glm::uvec4* out) {
+    const uint32_t bx = blockIdx.x * blockDim.x + threadIdx.x, by = blockIdx.y * blockDim.y + threadIdx.y;
+    const uint32_t blocksX = (w + 2) / 3, blocksY = (h + 2) / 3;
+    if (bx >= blocksX || by >= blocksY) return;
+    const glm::uvec2 q = gradientPixel(bx, by, frame, w, h);
+    out[size_t(by) * blocksX + bx] = primary[size_t(q.y) * w + q.x];
 }
 
 }  // namespace
@@ -108,8 +160,13 @@ struct CudaBackend::Impl {
     // Lights.
     DeviceBuffer tris, triCdf, instanceTriBase, punctual, envTexels, envMarginal, envConditional;
     // Per frame: the vbuffer and the outputs.
-    DeviceBuffer vbuffer, color, direct, indirect, albedo, specAlbedo, emission, primaryHit, counts;
-    SceneView scene;  ///< device pointers
+    DeviceBuffer vbuffer, color, direct, indirect, albedo, specAlbedo, emission, primaryHit, counts, sums, blockHits;
+    // Host staging of the outputs, in the order of FrameKernel's (color, direct, indirect, albedo, specAlbedo,
+    // emission), then the sums and the gradient blocks' hits.
+    PinnedBuffer staged[6], stagedSums, stagedBlockHits, stagedVbuffer;
+    SceneView scene;                                         ///< device pointers
+    cudaEvent_t kernelStart = nullptr, kernelEnd = nullptr;  ///< around the launch, for Counts::kernelMs
+    FrameKernel device;                                      ///< the frame launched: device pointers
 
     void uploadScene(const SceneView& host, const BvhArrays& bvh) {
         meshArrays.clear();
@@ -164,20 +221,15 @@ struct CudaBackend::Impl {
         if (!host.data) return {};
         return {static_cast<T*>(b.reserve(size_t(w) * h * sizeof(T))), w};
     }
-
-    template <class T>
-    void copyBack(const PixelOut<T>& host, const PixelOut<T>& device, uint32_t w, uint32_t h) {
-        if (!host.data) return;
-        check(cudaMemcpy2D(host.data, size_t(host.pitch) * sizeof(T), device.data, size_t(w) * sizeof(T),
-                           size_t(w) * sizeof(T), h, cudaMemcpyDeviceToHost),
-              "cudaMemcpy2D (to the host)");
-    }
 };
 
 CudaBackend::CudaBackend() : mImpl(std::make_unique<Impl>()) {}
-CudaBackend::~CudaBackend() = default;
+CudaBackend::~CudaBackend() {
+    if (mImpl->kernelStart) cudaEventDestroy(mImpl->kernelStart);
+    if (mImpl->kernelEnd) cudaEventDestroy(mImpl->kernelEnd);
+}
 
-void CudaBackend::render(const FrameKernel& k, uint64_t sceneKey) {
+void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
     Impl& m = *mImpl;
     const BvhArrays& arrays = k.bvh.bvh;
     if (m.sceneKey != sceneKey) {
@@ -196,10 +248,20 @@ void CudaBackend::render(const FrameKernel& k, uint64_t sceneKey) {
     d.lights = m.uploadLights(k.lights, k.scene.instanceCount);
     const uint32_t w = k.width, h = k.height;
     if (k.vbuffer) {
-        void* vb = m.vbuffer.reserve(size_t(w) * h * sizeof(glm::uvec4));
-        check(cudaMemcpy2D(vb, size_t(w) * sizeof(glm::uvec4), k.vbuffer, size_t(k.vbufferPitch) * sizeof(glm::uvec4),
-                           size_t(w) * sizeof(glm::uvec4), h, cudaMemcpyHostToDevice),
-              "cudaMemcpy2D (vbuffer to the device)");
+        // Through page-locked staging (rows copied in parallel): a copy from pageable memory runs at a third of
+        // the speed.
+        const size_t bytes = size_t(w) * h * sizeof(glm::uvec4);
+        auto* staged = static_cast<glm::uvec4*>(m.stagedVbuffer.reserve(bytes));
+        parallelFor2D(
+            w, h,
+            [&](const Tile& t) {
+                for (uint32_t y = t.y0; y < t.y1; ++y)
+                    std::memcpy(staged + size_t(y) * w, k.vbuffer + size_t(y) * k.vbufferPitch,
+                                size_t(w) * sizeof(glm::uvec4));
+            },
+            w, 16);
+        void* vb = m.vbuffer.reserve(bytes);
+        check(cudaMemcpyAsync(vb, staged, bytes, cudaMemcpyHostToDevice), "cudaMemcpyAsync (vbuffer to the device)");
         d.vbuffer = static_cast<const glm::uvec4*>(vb);
         d.vbufferPitch = w;
     }
@@ -209,22 +271,66 @@ void CudaBackend::render(const FrameKernel& k, uint64_t sceneKey) {
     d.albedo = m.output(m.albedo, k.albedo, w, h);
     d.specAlbedo = m.output(m.specAlbedo, k.specAlbedo, w, h);
     d.emission = m.output(m.emission, k.emission, w, h);
-    d.primaryHit = m.output(m.primaryHit, k.primaryHit, w, h);
-    d.counts = m.output(m.counts, k.counts, w, h);
-
+    d.primaryHit = {static_cast<glm::uvec4*>(m.primaryHit.reserve(size_t(w) * h * sizeof(glm::uvec4))), w};
+    d.counts = {static_cast<glm::uvec2*>(m.counts.reserve(size_t(w) * h * sizeof(glm::uvec2))), w};
+    auto* sums = static_cast<unsigned long long*>(m.sums.reserve(2 * sizeof(unsigned long long)));
+    check(cudaMemsetAsync(sums, 0, 2 * sizeof(unsigned long long)), "cudaMemsetAsync");
     const dim3 block(16, 8), grid((w + block.x - 1) / block.x, (h + block.y - 1) / block.y);
-    renderFrame<<<grid, block>>>(d);
+    if (!m.kernelStart) {
+        check(cudaEventCreate(&m.kernelStart), "cudaEventCreate");
+        check(cudaEventCreate(&m.kernelEnd), "cudaEventCreate");
+    }
+    check(cudaEventRecord(m.kernelStart), "cudaEventRecord");
+    renderFrame<<<grid, block>>>(d, sums);
     check(cudaGetLastError(), "the renderPixel launch");
-    check(cudaDeviceSynchronize(), "the renderPixel kernel");
+    check(cudaEventRecord(m.kernelEnd), "cudaEventRecord");
+    m.device = d;
+}
 
-    m.copyBack(k.color, d.color, w, h);
-    m.copyBack(k.direct, d.direct, w, h);
-    m.copyBack(k.indirect, d.indirect, w, h);
-    m.copyBack(k.albedo, d.albedo, w, h);
-    m.copyBack(k.specAlbedo, d.specAlbedo, w, h);
-    m.copyBack(k.emission, d.emission, w, h);
-    m.copyBack(k.primaryHit, d.primaryHit, w, h);
-    m.copyBack(k.counts, d.counts, w, h);
+CudaBackend::Counts CudaBackend::finish(const FrameKernel& k, glm::uvec4* gradientHits, uint64_t gradientFrame) {
+    Impl& m = *mImpl;
+    const FrameKernel& d = m.device;
+    const uint32_t w = k.width, h = k.height;
+    const uint32_t blocksX = (w + 2) / 3, blocksY = (h + 2) / 3;
+    // Everything is queued behind the kernel on one stream, into page-locked memory, then waited for once.
+    const PixelOut<glm::vec4> hostOut[6] = {k.color, k.direct, k.indirect, k.albedo, k.specAlbedo, k.emission};
+    const PixelOut<glm::vec4> devOut[6] = {d.color, d.direct, d.indirect, d.albedo, d.specAlbedo, d.emission};
+    const size_t plane = size_t(w) * h * sizeof(glm::vec4);
+    glm::vec4* staged[6] = {};
+    for (int i = 0; i < 6; ++i) {
+        if (!hostOut[i].data) continue;
+        staged[i] = static_cast<glm::vec4*>(m.staged[i].reserve(plane));
+        check(cudaMemcpyAsync(staged[i], devOut[i].data, plane, cudaMemcpyDeviceToHost), "cudaMemcpyAsync (outputs)");
+    }
+    auto* sums = static_cast<unsigned long long*>(m.stagedSums.reserve(2 * sizeof(unsigned long long)));
+    check(cudaMemcpyAsync(sums, m.sums.reserve(0), 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost),
+          "cudaMemcpyAsync (counts)");
+    glm::uvec4* hits = nullptr;
+    if (gradientHits) {
+        const size_t bytes = size_t(blocksX) * blocksY * sizeof(glm::uvec4);
+        auto* dHits = static_cast<glm::uvec4*>(m.blockHits.reserve(bytes));
+        const dim3 block(16, 8), grid((blocksX + block.x - 1) / block.x, (blocksY + block.y - 1) / block.y);
+        gatherGradientHits<<<grid, block>>>(d.primaryHit.data, w, h, gradientFrame, dHits);
+        check(cudaGetLastError(), "the gradient hits' launch");
+        hits = static_cast<glm::uvec4*>(m.stagedBlockHits.reserve(bytes));
+        check(cudaMemcpyAsync(hits, dHits, bytes, cudaMemcpyDeviceToHost), "cudaMemcpyAsync (gradient hits)");
+    }
+    check(cudaDeviceSynchronize(), "the renderPixel kernel");
+    // Into the graph's textures, whose rows may be padded: rows in parallel.
+    parallelFor2D(
+        w, h,
+        [&](const Tile& t) {
+            for (int i = 0; i < 6; ++i)
+                if (staged[i])
+                    for (uint32_t y = t.y0; y < t.y1; ++y)
+                        std::memcpy(hostOut[i].data + size_t(y) * hostOut[i].pitch, staged[i] + size_t(y) * w,
+                                    size_t(w) * sizeof(glm::vec4));
+        },
+        w, 16);
+    if (hits) std::memcpy(gradientHits, hits, size_t(blocksX) * blocksY * sizeof(glm::uvec4));
+    float kernelMs = 0.f;
+    check(cudaEventElapsedTime(&kernelMs, m.kernelStart, m.kernelEnd), "cudaEventElapsedTime");
+    return {sums[0], sums[1], double(kernelMs)};
 }
 
 }  // namespace loom::pt

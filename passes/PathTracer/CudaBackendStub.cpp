@@ -15,7 +15,11 @@ struct CudaBackend::Impl {};
 CudaBackend::CudaBackend() = default;
 CudaBackend::~CudaBackend() = default;
 
-void CudaBackend::render(const FrameKernel&, uint64_t) {
+void CudaBackend::launch(const FrameKernel&, uint64_t) {
+    throw Error({ErrorKind::Runtime, "", "PathTracer.device", cudaDeviceStatus().description, "", ""});
+}
+
+CudaBackend::Counts CudaBackend::finish(const FrameKernel&, glm::uvec4*, uint64_t) {
     throw Error({ErrorKind::Runtime, "", "PathTracer.device", cudaDeviceStatus().description, "", ""});
 }
 

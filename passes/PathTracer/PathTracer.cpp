@@ -38,13 +38,8 @@ using channel::kVBuffer;
 const char kGradientHits[] = "gradientHits";
 const char kGradientLuminance[] = "gradientLuminance";
 
-/// The pixel of block (bx, by) whose sample frame `frameIndex` keeps for the next frame's temporal gradient: one
-/// of the block's pixels at random (a hash of block and frame), so the samples do not form a fixed pattern.
-glm::uvec2 gradientPixel(uint32_t bx, uint32_t by, uint64_t frameIndex, uint32_t w, uint32_t h) {
-    const uint64_t k = pt::mix64((uint64_t(by) << 32 | bx) ^ pt::mix64(frameIndex + 0x6A09E667F3BCC909ull)) % 9u;
-    return {std::min(bx * kGradientBlock + uint32_t(k % 3), w - 1),
-            std::min(by * kGradientBlock + uint32_t(k / 3), h - 1)};
-}
+using pt::gradientPixel;
+static_assert(kGradientBlock == 3, "pt::gradientPixel's blocks are 3x3");
 
 /// Rec. 709 luminance, what the temporal gradients compare.
 float gradientLuminance(glm::vec3 c) {
@@ -329,10 +324,11 @@ PathTracer::PathTracer() = default;
 PathTracer::~PathTracer() = default;
 
 const Bvh& PathTracer::sceneBvh(const Scene& scene) {
-    if (!mBvh || mBvhScene != &scene || mBvhGeometryVersion != scene.geometryVersion()) {
+    // Moving instances rebuild only the top level (and the CUDA backend re-uploads only that, keyed on mBvhBuilds).
+    if (!mBvh || mBvhScene != &scene || mBvhMeshVersion != scene.meshVersion()) {
         mBvh = std::make_unique<Bvh>(scene);
         mBvhScene = &scene;
-        mBvhGeometryVersion = scene.geometryVersion();
+        mBvhMeshVersion = scene.meshVersion();
         ++mBvhBuilds;
     } else {
         mBvh->updateInstances(scene);
@@ -663,15 +659,21 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
     return rays;
 }
 
-/// The end of a frame on any backend: the temporal gradients (on the CPU), then the frame's stats.
-void finishFrame(PassContext& ctx, const BatchContext& batch, const Camera& camera, uint32_t spp, uint64_t frame,
-                 Texture* gradientTex, bool boxFilter, uint64_t rays, uint64_t dropped,
+/// The temporal gradients of a frame (on the CPU, for every backend): traced, or cleared where the samples kept are
+/// not the ones the box filter drew. Returns the rays traced.
+uint64_t gradients(PassContext& ctx, const BatchContext& batch, const Camera& camera, uint32_t spp, uint64_t frame,
+                   Texture* gradientTex, bool boxFilter) {
+    if (boxFilter) {
+        gradientTex->clear();  // the samples stored are the centre filter's: no exact replay of box samples
+        return 0;
+    }
+    return traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
+}
+
+/// The end of a frame on any backend: its stats.
+void finishFrame(PassContext& ctx, uint32_t spp, uint64_t rays, uint64_t dropped,
                  const std::vector<pt::EmissiveTri>& tris, std::chrono::steady_clock::time_point start) {
     const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
-    if (gradientTex && boxFilter)
-        gradientTex->clear();  // the samples stored are the centre filter's: no exact replay of box samples
-    else if (gradientTex)
-        rays += traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
     ctx.stats().set("rays", double(rays));
     ctx.stats().set("paths", double(uint64_t(w) * h * spp));
     ctx.stats().set("nonFiniteSamplesDropped", double(dropped));
@@ -746,7 +748,12 @@ void PathTracer::execute(PassContext& ctx) {
 
     if (mActive != Backend::Cpu) {
         // The CUDA backend's kernels (PixelKernel.h): on the GPU, or on the CPU threads (emulated).
+        const auto tBvh = std::chrono::steady_clock::now();
         const Bvh& bvh = sceneBvh(*scene);
+        // Where a frame's time goes before the kernels start: the lights and the rest, then the BVH.
+        ctx.stats().set("ms.prepare", std::chrono::duration<double, std::milli>(tBvh - start).count());
+        ctx.stats().set("ms.bvh",
+                        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tBvh).count());
         pt::FrameKernel k;
         k.bvh = bvh.view(view);
         k.scene = view;
@@ -775,33 +782,62 @@ void PathTracer::execute(PassContext& ctx) {
         k.albedo = out(albedo);
         k.specAlbedo = out(specAlbedo);
         k.emission = out(emission);
-        std::vector<glm::uvec4> primaryHits(gradientTex ? size_t(w) * h : 0);
-        if (gradientTex) k.primaryHit = {primaryHits.data(), w};
-        std::vector<glm::uvec2> counts(size_t(w) * h);
-        k.counts = {counts.data(), w};
+        const uint32_t blocksX = (w + kGradientBlock - 1) / kGradientBlock;
+        const uint32_t blocksY = (h + kGradientBlock - 1) / kGradientBlock;
+        // Each block's primary hit at its gradientPixel, for the next frame's gradients.
+        std::vector<glm::uvec4> blockHits(gradientTex ? size_t(blocksX) * blocksY : 0);
+        uint64_t rays = 0, dropped = 0, gradientRays = 0;
         if (mActive == Backend::Cuda) {
-            mCuda->render(k, mBvhBuilds);
+            const auto t0 = std::chrono::steady_clock::now();
+            mCuda->launch(k, mBvhBuilds);
+            const auto t1 = std::chrono::steady_clock::now();
+            // The gradients replay the last frame's samples, which this frame's do not touch: the CPU traces them
+            // while the GPU renders.
+            if (gradientTex) gradientRays = gradients(ctx, batch, camera, spp, frame, gradientTex, boxFilter);
+            const auto t2 = std::chrono::steady_clock::now();
+            const pt::CudaBackend::Counts c =
+                mCuda->finish(k, gradientTex ? blockHits.data() : nullptr, ctx.frameIndex());
+            const auto t3 = std::chrono::steady_clock::now();
+            rays = c.rays;
+            dropped = c.dropped;
+            const auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
+            ctx.stats().set("ms.cudaLaunch", ms(t0, t1));
+            ctx.stats().set("ms.cpuGradients", ms(t1, t2));
+            ctx.stats().set("ms.cudaFinish", ms(t2, t3));
+            ctx.stats().set("ms.cudaKernel", c.kernelMs);
         } else {
+            std::vector<glm::uvec4> primaryHits(gradientTex ? size_t(w) * h : 0);
+            if (gradientTex) k.primaryHit = {primaryHits.data(), w};
+            std::vector<glm::uvec2> counts(size_t(w) * h);
+            k.counts = {counts.data(), w};
             parallelFor2D(w, h, [&](const Tile& tile) {
                 for (uint32_t y = tile.y0; y < tile.y1; ++y)
                     for (uint32_t x = tile.x0; x < tile.x1; ++x) pt::renderPixel(k, x, y);
             });
-        }
-        uint64_t rays = 0, dropped = 0;
-        for (const glm::uvec2& c : counts) {
-            rays += c.x;
-            dropped += c.y;
+            for (const glm::uvec2& c : counts) {
+                rays += c.x;
+                dropped += c.y;
+            }
+            for (uint32_t by = 0; by < blocksY; ++by)
+                for (uint32_t bx = 0; bx < blocksX && gradientTex; ++bx) {
+                    const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
+                    blockHits[size_t(by) * blocksX + bx] = primaryHits[size_t(q.y) * w + q.x];
+                }
+            if (gradientTex) gradientRays = gradients(ctx, batch, camera, spp, frame, gradientTex, boxFilter);
         }
         if (gradientTex) {
             // Each block's sample of this frame, for the next frame's gradients (as the CPU path keeps them).
-            for (uint32_t by = 0; by * kGradientBlock < h; ++by)
-                for (uint32_t bx = 0; bx * kGradientBlock < w; ++bx) {
-                    const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
-                    gradientHits.at(q.x, q.y) = primaryHits[size_t(q.y) * w + q.x];
-                    gradientLum.at(q.x, q.y) = gradientLuminance(glm::vec3(color.at(q.x, q.y)));
-                }
+            parallelFor2D(blocksX, blocksY, [&](const Tile& t) {
+                for (uint32_t by = t.y0; by < t.y1; ++by)
+                    for (uint32_t bx = t.x0; bx < t.x1; ++bx) {
+                        const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
+                        gradientHits.at(q.x, q.y) = blockHits[size_t(by) * blocksX + bx];
+                        gradientLum.at(q.x, q.y) = gradientLuminance(glm::vec3(color.at(q.x, q.y)));
+                    }
+            });
         }
-        finishFrame(ctx, batch, camera, spp, frame, gradientTex, boxFilter, rays, dropped, mTris, start);
+        rays += gradientRays;
+        finishFrame(ctx, spp, rays, dropped, mTris, start);
         return;
     }
 
@@ -935,7 +971,8 @@ void PathTracer::execute(PassContext& ctx) {
         rays += tileRays[i];
         dropped += tileDropped[i];
     }
-    finishFrame(ctx, batch, camera, spp, frame, gradientTex, boxFilter, rays, dropped, mTris, start);
+    if (gradientTex) rays += gradients(ctx, batch, camera, spp, frame, gradientTex, boxFilter);
+    finishFrame(ctx, spp, rays, dropped, mTris, start);
 }
 
 }  // namespace loom

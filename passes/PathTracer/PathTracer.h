@@ -51,7 +51,7 @@ private:
     std::unique_ptr<pt::CudaBackend> mCuda;
     std::unique_ptr<Bvh> mBvh;
     const void* mBvhScene = nullptr;
-    uint64_t mBvhGeometryVersion = 0;
+    uint64_t mBvhMeshVersion = 0;
     uint64_t mBvhBuilds = 0;  ///< BVHs built so far: with the scene's address, the CUDA backend's upload key
 
     // Parameters.

@@ -100,6 +100,14 @@ struct FrameKernel {
     PixelOut<glm::uvec2> counts;      ///< (rays traced, samples dropped)
 };
 
+/// The pixel of 3x3 block (bx, by) whose sample frame `frameIndex` keeps for the next frame's temporal gradient: one
+/// of the block's pixels at random (a hash of block and frame), so the samples do not form a fixed pattern.
+LOOM_HD inline glm::uvec2 gradientPixel(uint32_t bx, uint32_t by, uint64_t frameIndex, uint32_t w, uint32_t h) {
+    constexpr uint32_t block = 3;  // channel::kGradientBlock
+    const uint64_t k = mix64((uint64_t(by) << 32 | bx) ^ mix64(frameIndex + 0x6A09E667F3BCC909ull)) % 9u;
+    return {glm::min(bx * block + uint32_t(k % 3), w - 1), glm::min(by * block + uint32_t(k / 3), h - 1)};
+}
+
 /// Renders pixel (x, y): what the CPU path tracer's execute computes for it.
 LOOM_HD inline void renderPixel(const FrameKernel& k, uint32_t x, uint32_t y) {
     uint32_t rays = 0, dropped = 0;

@@ -412,6 +412,7 @@ void Scene::finalize() {
     mLightState = lightState();
     computeFeatures();
     ++mGeometryVersion;
+    ++mMeshVersion;
     rebuildView();
 }
 

@@ -4,12 +4,11 @@
 // Ray tracing over a scene lives in RayScene.h.
 #include <cstdint>
 #include <filesystem>
+#include <glm/glm.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
-#include <glm/gtc/quaternion.hpp>
 
 #include "loom/Camera.h"
 #include "loom/SceneView.h"
@@ -18,8 +17,14 @@ namespace loom {
 
 struct Bounds {
     glm::vec3 lo{1e30f}, hi{-1e30f};
-    void extend(const glm::vec3& p) { lo = glm::min(lo, p); hi = glm::max(hi, p); }
-    void extend(const Bounds& b) { lo = glm::min(lo, b.lo); hi = glm::max(hi, b.hi); }
+    void extend(const glm::vec3& p) {
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
+    }
+    void extend(const Bounds& b) {
+        lo = glm::min(lo, b.lo);
+        hi = glm::max(hi, b.hi);
+    }
     bool valid() const { return lo.x <= hi.x; }
     glm::vec3 center() const { return 0.5f * (lo + hi); }
     glm::vec3 extent() const { return hi - lo; }
@@ -41,7 +46,7 @@ enum class AlphaMode : uint8_t { Opaque, Mask, Blend };
 struct Material {
     std::string name;
     glm::vec4 baseColorFactor{1.f};
-    float metallicFactor = 1.f;   ///< glTF default is 1 (fully metallic) when absent
+    float metallicFactor = 1.f;  ///< glTF default is 1 (fully metallic) when absent
     float roughnessFactor = 1.f;
     glm::vec3 emissiveFactor{0.f};  ///< already multiplied by KHR_materials_emissive_strength
     /// The two factors emissiveFactor is the product of: the file's emissiveFactor and KHR_materials_emissive_strength.
@@ -89,10 +94,10 @@ struct Node {
     glm::vec3 scale{1.f};
     bool hasMatrix = false;  ///< a static "matrix" node (not animatable)
     glm::mat4 matrix{1.f};
-    glm::mat4 local() const;  ///< T * R * S, or matrix
+    glm::mat4 local() const;       ///< T * R * S, or matrix
     std::vector<uint32_t> meshes;  ///< primitives this node draws (indices into Scene::meshes)
-    int camera = -1;  ///< index into Scene::cameras
-    int light = -1;   ///< index into Scene::lights
+    int camera = -1;               ///< index into Scene::cameras
+    int light = -1;                ///< index into Scene::lights
 };
 
 /// A mesh placed in the world by a node. Its index is the instance id that
@@ -186,7 +191,7 @@ struct Environment {
 enum class CameraPathKind : uint8_t { Static, Orbit, Dolly };
 struct CameraPath {
     CameraPathKind kind = CameraPathKind::Static;
-    float speed = 1.f;  ///< orbit: radians per second; dolly: fraction of the distance per second
+    float speed = 1.f;     ///< orbit: radians per second; dolly: fraction of the distance per second
     float amount = 0.25f;  ///< dolly: amplitude as a fraction of the distance to the target
 };
 
@@ -302,10 +307,10 @@ public:
     /// animated glTF camera ignores it). Takes effect now and at every update.
     void setCameraPose(const glm::mat4& world);
 
-    Bounds bounds() const;  ///< world bounds at the last update
+    Bounds bounds() const;          ///< world bounds at the last update
     float animationLength() const;  ///< longest animation, seconds
-    size_t triangleCount() const;  ///< over instances
-    bool hasMotion() const;        ///< animations (of nodes or of light) or a camera path
+    size_t triangleCount() const;   ///< over instances
+    bool hasMotion() const;         ///< animations (of nodes or of light) or a camera path
     /// Whether the last update() changed emitted light: a material's emission or a punctual light's colour or
     /// intensity, driven by an animation. Like a moved instance, it ends an accumulation; false after cutMotion().
     bool lightingChanged() const { return mLightingChanged; }
@@ -324,6 +329,9 @@ public:
     /// Counts finalize() calls and the updates that moved an instance: what a pass built from the instances' world
     /// transforms (a light list) is still valid while it stays the same and no emission is animated.
     uint64_t geometryVersion() const { return mGeometryVersion; }
+    /// Counts finalize() calls only: what a pass built from the meshes alone (a per-mesh BVH) is still valid while it
+    /// stays the same, however the instances move.
+    uint64_t meshVersion() const { return mMeshVersion; }
 
     const RayScene& rayScene() const { return *mRayScene; }
     /// Plain view for kernels; rebuilt by finalize() and update().
@@ -348,11 +356,12 @@ private:
     std::vector<glm::mat4> mNodeWorld;
     bool mUpdated = false;
     glm::mat4 mCameraBase{1.f};  // camera pose before the procedural path
-    Bounds mRestBounds;           // world bounds at time 0: the pivot of camera paths
+    Bounds mRestBounds;          // world bounds at time 0: the pivot of camera paths
     bool mCameraAnimated = false;
     bool mLightingChanged = false;
     SceneFeatures mFeatures;
     uint64_t mGeometryVersion = 0;
+    uint64_t mMeshVersion = 0;
     std::vector<float> mLightState;  // emission and punctual light values the last update left, when animated
 };
 
