@@ -23,25 +23,34 @@ void check(cudaError_t e, const char* call) {
     if (e != cudaSuccess) fail(call, e);
 }
 
-/// Device memory that grows to the largest size asked of it.
-class DeviceBuffer {
+cudaError_t allocateDevice(void** p, size_t bytes) {
+    return cudaMalloc(p, bytes);
+}
+cudaError_t allocatePinned(void** p, size_t bytes) {
+    return cudaMallocHost(p, bytes);
+}
+
+/// Memory that grows to the largest size asked of it: on the device (cudaMalloc), or page-locked on the host
+/// (cudaMallocHost), which the device copies to and from at full speed.
+template <cudaError_t (*Allocate)(void**, size_t), cudaError_t (*Release)(void*)>
+class GrowingBuffer {
 public:
-    DeviceBuffer() = default;
-    DeviceBuffer(const DeviceBuffer&) = delete;
-    DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-    DeviceBuffer(DeviceBuffer&& o) noexcept : mPtr(o.mPtr), mSize(o.mSize) {
+    GrowingBuffer() = default;
+    GrowingBuffer(const GrowingBuffer&) = delete;
+    GrowingBuffer& operator=(const GrowingBuffer&) = delete;
+    GrowingBuffer(GrowingBuffer&& o) noexcept : mPtr(o.mPtr), mSize(o.mSize) {
         o.mPtr = nullptr;
         o.mSize = 0;
     }
-    ~DeviceBuffer() {
-        if (mPtr) cudaFree(mPtr);
+    ~GrowingBuffer() {
+        if (mPtr) Release(mPtr);
     }
     void* reserve(size_t bytes) {
         if (bytes > mSize) {
-            if (mPtr) cudaFree(mPtr);
+            if (mPtr) Release(mPtr);
             mPtr = nullptr;
             mSize = 0;
-            check(cudaMalloc(&mPtr, bytes), "cudaMalloc");
+            check(Allocate(&mPtr, bytes), "a CUDA allocation");
             mSize = bytes;
         }
         return mPtr;
@@ -59,31 +68,8 @@ private:
     void* mPtr = nullptr;
     size_t mSize = 0;
 };
-
-/// Page-locked host memory that grows to the largest size asked of it: the device copies into it at full speed.
-class PinnedBuffer {
-public:
-    PinnedBuffer() = default;
-    PinnedBuffer(const PinnedBuffer&) = delete;
-    PinnedBuffer& operator=(const PinnedBuffer&) = delete;
-    ~PinnedBuffer() {
-        if (mPtr) cudaFreeHost(mPtr);
-    }
-    void* reserve(size_t bytes) {
-        if (bytes > mSize) {
-            if (mPtr) cudaFreeHost(mPtr);
-            mPtr = nullptr;
-            mSize = 0;
-            check(cudaMallocHost(&mPtr, bytes), "cudaMallocHost");
-            mSize = bytes;
-        }
-        return mPtr;
-    }
-
-private:
-    void* mPtr = nullptr;
-    size_t mSize = 0;
-};
+using DeviceBuffer = GrowingBuffer<allocateDevice, cudaFree>;
+using PinnedBuffer = GrowingBuffer<allocatePinned, cudaFreeHost>;
 
 template <class T>
 BvhSpan<T> uploadSpan(DeviceBuffer& b, BvhSpan<T> s) {
