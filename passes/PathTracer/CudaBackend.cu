@@ -2,6 +2,7 @@
 // and the outputs copied back into the graph's host textures. No decision about a pixel is made here.
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -76,12 +77,12 @@ BvhSpan<T> uploadSpan(DeviceBuffer& b, BvhSpan<T> s) {
     return {b.upload(s.data, s.count), s.count};
 }
 
-/// Every pixel's path, then its warp's counters summed into sums[0] (rays) and sums[1] (dropped samples): integer
-/// sums, the same in any order.
-__global__ void renderFrame(FrameKernel k, unsigned long long* sums) {
-    const uint32_t x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+/// Every pixel's path in rows y0..y1, then its warp's counters summed into sums[0] (rays) and sums[1] (dropped
+/// samples): integer sums, the same in any order.
+__global__ void renderFrame(FrameKernel k, uint32_t y0, uint32_t y1, unsigned long long* sums) {
+    const uint32_t x = blockIdx.x * blockDim.x + threadIdx.x, y = y0 + blockIdx.y * blockDim.y + threadIdx.y;
     uint32_t rays = 0, dropped = 0;
-    if (x < k.width && y < k.height) {
+    if (x < k.width && y < y1) {
         renderPixel(k, x, y);
         const glm::uvec2 c = k.counts.data[size_t(y) * k.counts.pitch + x];
         rays = c.x;
@@ -151,8 +152,27 @@ struct CudaBackend::Impl {
     // emission), then the sums and the gradient blocks' hits.
     PinnedBuffer staged[6], stagedSums, stagedBlockHits, stagedVbuffer;
     SceneView scene;                                         ///< device pointers
-    cudaEvent_t kernelStart = nullptr, kernelEnd = nullptr;  ///< around the launch, for Counts::kernelMs
+    cudaEvent_t kernelStart = nullptr, kernelEnd = nullptr;  ///< around the launches, for Counts::kernelMs
     FrameKernel device;                                      ///< the frame launched: device pointers
+    // The frame runs in bands of rows: each band's outputs are copied back (on `copies`) while the next band
+    // renders (on `kernels`), and copied into the graph's textures while later ones are still on their way.
+    static constexpr int kBands = 4;
+    cudaStream_t kernels = nullptr, copies = nullptr;
+    cudaEvent_t rendered[kBands] = {}, copied[kBands] = {};
+    uint32_t bandRows = 0;
+    glm::vec4* staged6[6] = {};  ///< this frame's staging of each output, or null
+
+    void createStreams() {
+        if (kernels) return;
+        check(cudaStreamCreate(&kernels), "cudaStreamCreate");
+        check(cudaStreamCreate(&copies), "cudaStreamCreate");
+        check(cudaEventCreate(&kernelStart), "cudaEventCreate");
+        check(cudaEventCreate(&kernelEnd), "cudaEventCreate");
+        for (int b = 0; b < kBands; ++b) {
+            check(cudaEventCreateWithFlags(&rendered[b], cudaEventDisableTiming), "cudaEventCreate");
+            check(cudaEventCreateWithFlags(&copied[b], cudaEventDisableTiming), "cudaEventCreate");
+        }
+    }
 
     void uploadScene(const SceneView& host, const BvhArrays& bvh) {
         meshArrays.clear();
@@ -211,8 +231,17 @@ struct CudaBackend::Impl {
 
 CudaBackend::CudaBackend() : mImpl(std::make_unique<Impl>()) {}
 CudaBackend::~CudaBackend() {
-    if (mImpl->kernelStart) cudaEventDestroy(mImpl->kernelStart);
-    if (mImpl->kernelEnd) cudaEventDestroy(mImpl->kernelEnd);
+    Impl& m = *mImpl;
+    if (!m.kernels) return;
+    cudaStreamSynchronize(m.kernels);
+    cudaStreamSynchronize(m.copies);
+    for (cudaEvent_t e : {m.kernelStart, m.kernelEnd}) cudaEventDestroy(e);
+    for (int b = 0; b < Impl::kBands; ++b) {
+        cudaEventDestroy(m.rendered[b]);
+        cudaEventDestroy(m.copied[b]);
+    }
+    cudaStreamDestroy(m.kernels);
+    cudaStreamDestroy(m.copies);
 }
 
 void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
@@ -261,15 +290,34 @@ void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
     d.counts = {static_cast<glm::uvec2*>(m.counts.reserve(size_t(w) * h * sizeof(glm::uvec2))), w};
     auto* sums = static_cast<unsigned long long*>(m.sums.reserve(2 * sizeof(unsigned long long)));
     check(cudaMemsetAsync(sums, 0, 2 * sizeof(unsigned long long)), "cudaMemsetAsync");
-    const dim3 block(16, 8), grid((w + block.x - 1) / block.x, (h + block.y - 1) / block.y);
-    if (!m.kernelStart) {
-        check(cudaEventCreate(&m.kernelStart), "cudaEventCreate");
-        check(cudaEventCreate(&m.kernelEnd), "cudaEventCreate");
+    m.createStreams();
+    // Bands of whole 8-row thread blocks; each band's outputs go to page-locked staging behind it.
+    const dim3 block(16, 8);
+    m.bandRows = ((h + Impl::kBands - 1) / Impl::kBands + block.y - 1) / block.y * block.y;
+    const PixelOut<glm::vec4> devOut[6] = {d.color, d.direct, d.indirect, d.albedo, d.specAlbedo, d.emission};
+    for (int i = 0; i < 6; ++i)
+        m.staged6[i] =
+            devOut[i].data ? static_cast<glm::vec4*>(m.staged[i].reserve(size_t(w) * h * sizeof(glm::vec4))) : nullptr;
+    // The uploads above ran on the legacy default stream, which these (blocking) streams wait for.
+    check(cudaEventRecord(m.kernelStart, m.kernels), "cudaEventRecord");
+    for (int b = 0; b < Impl::kBands; ++b) {
+        const uint32_t y0 = std::min(h, uint32_t(b) * m.bandRows), y1 = std::min(h, y0 + m.bandRows);
+        if (y0 < y1) {
+            const dim3 grid((w + block.x - 1) / block.x, (y1 - y0 + block.y - 1) / block.y);
+            renderFrame<<<grid, block, 0, m.kernels>>>(d, y0, y1, sums);
+            check(cudaGetLastError(), "the renderPixel launch");
+        }
+        check(cudaEventRecord(m.rendered[b], m.kernels), "cudaEventRecord");
+        check(cudaStreamWaitEvent(m.copies, m.rendered[b], 0), "cudaStreamWaitEvent");
+        const size_t offset = size_t(y0) * w, bytes = size_t(y1 - y0) * w * sizeof(glm::vec4);
+        for (int i = 0; i < 6; ++i)
+            if (m.staged6[i] && bytes)
+                check(cudaMemcpyAsync(m.staged6[i] + offset, devOut[i].data + offset, bytes, cudaMemcpyDeviceToHost,
+                                      m.copies),
+                      "cudaMemcpyAsync (outputs)");
+        check(cudaEventRecord(m.copied[b], m.copies), "cudaEventRecord");
     }
-    check(cudaEventRecord(m.kernelStart), "cudaEventRecord");
-    renderFrame<<<grid, block>>>(d, sums);
-    check(cudaGetLastError(), "the renderPixel launch");
-    check(cudaEventRecord(m.kernelEnd), "cudaEventRecord");
+    check(cudaEventRecord(m.kernelEnd, m.kernels), "cudaEventRecord");
     m.device = d;
 }
 
@@ -278,41 +326,37 @@ CudaBackend::Counts CudaBackend::finish(const FrameKernel& k, glm::uvec4* gradie
     const FrameKernel& d = m.device;
     const uint32_t w = k.width, h = k.height;
     const uint32_t blocksX = (w + 2) / 3, blocksY = (h + 2) / 3;
-    // Everything is queued behind the kernel on one stream, into page-locked memory, then waited for once.
     const PixelOut<glm::vec4> hostOut[6] = {k.color, k.direct, k.indirect, k.albedo, k.specAlbedo, k.emission};
-    const PixelOut<glm::vec4> devOut[6] = {d.color, d.direct, d.indirect, d.albedo, d.specAlbedo, d.emission};
-    const size_t plane = size_t(w) * h * sizeof(glm::vec4);
-    glm::vec4* staged[6] = {};
-    for (int i = 0; i < 6; ++i) {
-        if (!hostOut[i].data) continue;
-        staged[i] = static_cast<glm::vec4*>(m.staged[i].reserve(plane));
-        check(cudaMemcpyAsync(staged[i], devOut[i].data, plane, cudaMemcpyDeviceToHost), "cudaMemcpyAsync (outputs)");
-    }
     auto* sums = static_cast<unsigned long long*>(m.stagedSums.reserve(2 * sizeof(unsigned long long)));
-    check(cudaMemcpyAsync(sums, m.sums.reserve(0), 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost),
-          "cudaMemcpyAsync (counts)");
     glm::uvec4* hits = nullptr;
     if (gradientHits) {
         const size_t bytes = size_t(blocksX) * blocksY * sizeof(glm::uvec4);
         auto* dHits = static_cast<glm::uvec4*>(m.blockHits.reserve(bytes));
         const dim3 block(16, 8), grid((blocksX + block.x - 1) / block.x, (blocksY + block.y - 1) / block.y);
-        gatherGradientHits<<<grid, block>>>(d.primaryHit.data, w, h, gradientFrame, dHits);
+        gatherGradientHits<<<grid, block, 0, m.kernels>>>(d.primaryHit.data, w, h, gradientFrame, dHits);
         check(cudaGetLastError(), "the gradient hits' launch");
         hits = static_cast<glm::uvec4*>(m.stagedBlockHits.reserve(bytes));
-        check(cudaMemcpyAsync(hits, dHits, bytes, cudaMemcpyDeviceToHost), "cudaMemcpyAsync (gradient hits)");
+        check(cudaMemcpyAsync(hits, dHits, bytes, cudaMemcpyDeviceToHost, m.kernels), "cudaMemcpyAsync (hits)");
     }
-    check(cudaDeviceSynchronize(), "the renderPixel kernel");
-    // Into the graph's textures, whose rows may be padded: rows in parallel.
-    parallelFor2D(
-        w, h,
-        [&](const Tile& t) {
-            for (int i = 0; i < 6; ++i)
-                if (staged[i])
-                    for (uint32_t y = t.y0; y < t.y1; ++y)
-                        std::memcpy(hostOut[i].data + size_t(y) * hostOut[i].pitch, staged[i] + size_t(y) * w,
-                                    size_t(w) * sizeof(glm::vec4));
-        },
-        w, 16);
+    check(cudaMemcpyAsync(sums, m.sums.reserve(0), 2 * sizeof(unsigned long long), cudaMemcpyDeviceToHost, m.kernels),
+          "cudaMemcpyAsync (counts)");
+    // Each band into the graph's textures (whose rows may be padded) as soon as it has arrived, rows in parallel.
+    for (int b = 0; b < Impl::kBands; ++b) {
+        check(cudaEventSynchronize(m.copied[b]), "the renderPixel kernel");
+        const uint32_t y0 = std::min(h, uint32_t(b) * m.bandRows), y1 = std::min(h, y0 + m.bandRows);
+        if (y0 == y1) continue;
+        parallelFor2D(
+            w, y1 - y0,
+            [&](const Tile& t) {
+                for (int i = 0; i < 6; ++i)
+                    if (m.staged6[i])
+                        for (uint32_t y = y0 + t.y0; y < y0 + t.y1; ++y)
+                            std::memcpy(hostOut[i].data + size_t(y) * hostOut[i].pitch, m.staged6[i] + size_t(y) * w,
+                                        size_t(w) * sizeof(glm::vec4));
+            },
+            w, 16);
+    }
+    check(cudaStreamSynchronize(m.kernels), "the gradient hits' kernel");
     if (hits) std::memcpy(gradientHits, hits, size_t(blocksX) * blocksY * sizeof(glm::uvec4));
     float kernelMs = 0.f;
     check(cudaEventElapsedTime(&kernelMs, m.kernelStart, m.kernelEnd), "cudaEventElapsedTime");
