@@ -39,8 +39,9 @@ common=(--scene "$scene" --size "$size" --fps 30 --jitter halton --quiet)
   --stats "$out/denoised/stats.json"
 "$loom" render --graph graphs/PathTracerRaw.json "${common[@]}" --start-frame "$last" --frames 1 \
   --out "$out/denoised/noisy"
+# (No warm-up: the accumulation restarts at every frame of a moving scene, so frames before the last add nothing.)
 "$loom" render --graph graphs/PathTracerAccumulate.json "${common[@]}" --start-frame "$last" --frames 1 \
-  --set PathTracer.samplesPerPixel=256 --out "$out/denoised/reference"
+  --warmup 0 --set PathTracer.samplesPerPixel=256 --out "$out/denoised/reference"
 frame=$(printf '%04d' "$last")
 "$loom" image montage "$out/denoised/noisy/ToneMap.dst.$frame.png" "$out/denoised/ToneMap.dst.$frame.png" \
   "$out/denoised/reference/ToneMap.dst.$frame.png" -o "$out/denoised/side_by_side.png"

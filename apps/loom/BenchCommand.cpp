@@ -93,6 +93,8 @@ struct BenchOptions {
     std::vector<uint32_t> eventFrames;  ///< --event-frame: lighting steps the lag figures measure the recovery after
     std::string referenceSequence;      ///< --reference-sequence: given reference frames, "PATTERN[:LAYER]"
     int64_t referenceFirstFrame = 0;    ///< --reference-first-frame: the file number of bench frame 0
+    bool referencesOnly = false;        ///< --references-only: fill the reference cache, measure nothing
+    std::string referenceFrames;        ///< --reference-frames: with --references-only, the frames to render
     std::set<std::string> given;        ///< which of the options below were given (not only their values)
 };
 
@@ -311,10 +313,11 @@ std::string sequenceKeyText(const BenchOptions& o, uint32_t width, uint32_t heig
 
 /// How a reference is rendered: the reference graph, its path tracer set to these values.
 struct ReferenceSpec {
-    std::optional<int> maxBounces;       ///< overrides the reference graph's when set
+    std::optional<int> maxBounces;                 ///< overrides the reference graph's when set
     std::string pixelFilter = kPixelFilterCenter;  ///< the path tracer's ParamRole::PixelFilter
-    uint64_t firstFrame = 0;             ///< frames before it are not needed (left empty)
+    uint64_t firstFrame = 0;                       ///< frames before it are not needed (left empty)
     std::string label = "reference";
+    const std::set<uint64_t>* only = nullptr;  ///< with it, frames outside it are neither rendered nor read
 };
 
 /// Reference frames given as files (--reference-sequence): bench frame i is the file numbered i + first of the
@@ -619,7 +622,8 @@ ReferenceSet references(const BenchOptions& o, PluginRegistry& registry, const s
 
     const uint64_t count = shared ? 1 : o.frames;
     for (uint64_t i = 0; i < count; ++i) {
-        if (!shared && i < spec.firstFrame) {
+        // A shared image is frame 0's: the worker whose selection holds frame 0 renders it.
+        if ((!shared && i < spec.firstFrame) || (spec.only && !spec.only->count(i))) {
             out.frames.emplace_back();
             out.noise.emplace_back();
             continue;
@@ -1017,6 +1021,22 @@ void runBench(BenchOptions o) {
                       "which is not given",
                       "", "add --reference-sequence, or leave out --reference-first-frame");
     }
+    std::set<uint64_t> referenceFrames;
+    if (o.referencesOnly && givenReference)
+        throwBadInput("--references-only", "--references-only renders references, and --reference-sequence gives them",
+                      "", "leave out one of them");
+    if (!o.referenceFrames.empty()) {
+        if (!o.referencesOnly)
+            throwBadInput("--reference-frames",
+                          "--reference-frames selects the frames a --references-only run renders; a benchmark needs "
+                          "every frame's reference",
+                          "", "add --references-only, or leave out --reference-frames");
+        referenceFrames = parseFrameList(o.referenceFrames, "--reference-frames");
+        for (uint64_t f : referenceFrames)
+            if (f >= o.frames)
+                throwBadInput("--reference-frames", fmt::format("frame {} is not inside the sequence", f),
+                              fmt::format("frames in 0..{}", o.frames - 1));
+    }
     if (o.frames == 0) throwBadInput("--frames", "frame count is 0", "more frames than --warmup");
     if (o.frames > 100000) throwBadInput("--frames", "too many frames", "at most 100000");
     if (o.frames <= o.warmup)
@@ -1144,6 +1164,7 @@ void runBench(BenchOptions o) {
         graphBounces = std::make_pair(roleInt(*brute->graph, bruteTracer, ParamRole::MaxBounces),
                                       roleInt(*brute->graph, bruteTracer, ParamRole::RussianRouletteStart));
     ReferenceSpec spec;
+    if (!referenceFrames.empty()) spec.only = &referenceFrames;
     if (givenReference) {
         // Nothing to match: the references are what they are.
     } else if (o.referenceBounces == "graph") {
@@ -1219,6 +1240,7 @@ void runBench(BenchOptions o) {
         full.pixelFilter = spec.pixelFilter;
         full.firstFrame = o.warmup;
         full.label = "full-length reference";
+        full.only = spec.only;
         // Its length first (cheap: the graph only), to skip it when the lengths agree.
         const ReferenceSet fullSet = [&] {
             const GraphDesc refDesc = loadGraph(o.referenceGraph);
@@ -1227,7 +1249,11 @@ void runBench(BenchOptions o) {
             if (!t.empty() && roleInt(g, t, ParamRole::MaxBounces) == refSet.maxBounces) return ReferenceSet{};
             return references(o, registry, scene, width, height, full);
         }();
-        if (!fullSet.frames.empty()) {
+        if (o.referencesOnly) {
+            if (!fullSet.cache.empty())
+                spdlog::info("full-length reference: {} frame(s) rendered, {} from the cache, in {}", fullSet.rendered,
+                             fullSet.cached, fullSet.cache);
+        } else if (!fullSet.frames.empty()) {
             bench::BiasRow b;
             b.graphBounces = refSet.maxBounces;
             b.fullBounces = fullSet.maxBounces;
@@ -1249,6 +1275,12 @@ void runBench(BenchOptions o) {
                          b.flip);
             info.bias = b;
         }
+    }
+
+    if (o.referencesOnly) {
+        std::cout << fmt::format("references only: {} frame(s) rendered, {} from the cache, in {}\n", refSet.rendered,
+                                 refSet.cached, refSet.cache);
+        return;
     }
 
     std::vector<Run> results;
@@ -1378,6 +1410,12 @@ void addBenchCommand(CLI::App& app) {
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_option("--cache", o->cache, "reference cache folder (default $LOOM_CACHE, else ~/.cache/loom/references)");
     cmd->add_option("--out,-o", o->out, "output folder")->capture_default_str();
+    cmd->add_flag("--references-only", o->referencesOnly,
+                  "render the references into the cache and stop: nothing is measured or written to --out (many "
+                  "such runs, on other machines too, can fill one --cache folder)");
+    cmd->add_option("--reference-frames", o->referenceFrames,
+                    "with --references-only, the frames whose references to render, e.g. 0-15 or 3,7 (default: "
+                    "all); a static scene's one reference is frame 0's");
     cmd->add_option("--event-frame", o->eventFrames,
                     "a lighting step at this frame: the lag figures measure the recovery after it (repeatable)");
     cmd->add_flag("--plot", o->plot,

@@ -40,6 +40,7 @@ struct RenderOptions {
     bool quiet = false;
     bool poison = false;
     bool hold = false;
+    std::string warmup = "auto";
     SceneOptions scene;
 };
 
@@ -97,12 +98,29 @@ void runRender(const RenderOptions& o) {
     copts.poisonTransients = o.poison;
     graph.compile(copts);
 
+    // Warm-up: a shard of a sequence (--start-frame K > 0) first runs frames K - W .. K - 1 unwritten, so that a
+    // graph with history enters frame K as it would in one run from frame 0. auto: from frame 0 (the same frames
+    // bit for bit) where the graph keeps history, none where it keeps none; a number: at most that many frames
+    // (cheaper, and close once the history has forgotten its start). Nothing to warm for a held frame.
+    uint64_t warmup = 0;
+    if (o.warmup == "auto" || o.warmup == "all") {
+        warmup = (o.warmup == "all" || graph.plan().historyBytes > 0) ? o.startFrame : 0;
+    } else {
+        char* end = nullptr;
+        const unsigned long long n = std::strtoull(o.warmup.c_str(), &end, 10);
+        if (o.warmup.empty() || *end || o.warmup[0] == '-')
+            throwBadInput("--warmup", "'" + o.warmup + "' is not a frame count", "auto, all or a number of frames");
+        warmup = std::min<uint64_t>(n, o.startFrame);
+    }
+    if (o.hold) warmup = 0;
+    bool warming = false;
+
     const std::filesystem::path outDir(o.out);
     uint64_t dumped = 0;
     if (!o.dump.empty()) {
         graph.setFieldObserver(
             [&](const FrameInfo& f, const std::string& pass, const std::string& field, const Texture& tex) {
-                if (!dumpFrames.empty() && !dumpFrames.count(f.frameIndex)) return;
+                if (warming || (!dumpFrames.empty() && !dumpFrames.count(f.frameIndex))) return;
                 writeImage(outDir / frameFileName(pass, field, f.frameIndex, tex.format()), tex);
                 ++dumped;
             });
@@ -129,11 +147,17 @@ void runRender(const RenderOptions& o) {
             ++written;
         }
     };
+    warming = true;
+    for (uint64_t i = o.startFrame - warmup; i < o.startFrame && !stopRequested(); ++i)
+        graph.execute(sceneFrame(scene.get(), i, o.fps, width, height, i == o.startFrame - warmup));
+    warming = false;
+    if (warmup > 0) statsJson["warmup"] = {{"from", o.startFrame - warmup}, {"frames", warmup}};
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames && !stopRequested(); ++i) {
         const uint64_t index = o.startFrame + i;
-        const FrameInfo frame = o.hold ? sceneFrameAt(scene.get(), index, heldTime, width, height, i == 0)
-                                       : sceneFrame(scene.get(), index, o.fps, width, height, i == 0);
+        const bool first = i == 0 && warmup == 0;
+        const FrameInfo frame = o.hold ? sceneFrameAt(scene.get(), index, heldTime, width, height, first)
+                                       : sceneFrame(scene.get(), index, o.fps, width, height, first);
         graph.execute(frame);
         if (i > 0) {
             const auto stats = graph.lastStats();
@@ -213,6 +237,10 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--stats", o->statsFile, "write per-frame timings and counters as JSON");
     cmd->add_option("--fps", o->fps, "frames per second of the animation clock")->capture_default_str();
     cmd->add_flag("--quiet,-q", o->quiet, "no progress bar or summary");
+    cmd->add_option("--warmup", o->warmup,
+                    "before --start-frame K, run frames unwritten so history is as in one run from frame 0: auto "
+                    "(from frame 0 where the graph keeps history, else none), all, or a number of frames")
+        ->capture_default_str();
     cmd->add_flag("--hold", o->hold,
                   "hold one frame: run --frames iterations of frame --start-frame at its scene time and camera "
                   "(fresh random numbers each; an accumulating graph converges that frame) and write the outputs "

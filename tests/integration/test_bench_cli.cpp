@@ -293,6 +293,48 @@ TEST_F(BenchCli, SecondRunHitsTheCacheWithIdenticalMetricsOnAnyThreadCount) {
     EXPECT_EQ(entries, (std::map<std::string, int>{{"bruteforce", 1}, {"full", 2}, {"matched", 2}}));
 }
 
+// Workers that each render some frames' references (--references-only --reference-frames) fill one cache: a
+// benchmark after them renders nothing, and the cached images are those of one machine rendering every frame, bit
+// for bit (each frame's seeds depend on the frame alone).
+TEST_F(BenchCli, ReferencesOnlyWorkersFillOneSharedCache) {
+    const std::string graph = " --graph PathTracerATrous";
+    const auto a = run(tinyArgs("a") + graph + " --references-only --reference-frames 0-3");
+    ASSERT_EQ(a.code, 0) << a.output;
+    EXPECT_NE(a.output.find("references only: 4 frame(s) rendered, 0 from the cache"), std::string::npos) << a.output;
+    const auto b = run(tinyArgs("b") + graph + " --references-only --reference-frames 4-7 --threads 1");
+    ASSERT_EQ(b.code, 0) << b.output;
+    EXPECT_NE(b.output.find("references only: 4 frame(s) rendered, 0 from the cache"), std::string::npos) << b.output;
+    EXPECT_FALSE(fs::exists(mDir / "a" / "results.json"));
+    EXPECT_FALSE(fs::exists(mDir / "b" / "results.json"));
+
+    const json c = benchOk(kDynamic, "c", "--frames 8 --warmup 2 --reference-spp 32 --brute-force-spp none" + graph);
+    EXPECT_EQ(c["reference"]["frames_cached"].get<int>(), 8);
+    EXPECT_EQ(c["reference"]["frames_rendered"].get<int>(), 0);
+    EXPECT_EQ(c["bias"]["frames_rendered"].get<int>(), 0);
+
+    // One machine, every frame, into another cache: the same files.
+    const auto one =
+        run("bench --scene " + loom::test::shellQuoted(kDynamic) +
+            " --size 64x64 --frames 8 --warmup 2 --reference-spp 32 --cache single --references-only" + graph);
+    ASSERT_EQ(one.code, 0) << one.output;
+    size_t compared = 0;
+    for (const auto& entry : fs::directory_iterator(mDir / "single"))
+        for (const auto& f : fs::directory_iterator(entry.path())) {
+            if (f.path().extension() != ".exr") continue;
+            const fs::path shared = mDir / "cache" / entry.path().filename() / f.path().filename();
+            ASSERT_TRUE(fs::exists(shared)) << shared;
+            std::ifstream x(f.path(), std::ios::binary), y(shared, std::ios::binary);
+            const std::string bx((std::istreambuf_iterator<char>(x)), {}), by((std::istreambuf_iterator<char>(y)), {});
+            EXPECT_TRUE(bx == by) << f.path().filename();
+            ++compared;
+        }
+    // Matched and full-length references, image and variance: 8 + 6 frames (the full one skips the warm-up).
+    EXPECT_EQ(compared, 2u * (8u + 6u));
+
+    expectBadInput({{"--reference-frames", "0-3"}}, {"--reference-frames", "--references-only"});
+    expectBadInput({{"--references-only", ""}, {"--reference-frames", "5-9"}}, {"frame 8 is not inside the sequence"});
+}
+
 TEST_F(BenchCli, SweepGivesOneResultPerValue) {
     const json results =
         benchOk(kDynamic, "out",

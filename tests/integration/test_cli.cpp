@@ -161,6 +161,50 @@ TEST_F(Cli, RenderWritesStatsForEveryFrame) {
     expectNoTemporaries();
 }
 
+// A shard of a sequence (--start-frame K) first runs frames 0..K-1 unwritten where the graph keeps history
+// (--warmup auto), so its frames are those of one run from frame 0 bit for bit: SVGF's filtered image, dumped as
+// float EXR, on the moving Cornell box. Cold (--warmup 0) they differ, which is why; a graph without history warms
+// nothing up and needs none.
+TEST_F(Cli, ShardsWarmUpHistoryToGiveTheFramesOfOneRun) {
+    const std::string scene = quoted(loom::test::dataScene("cornell_dynamic.gltf"));
+    const std::string svgf = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/PathTracerSVGF.json");
+    const std::string common =
+        " --scene " + scene + " --size 64x64 -q --dump SVGF.filtered --set PathTracer.device=cpu";
+    ASSERT_EQ(loom("render --graph " + svgf + common + " --frames 6 --out long").code, 0);
+    const RunResult shard = loom("render --graph " + svgf + common +
+                                 " --frames 2 --start-frame 4 --out shard "
+                                 "--stats stats.json");
+    ASSERT_EQ(shard.code, 0) << shard.output;
+    ASSERT_EQ(loom("render --graph " + svgf + common + " --frames 2 --start-frame 4 --warmup 0 --out cold").code, 0);
+    // Only the shard's own frames are written (and dumped).
+    EXPECT_EQ(files("shard"), (std::vector<std::string>{"SVGF.filtered.0004.exr", "SVGF.filtered.0005.exr",
+                                                        "ToneMap.dst.0004.png", "ToneMap.dst.0005.png"}));
+    const nlohmann::json stats = nlohmann::json::parse(readText("stats.json"), nullptr, false);
+    EXPECT_EQ(stats["warmup"]["from"], 0);
+    EXPECT_EQ(stats["warmup"]["frames"], 4);
+    ASSERT_EQ(stats["frames"].size(), 2u);
+    for (const char* f : {"0004", "0005"}) {
+        const std::string name = std::string("/SVGF.filtered.") + f + ".exr";
+        const std::string one = readText("long" + name), warm = readText("shard" + name),
+                          cold = readText("cold" + name);
+        ASSERT_FALSE(one.empty()) << name;
+        EXPECT_TRUE(one == warm) << name << ": the shard's frame differs from one run's";
+        EXPECT_FALSE(one == cold) << name << ": history made no difference, so the test shows nothing";
+    }
+
+    // A graph without history: no warm-up, and the frames are the same anyway.
+    const std::string pt = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/PathTracer.json");
+    const std::string plain =
+        " --scene " + scene + " --size 64x64 -q --dump PathTracer.color --set PathTracer.device=cpu";
+    ASSERT_EQ(loom("render --graph " + pt + plain + " --frames 3 --out ptlong").code, 0);
+    ASSERT_EQ(loom("render --graph " + pt + plain + " --frames 1 --start-frame 2 --out ptshard --stats pt.json").code,
+              0);
+    EXPECT_FALSE(nlohmann::json::parse(readText("pt.json"), nullptr, false).contains("warmup"));
+    EXPECT_EQ(readText("ptlong/PathTracer.color.0002.exr"), readText("ptshard/PathTracer.color.0002.exr"));
+
+    expectBadInput(render("--start-frame 2 --warmup two"), {"--warmup", "'two' is not a frame count"});
+}
+
 // An output file that cannot be written (a folder, a missing folder) is bad input; --stats is checked before the
 // first frame, not after the last.
 TEST_F(Cli, OutputFilePathsAreCheckedFirst) {
@@ -522,9 +566,9 @@ TEST_F(Cli, ACameraPathOnAnAnimatedCameraIsIgnoredWithAWarning) {
     // cornell_dynamic animates its camera: the frames follow it, and --camera-path says it has no effect; on the
     // still box the path applies silently.
     const std::string gbuffer = quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/GBufferRT.json");
-    RunResult r = loom("render --graph " + gbuffer + " --scene " +
-                       quoted(loom::test::dataScene("cornell_dynamic.gltf")) +
-                       " --size 16x16 --camera-path orbit -q --out out");
+    RunResult r =
+        loom("render --graph " + gbuffer + " --scene " + quoted(loom::test::dataScene("cornell_dynamic.gltf")) +
+             " --size 16x16 --camera-path orbit -q --out out");
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_CONTAINS(r.output, "--camera-path orbit is ignored");
     EXPECT_CONTAINS(r.output, "animates its camera");
@@ -604,8 +648,9 @@ TEST_F(Cli, HoldAccumulatesOneFrameOfAnAnimatedScene) {
     EXPECT_EQ(moving.output.find(restarted, at + 1), std::string::npos) << moving.output;  // once
     EXPECT_NE(moving.output.find("--hold"), std::string::npos) << moving.output;
     EXPECT_EQ(run("held3", "--start-frame 30 --frames 3 --hold").output.find("restarted"), std::string::npos);
-    const RunResult still = loom("render --graph held.json --scene " + quoted(loom::test::dataScene("cornell_box.gltf")) +
-                                 " --size 32x32 -q --out still --frames 3");
+    const RunResult still =
+        loom("render --graph held.json --scene " + quoted(loom::test::dataScene("cornell_box.gltf")) +
+             " --size 32x32 -q --out still --frames 3");
     EXPECT_EQ(still.code, 0) << still.output;
     EXPECT_EQ(still.output.find("restarted"), std::string::npos) << still.output;
     // The default graph's accumulator restarts under motion by design (its output is SVGF's then): no warning.
