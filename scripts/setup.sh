@@ -13,6 +13,7 @@ PACKAGES=(
   python3-matplotlib
   libegl-dev libgl-dev libegl1-mesa-dev libgl1-mesa-dri libgles-dev
   xvfb xauth xdotool
+  slurm-wlm munge
 )
 
 missing=()

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <regex>
@@ -41,6 +42,7 @@ struct RenderOptions {
     bool poison = false;
     bool hold = false;
     std::string warmup = "auto";
+    uint64_t seedOffset = 0;
     SceneOptions scene;
 };
 
@@ -113,6 +115,10 @@ void runRender(const RenderOptions& o) {
         warmup = std::min<uint64_t>(n, o.startFrame);
     }
     if (o.hold) warmup = 0;
+    if (o.seedOffset > 0 && !o.hold)
+        throwBadInput("--seed-offset", "--seed-offset shards the samples of a held frame, and there is no --hold",
+                      "--hold with --seed-offset", "add --hold, or leave out --seed-offset");
+    if (o.seedOffset > (uint64_t(1) << 40)) throwBadInput("--seed-offset", "too large", "at most 2^40");
     bool warming = false;
 
     const std::filesystem::path outDir(o.out);
@@ -140,10 +146,16 @@ void runRender(const RenderOptions& o) {
     // cannot converge does not pass silently.
     uint64_t restarts = 0;
     uint64_t done = 0;  // frames finished
+    // A held frame's EXRs say which samples they hold, so that `loom image merge` can weigh and check shards.
+    std::map<std::string, std::string> heldAttributes;
     const auto writeOutputs = [&](uint64_t named) {
+        if (o.hold)
+            heldAttributes = {{"loomHeldFrame", std::to_string(o.startFrame)},
+                              {"loomSeedOffset", std::to_string(o.seedOffset)},
+                              {"loomIterations", std::to_string(done)}};
         for (const auto& out : graph.outputs()) {
             const Texture* tex = graph.fieldTexture(out.pass + "." + out.channel);
-            writeImage(outDir / frameFileName(out.pass, out.channel, named, tex->format()), *tex);
+            writeImage(outDir / frameFileName(out.pass, out.channel, named, tex->format()), *tex, heldAttributes);
             ++written;
         }
     };
@@ -154,7 +166,9 @@ void runRender(const RenderOptions& o) {
     if (warmup > 0) statsJson["warmup"] = {{"from", o.startFrame - warmup}, {"frames", warmup}};
     auto start = std::chrono::steady_clock::now();
     for (uint64_t i = 0; i < o.frames && !stopRequested(); ++i) {
-        const uint64_t index = o.startFrame + i;
+        // Held, iteration i runs as frame index K + seed offset + i: shards with disjoint offsets draw disjoint
+        // samples of frame K, and together the samples of one longer run.
+        const uint64_t index = o.startFrame + (o.hold ? o.seedOffset : 0) + i;
         const bool first = i == 0 && warmup == 0;
         const FrameInfo frame = o.hold ? sceneFrameAt(scene.get(), index, heldTime, width, height, first)
                                        : sceneFrame(scene.get(), index, o.fps, width, height, first);
@@ -166,6 +180,7 @@ void runRender(const RenderOptions& o) {
                 return restarted != pass.second.end() && restarted->second != 0.0;
             });
         }
+        done = i + 1;
         if (!o.hold || i + 1 == o.frames) writeOutputs(o.hold ? o.startFrame : frame.frameIndex);
         if (!o.statsFile.empty()) {
             nlohmann::json jf = {{"frame", frame.frameIndex}, {"passes", nlohmann::json::object()}};
@@ -179,7 +194,6 @@ void runRender(const RenderOptions& o) {
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
             progress(i + 1, o.frames, elapsed / double(i + 1));
         }
-        done = i + 1;
     }
     const int stoppedBy = done < o.frames ? stopSignal() : 0;
     if (stoppedBy) {
@@ -240,6 +254,10 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--warmup", o->warmup,
                     "before --start-frame K, run frames unwritten so history is as in one run from frame 0: auto "
                     "(from frame 0 where the graph keeps history, else none), all, or a number of frames")
+        ->capture_default_str();
+    cmd->add_option("--seed-offset", o->seedOffset,
+                    "with --hold: iteration i runs as frame index K + offset + i, so runs with disjoint offsets "
+                    "render disjoint samples of frame K (merge them with loom image merge)")
         ->capture_default_str();
     cmd->add_flag("--hold", o->hold,
                   "hold one frame: run --frames iterations of frame --start-frame at its scene time and camera "

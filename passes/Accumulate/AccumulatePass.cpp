@@ -23,6 +23,9 @@ const char kSumRG[] = "sumRG";
 const char kSumBA[] = "sumBA";
 const char kCount[] = "count";
 const char kFrames[] = "frames";
+const char kPartialSumRG[] = "partialSumRG";
+const char kPartialSumBA[] = "partialSumBA";
+const char kPartialCount[] = "partialCount";
 
 const char* const kStateFields[] = {kSum, kCompensation, kSumRG, kSumBA, kCount, kFrames};
 
@@ -108,6 +111,15 @@ void AccumulatePass::reflect(Reflection& r, const CompileInfo&) const {
             "turns into the mean as frames accumulate (see denoisedFrames)");
     r.output(kDst, Format::RGBA32F)
         .doc("mean of the finite samples since the last reset; with `denoised`, the blend of the two");
+    r.output(kPartialSumRG, Format::RGBA32U)
+        .optional()
+        .doc(
+            "the running sums of R and G as doubles, laid out as sumRG (any precision: float and kahan sums widened), "
+            "for merging partial accumulations of one frame (`loom image merge`)");
+    r.output(kPartialSumBA, Format::RGBA32U).optional().doc("the sums of B and A, as partialSumRG");
+    r.output(kPartialCount, Format::R32U)
+        .optional()
+        .doc("the finite samples in each pixel's sums: dst is partialSum / partialCount (0 where it is 0)");
     r.history(kSum, Format::RGBA32F)
         .doc("running sum: the state for float and kahan; for double, the double sum rounded to float (to inspect)");
     r.history(kCompensation, Format::RGBA32F)
@@ -171,6 +183,30 @@ void AccumulatePass::clearUnusedState(PassContext& ctx) const {
     }
 }
 
+void AccumulatePass::writePartial(PassContext& ctx) const {
+    Texture* rgOut = ctx.output(kPartialSumRG);
+    Texture* baOut = ctx.output(kPartialSumBA);
+    if (Texture* count = ctx.output(kPartialCount)) count->copyFrom(ctx.historyCur(kCount));
+    if (!rgOut && !baOut) return;
+    if (mPrecision == Precision::Double) {
+        if (rgOut) rgOut->copyFrom(ctx.historyCur(kSumRG));
+        if (baOut) baOut->copyFrom(ctx.historyCur(kSumBA));
+        return;
+    }
+    const auto sum = ctx.historyCur(kSum).view<glm::vec4>();
+    const auto comp = ctx.historyCur(kCompensation).view<glm::vec4>();
+    const auto rg = rgOut ? rgOut->view<glm::uvec4>() : ImageView<glm::uvec4>{};
+    const auto ba = baOut ? baOut->view<glm::uvec4>() : ImageView<glm::uvec4>{};
+    parallelForPixels(sum.width, sum.height, [&](uint32_t x, uint32_t y) {
+        glm::dvec4 d(sum.at(x, y));
+        if (mPrecision == Precision::Kahan) d += glm::dvec4(comp.at(x, y));
+        glm::uvec4 a, b;
+        accumulate::packDoubleSum(d, a, b);
+        if (rg.data) rg.at(x, y) = a;
+        if (ba.data) ba.at(x, y) = b;
+    });
+}
+
 void AccumulatePass::execute(PassContext& ctx) {
     const auto src = ctx.input(kSrc)->view<glm::vec4>();
     const auto dst = ctx.output(kDst)->view<glm::vec4>();
@@ -180,6 +216,8 @@ void AccumulatePass::execute(PassContext& ctx) {
         const auto pass = denoised ? denoised->view<glm::vec4>() : src;
         parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) { dst.at(x, y) = pass.at(x, y); });
         for (const char* field : kStateFields) ctx.historyCur(field).clear();
+        for (const char* field : {kPartialSumRG, kPartialSumBA, kPartialCount})
+            if (Texture* t = ctx.output(field)) t->clear();
         mRestartPending = true;
         ctx.stats().set(stat::kAccumulatedFrames, 0);
         ctx.stats().set(kStatNonFinite, 0);
@@ -233,6 +271,7 @@ void AccumulatePass::execute(PassContext& ctx) {
             break;
     }
     ctx.historyCur(kFrames).view<uint32_t>().at(0, 0) = frames;
+    writePartial(ctx);
     if (mStaleFrames > 0) {
         clearUnusedState(ctx);
         --mStaleFrames;

@@ -43,6 +43,8 @@ public:
     void execute(PassContext& ctx) override;
 
 private:
+    /// The partial* outputs, where used: the state after this frame as double sums and counts.
+    void writePartial(PassContext& ctx) const;
     /// Has the camera, a scene instance or a punctual light moved, the scene's lighting changed, or a parameter
     /// of a pass upstream changed, in this frame? Call once per frame: it remembers the lights' poses.
     bool sceneMoved(const PassContext& ctx);

@@ -3,8 +3,6 @@
 // dumpable history, parameter independence of reflection. The per-pixel kernels on their own: passes/Accumulate/tests/.
 #include <gtest/gtest.h>
 
-#include "TestUtil.h"
-
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -19,6 +17,7 @@
 #include <vector>
 
 #include "../../passes/Accumulate/AccumulateKernels.h"
+#include "TestUtil.h"
 #include "loom/Camera.h"
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
@@ -36,7 +35,9 @@ using SampleFn = std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)
 using SequencePass = test::FunctionSource;
 
 /// The build's plugins (AccumulatePass, the test passes) plus Sequence.
-PluginRegistry& registry() { return test::registryWithFunctionSource(); }
+PluginRegistry& registry() {
+    return test::registryWithFunctionSource();
+}
 
 const char* const kPrecisions[] = {"float", "kahan", "double"};
 
@@ -543,8 +544,14 @@ TEST(AccumulatePass, HistoryFieldsCanBeObservedAndHoldTheState) {
             });
         h.source->fn = [](uint64_t frame, uint32_t x, uint32_t) { return glm::vec4(0.5f + float(x)); };
         h.run(3);
-        EXPECT_EQ(seen,
-                  (std::set<std::string>{"src", "dst", "sum", "compensation", "sumRG", "sumBA", "count", "frames"}));
+        EXPECT_EQ(seen, (std::set<std::string>{"src", "dst", "sum", "compensation", "sumRG", "sumBA", "count", "frames",
+                                               "partialSumRG", "partialSumBA", "partialCount"}));
+        // The partial outputs (for merging shards) hold the state as double sums and counts in every precision:
+        // three samples of 4.5 at x = 4, so dst = partialSum / partialCount.
+        EXPECT_EQ(last["partialCount"]->view<uint32_t>().at(4, 2), 3u);
+        EXPECT_EQ(accumulate::unpackDoubleSum(last["partialSumRG"]->view<glm::uvec4>().at(4, 2),
+                                              last["partialSumBA"]->view<glm::uvec4>().at(4, 2)),
+                  glm::dvec4(13.5));
         // The dumped state: three samples of 0.5 + x.
         EXPECT_EQ(last["count"]->view<uint32_t>().at(4, 2), 3u);
         EXPECT_EQ(last["frames"]->width(), 1u);

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <glm/vec4.hpp>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "TestUtil.h"
+#include "loom/ExrFile.h"
 #include "loom/ImageIO.h"
 #include "loom/Texture.h"
 
@@ -203,6 +205,55 @@ TEST_F(Cli, ShardsWarmUpHistoryToGiveTheFramesOfOneRun) {
     EXPECT_EQ(readText("ptlong/PathTracer.color.0002.exr"), readText("ptshard/PathTracer.color.0002.exr"));
 
     expectBadInput(render("--start-frame 2 --warmup two"), {"--warmup", "'two' is not a frame count"});
+}
+
+// Sample shards of one held frame (--seed-offset) merged by `loom image merge` give one run's reference bit for bit:
+// the shards keep their double sums and counts (graphs/ReferenceShard.json), the merge adds them in double and
+// divides as AccumulatePass does. Each shard's EXRs say which samples they hold; overlapping shards are refused.
+TEST_F(Cli, SampleShardsMergeIntoOneRunsReferenceBitForBit) {
+    const std::string common = "render --graph " +
+                               quoted(std::string(LOOM_TEST_SOURCE_DIR) + "/graphs/ReferenceShard.json") + " --scene " +
+                               quoted(loom::test::dataScene("cornell_dynamic.gltf")) +
+                               " --size 64x64 --start-frame 3 --hold -q --set PathTracer.samplesPerPixel=2"
+                               " --set PathTracer.device=cpu";
+    ASSERT_EQ(loom(common + " --frames 8 --out single").code, 0);
+    ASSERT_EQ(loom(common + " --frames 3 --out a").code, 0);
+    ASSERT_EQ(loom(common + " --frames 5 --seed-offset 3 --out b").code, 0);
+    const loom::ExrFile header(path("b/Accumulate.dst.0003.exr"));
+    EXPECT_EQ(header.stringAttribute("loomHeldFrame"), "3");
+    EXPECT_EQ(header.stringAttribute("loomSeedOffset"), "3");
+    EXPECT_EQ(header.stringAttribute("loomIterations"), "5");
+
+    const auto bits = [&](const std::string& rel) {
+        const loom::Texture t = loom::readImage(path(rel));
+        std::vector<uint32_t> v;
+        for (uint32_t y = 0; y < t.height(); ++y)
+            for (uint32_t x = 0; x < t.width(); ++x)
+                for (int c = 0; c < 4; ++c) {
+                    const float f = t.texel(x, y, c);
+                    uint32_t u;
+                    std::memcpy(&u, &f, 4);
+                    v.push_back(u);
+                }
+        return v;
+    };
+    for (const char* order : {"a b", "b a"}) {
+        const RunResult merged = loom(std::string("image merge ") + order + " -o merged");
+        ASSERT_EQ(merged.code, 0) << merged.output;
+        EXPECT_CONTAINS(merged.output, "2 shards, 8 iterations");
+        EXPECT_TRUE(bits("merged/Accumulate.mean.0003.exr") == bits("single/Accumulate.dst.0003.exr")) << order;
+        EXPECT_TRUE(bits("merged/Accumulate.partialCount.0003.exr") == bits("single/Accumulate.partialCount.0003.exr"));
+    }
+    // Neither shard alone is the reference: the merge is what makes it.
+    EXPECT_FALSE(bits("a/Accumulate.dst.0003.exr") == bits("single/Accumulate.dst.0003.exr"));
+    EXPECT_FALSE(bits("b/Accumulate.dst.0003.exr") == bits("single/Accumulate.dst.0003.exr"));
+
+    const RunResult overlap = loom("image merge a b a -o twice");
+    EXPECT_EQ(overlap.code, 2) << overlap.output;
+    EXPECT_CONTAINS(overlap.output, "overlap");
+    const RunResult noPartials = loom("image merge single/.. a -o none");
+    EXPECT_EQ(noPartials.code, 2) << noPartials.output;
+    expectBadInput(render("--seed-offset 4"), {"--seed-offset", "--hold"});
 }
 
 // An output file that cannot be written (a folder, a missing folder) is bad input; --stats is checked before the

@@ -5,6 +5,7 @@
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 #include <ImfStandardAttributes.h>
+#include <ImfStringAttribute.h>
 #include <ImfThreading.h>
 #include <unistd.h>
 
@@ -203,6 +204,12 @@ std::optional<std::array<float, 16>> ExrFile::worldToCamera() const {
     for (int r = 0; r < 4; ++r)
         for (int c = 0; c < 4; ++c) out[size_t(r * 4 + c)] = m[r][c];
     return out;
+}
+
+std::optional<std::string> ExrFile::stringAttribute(const std::string& name) const {
+    const auto* a = mImpl->file->header().findTypedAttribute<Imf::StringAttribute>(name);
+    if (!a) return std::nullopt;
+    return a->value();
 }
 
 std::vector<std::string> ExrFile::layerChannels(std::string_view layer) const {

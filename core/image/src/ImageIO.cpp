@@ -5,6 +5,7 @@
 #include <ImfHeader.h>
 #include <ImfOutputFile.h>
 #include <ImfStdIO.h>
+#include <ImfStringAttribute.h>
 #include <ImfVersion.h>
 #include <stb/stb_image.h>
 #include <stb/stb_image_write.h>
@@ -54,30 +55,36 @@ std::string lowerExtension(const fs::path& path) {
     return ext;
 }
 
-
 Imf::PixelType exrPixelType(ComponentType c) {
     switch (c) {
-    case ComponentType::Float32: return Imf::FLOAT;
-    case ComponentType::Float16: return Imf::HALF;
-    case ComponentType::Uint32: return Imf::UINT;
-    case ComponentType::Unorm8: break;
+        case ComponentType::Float32:
+            return Imf::FLOAT;
+        case ComponentType::Float16:
+            return Imf::HALF;
+        case ComponentType::Uint32:
+            return Imf::UINT;
+        case ComponentType::Unorm8:
+            break;
     }
     return Imf::NUM_PIXELTYPES;
 }
 
-size_t pixelTypeSize(Imf::PixelType t) { return t == Imf::HALF ? 2 : 4; }
+size_t pixelTypeSize(Imf::PixelType t) {
+    return t == Imf::HALF ? 2 : 4;
+}
 
-void writeExr(const fs::path& path, const Texture& tex) {
+void writeExr(const fs::path& path, const Texture& tex, const std::map<std::string, std::string>& attributes) {
     const FormatInfo& info = formatInfo(tex.format());
     const Imf::PixelType type = exrPixelType(info.component);
     Imf::Header header(int(tex.width()), int(tex.height()));
+    for (const auto& [name, value] : attributes) header.insert(name, Imf::StringAttribute(value));
     Imf::FrameBuffer frameBuffer;
     // OpenEXR's slices take non-const pointers, but writing only reads through them.
     char* base = reinterpret_cast<char*>(const_cast<std::byte*>(tex.data()));
     for (uint32_t c = 0; c < info.channels; ++c) {
         header.channels().insert(kChannelNames[c], Imf::Channel(type));
-        frameBuffer.insert(kChannelNames[c], Imf::Slice(type, base + c * pixelTypeSize(type), info.bytesPerPixel,
-                                                        tex.rowPitch()));
+        frameBuffer.insert(kChannelNames[c],
+                           Imf::Slice(type, base + c * pixelTypeSize(type), info.bytesPerPixel, tex.rowPitch()));
     }
     writeAtomically(path, [&](std::ofstream& out, const std::string& tmp) {
         Imf::StdOFStream stream(out, tmp.c_str());
@@ -319,24 +326,25 @@ std::string describeImageDecodeFailure(const unsigned char* bytes, size_t size, 
     return "not a PNG or JPEG image (it starts with bytes " + lead + ")" + stb;
 }
 
-const char* imageExtension(Format f) { return formatInfo(f).component == ComponentType::Unorm8 ? "png" : "exr"; }
+const char* imageExtension(Format f) {
+    return formatInfo(f).component == ComponentType::Unorm8 ? "png" : "exr";
+}
 
-void writeImage(const fs::path& path, const Texture& tex) {
+void writeImage(const fs::path& path, const Texture& tex, const std::map<std::string, std::string>& attributes) {
     if (tex.empty() || tex.width() == 0 || tex.height() == 0) {
-        throwRuntime(path, "cannot write an empty " + std::to_string(tex.width()) + "x" +
-                               std::to_string(tex.height()) + " image");
+        throwRuntime(path, "cannot write an empty " + std::to_string(tex.width()) + "x" + std::to_string(tex.height()) +
+                               " image");
     }
     const std::string expected = imageExtension(tex.format());
     const std::string ext = lowerExtension(path);
     if ((ext == "exr" || ext == "png") && ext != expected) {
         throwBadInput("", "a " + std::string(formatName(tex.format())) + " texture cannot be written as ." + ext,
-                      "a ." + expected + " file", "name the file with the ." + expected + " extension",
-                      path.string());
+                      "a ." + expected + " file", "name the file with the ." + expected + " extension", path.string());
     }
     if (expected == "png") {
         writePng(path, tex);
     } else {
-        writeExr(path, tex);
+        writeExr(path, tex, attributes);
     }
 }
 
@@ -345,8 +353,8 @@ namespace {
 void checkReadable(const fs::path& path) {
     std::error_code ec;
     if (!fs::exists(path, ec)) {
-        throwBadInput("", "image file not found", "an existing image file",
-                      "check the path and the working folder", path.string());
+        throwBadInput("", "image file not found", "an existing image file", "check the path and the working folder",
+                      path.string());
     }
     if (!fs::is_regular_file(path, ec)) {
         throwBadInput("", "not a regular file", "an image file", "", path.string());

@@ -71,6 +71,8 @@ public:
     /// OpenEXR's standard attribute worldToCamera, row-major, for row vectors (p_camera = p_world * M), if the
     /// file has it.
     std::optional<std::array<float, 16>> worldToCamera() const;
+    /// A string attribute of the header (writeImage's `attributes`), if the file has one of that name and type.
+    std::optional<std::string> stringAttribute(const std::string& name) const;
 
     /// The channels of `layer` by component: R, G, B, A, else X, Y, Z, W, else U, V under "<layer>." (the bare
     /// names for an empty layer), each at its component's place, "" where the file lacks it, trailing gaps

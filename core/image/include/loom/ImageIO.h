@@ -3,6 +3,7 @@
 // for 8-bit formats (stb). Writes are atomic (loom/Files.h), so a reader
 // never sees a half-written image.
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -18,8 +19,11 @@ const char* imageExtension(Format f);
 /// HALF, R32U/RG32U/RGBA32U as UINT; channels named R, G, B, A. PNG:
 /// RGBA8Unorm and RGBA8Srgb as 4-channel 8-bit. Throws loom::Error (Runtime
 /// kind for I/O failures, naming the path; BadInput when the folder does not
-/// exist or is not writable).
-void writeImage(const std::filesystem::path& path, const Texture& tex);
+/// exist or is not writable). `attributes`: string attributes of an EXR's
+/// header (name -> value), which ExrFile::stringAttribute reads back; a PNG
+/// carries none.
+void writeImage(const std::filesystem::path& path, const Texture& tex,
+                const std::map<std::string, std::string>& attributes = {});
 
 /// Reads an EXR (into RGBA32F, or RGBA32U when all channels are UINT; missing
 /// channels are 0, alpha 1), a Radiance RGBE .hdr (RGBA32F, alpha 1) or a PNG
