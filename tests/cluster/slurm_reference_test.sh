@@ -38,12 +38,12 @@ chmod 400 "$t/munge.key"
 munged --force --socket="$t/munge.sock" --key-file="$t/munge.key" --pid-file="$t/munged.pid" \
   --log-file="$t/munged.log" --seed-file="$t/munge.seed" || fail "munged did not start"
 
-host="$(hostname)"
+host="$(hostname)"  # slurmd finds its node by this name; the address is given, so nothing needs DNS
 port=$((20000 + $$ % 20000))
 mkdir -p "$t/state" "$t/spool"
 cat > "$t/slurm.conf" <<EOF
 ClusterName=loomtest
-SlurmctldHost=$host
+SlurmctldHost=$host(127.0.0.1)
 SlurmUser=$(id -un)
 SlurmdUser=$(id -un)
 AuthType=auth/munge
@@ -68,7 +68,7 @@ ReturnToService=2
 MinJobAge=600
 SlurmctldLogFile=$t/slurmctld.log
 SlurmdLogFile=$t/slurmd.log
-NodeName=$host CPUs=$(nproc) State=UNKNOWN
+NodeName=$host NodeAddr=127.0.0.1 CPUs=$(nproc) State=UNKNOWN
 PartitionName=loom Nodes=$host Default=YES MaxTime=INFINITE State=UP
 EOF
 export SLURM_CONF="$t/slurm.conf"
