@@ -17,6 +17,7 @@
 
 #include "CliUtil.h"
 #include "Display.h"
+#include "loom/DoubleTexels.h"
 #include "loom/Error.h"
 #include "loom/ExrFile.h"
 #include "loom/Files.h"
@@ -60,21 +61,6 @@ void runMontage(const std::vector<std::string>& inputs, const std::string& outpu
 }
 
 namespace fs = std::filesystem;
-
-/// A double from the (low, high) words of its bits, as AccumulatePass lays its sums out.
-double fromWords(uint32_t low, uint32_t high) {
-    const uint64_t bits = uint64_t(high) << 32 | low;
-    double d;
-    std::memcpy(&d, &bits, sizeof d);
-    return d;
-}
-
-void toWords(double d, uint32_t& low, uint32_t& high) {
-    uint64_t bits;
-    std::memcpy(&bits, &d, sizeof bits);
-    low = uint32_t(bits);
-    high = uint32_t(bits >> 32);
-}
 
 /// One shard's partial accumulation of one frame of one pass: its double sums and sample counts, and where its
 /// samples came from (the header attributes `loom render --hold` writes).
@@ -177,27 +163,16 @@ void runMerge(const std::vector<std::string>& parts, const std::string& out) {
         const auto cv = count.view<uint32_t>();
         for (uint32_t y = 0; y < h; ++y)
             for (uint32_t x = 0; x < w; ++x) {
-                double sum[4] = {0.0, 0.0, 0.0, 0.0};
+                glm::dvec4 sum(0.0);
                 uint64_t n = 0;
                 for (const Partial& p : shards) {  // in the order given: the same bits for the same order
-                    const glm::uvec4 a = p.sumRG.view<glm::uvec4>().at(x, y), b = p.sumBA.view<glm::uvec4>().at(x, y);
-                    sum[0] += fromWords(a.x, a.y);
-                    sum[1] += fromWords(a.z, a.w);
-                    sum[2] += fromWords(b.x, b.y);
-                    sum[3] += fromWords(b.z, b.w);
+                    sum += unpackDoubleSum(p.sumRG.view<glm::uvec4>().at(x, y), p.sumBA.view<glm::uvec4>().at(x, y));
                     n += p.count.view<glm::uvec4>().at(x, y).x;
                 }
                 if (n > 0xFFFFFFFFull) throwBadInput("loom image merge", "more than 2^32 samples in a pixel", "fewer");
-                glm::uvec4 a, b;
-                toWords(sum[0], a.x, a.y);
-                toWords(sum[1], a.z, a.w);
-                toWords(sum[2], b.x, b.y);
-                toWords(sum[3], b.z, b.w);
-                rg.at(x, y) = a;
-                ba.at(x, y) = b;
+                packDoubleSum(sum, rg.at(x, y), ba.at(x, y));
                 cv.at(x, y) = uint32_t(n);
-                mv.at(x, y) =
-                    n == 0 ? glm::vec4(0.f) : glm::vec4(glm::dvec4(sum[0], sum[1], sum[2], sum[3]) / double(n));
+                mv.at(x, y) = n == 0 ? glm::vec4(0.f) : glm::vec4(sum / double(n));
             }
         const std::map<std::string, std::string> attributes = {
             {"loomHeldFrame", shards.front().heldFrame},

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstring>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "CudaBackend.h"
@@ -160,7 +161,13 @@ struct CudaBackend::Impl {
     cudaStream_t kernels = nullptr, copies = nullptr;
     cudaEvent_t rendered[kBands] = {}, copied[kBands] = {};
     uint32_t bandRows = 0;
-    glm::vec4* staged6[6] = {};  ///< this frame's staging of each output, or null
+    glm::vec4* stagedOutput[6] = {};  ///< this frame's staging of each output, or null
+
+    /// Rows y0..y1 of band b of a frame `h` rows high (empty past the last row).
+    std::pair<uint32_t, uint32_t> band(int b, uint32_t h) const {
+        const uint32_t y0 = std::min(h, uint32_t(b) * bandRows);
+        return {y0, std::min(h, y0 + bandRows)};
+    }
 
     void createStreams() {
         if (kernels) return;
@@ -296,12 +303,12 @@ void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
     m.bandRows = ((h + Impl::kBands - 1) / Impl::kBands + block.y - 1) / block.y * block.y;
     const PixelOut<glm::vec4> devOut[6] = {d.color, d.direct, d.indirect, d.albedo, d.specAlbedo, d.emission};
     for (int i = 0; i < 6; ++i)
-        m.staged6[i] =
+        m.stagedOutput[i] =
             devOut[i].data ? static_cast<glm::vec4*>(m.staged[i].reserve(size_t(w) * h * sizeof(glm::vec4))) : nullptr;
     // The uploads above ran on the legacy default stream, which these (blocking) streams wait for.
     check(cudaEventRecord(m.kernelStart, m.kernels), "cudaEventRecord");
     for (int b = 0; b < Impl::kBands; ++b) {
-        const uint32_t y0 = std::min(h, uint32_t(b) * m.bandRows), y1 = std::min(h, y0 + m.bandRows);
+        const auto [y0, y1] = m.band(b, h);
         if (y0 < y1) {
             const dim3 grid((w + block.x - 1) / block.x, (y1 - y0 + block.y - 1) / block.y);
             renderFrame<<<grid, block, 0, m.kernels>>>(d, y0, y1, sums);
@@ -311,9 +318,9 @@ void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
         check(cudaStreamWaitEvent(m.copies, m.rendered[b], 0), "cudaStreamWaitEvent");
         const size_t offset = size_t(y0) * w, bytes = size_t(y1 - y0) * w * sizeof(glm::vec4);
         for (int i = 0; i < 6; ++i)
-            if (m.staged6[i] && bytes)
-                check(cudaMemcpyAsync(m.staged6[i] + offset, devOut[i].data + offset, bytes, cudaMemcpyDeviceToHost,
-                                      m.copies),
+            if (m.stagedOutput[i] && bytes)
+                check(cudaMemcpyAsync(m.stagedOutput[i] + offset, devOut[i].data + offset, bytes,
+                                      cudaMemcpyDeviceToHost, m.copies),
                       "cudaMemcpyAsync (outputs)");
         check(cudaEventRecord(m.copied[b], m.copies), "cudaEventRecord");
     }
@@ -343,16 +350,17 @@ CudaBackend::Counts CudaBackend::finish(const FrameKernel& k, glm::uvec4* gradie
     // Each band into the graph's textures (whose rows may be padded) as soon as it has arrived, rows in parallel.
     for (int b = 0; b < Impl::kBands; ++b) {
         check(cudaEventSynchronize(m.copied[b]), "the renderPixel kernel");
-        const uint32_t y0 = std::min(h, uint32_t(b) * m.bandRows), y1 = std::min(h, y0 + m.bandRows);
+        const std::pair<uint32_t, uint32_t> rows = m.band(b, h);
+        const uint32_t y0 = rows.first, y1 = rows.second;
         if (y0 == y1) continue;
         parallelFor2D(
             w, y1 - y0,
             [&](const Tile& t) {
                 for (int i = 0; i < 6; ++i)
-                    if (m.staged6[i])
+                    if (m.stagedOutput[i])
                         for (uint32_t y = y0 + t.y0; y < y0 + t.y1; ++y)
-                            std::memcpy(hostOut[i].data + size_t(y) * hostOut[i].pitch, m.staged6[i] + size_t(y) * w,
-                                        size_t(w) * sizeof(glm::vec4));
+                            std::memcpy(hostOut[i].data + size_t(y) * hostOut[i].pitch,
+                                        m.stagedOutput[i] + size_t(y) * w, size_t(w) * sizeof(glm::vec4));
             },
             w, 16);
     }

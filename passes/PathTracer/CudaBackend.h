@@ -6,7 +6,7 @@
 // are all that comes back.
 // Everything that decides a pixel's value is in PixelKernel.h, which the tests run on the host; what is here is
 // memory copies and one launch. Built by nvcc when CMake finds the CUDA toolkit (LOOM_CUDA); without it
-// CudaBackendStub.cpp says so.
+// NoCudaBackend.cpp says so.
 #include <cstdint>
 #include <memory>
 #include <string>

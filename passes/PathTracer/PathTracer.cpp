@@ -213,9 +213,7 @@ void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
             "temporal gradients (A-SVGF), on last frame's pixel grid: for one pixel of each 3x3 block, (luminance of "
             "its samples re-shaded this frame at the same surface points with the same random numbers, their "
             "luminance last frame), replicated over the block; (0, 0) without history, on a miss or with pixelFilter "
-            "box. "
-            "Equal where the "
-            "shading did not change");
+            "box. Equal where the shading did not change");
     if (!info.wired || info.isOutputConsumed(kGradient)) {
         r.history(kGradientHits, Format::RGBA32U)
             .doc("primary hit (instance, primitive, u and v bits) of each 3x3 block's gradient sample (gradient only)");
@@ -748,12 +746,7 @@ void PathTracer::execute(PassContext& ctx) {
 
     if (mActive != Backend::Cpu) {
         // The CUDA backend's kernels (PixelKernel.h): on the GPU, or on the CPU threads (emulated).
-        const auto tBvh = std::chrono::steady_clock::now();
         const Bvh& bvh = sceneBvh(*scene);
-        // Where a frame's time goes before the kernels start: the lights and the rest, then the BVH.
-        ctx.stats().set("ms.prepare", std::chrono::duration<double, std::milli>(tBvh - start).count());
-        ctx.stats().set("ms.bvh",
-                        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tBvh).count());
         pt::FrameKernel k;
         k.bvh = bvh.view(view);
         k.scene = view;
@@ -818,12 +811,14 @@ void PathTracer::execute(PassContext& ctx) {
                 rays += c.x;
                 dropped += c.y;
             }
-            for (uint32_t by = 0; by < blocksY; ++by)
-                for (uint32_t bx = 0; bx < blocksX && gradientTex; ++bx) {
-                    const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
-                    blockHits[size_t(by) * blocksX + bx] = primaryHits[size_t(q.y) * w + q.x];
-                }
-            if (gradientTex) gradientRays = gradients(ctx, batch, camera, spp, frame, gradientTex, boxFilter);
+            if (gradientTex) {
+                for (uint32_t by = 0; by < blocksY; ++by)
+                    for (uint32_t bx = 0; bx < blocksX; ++bx) {
+                        const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
+                        blockHits[size_t(by) * blocksX + bx] = primaryHits[size_t(q.y) * w + q.x];
+                    }
+                gradientRays = gradients(ctx, batch, camera, spp, frame, gradientTex, boxFilter);
+            }
         }
         if (gradientTex) {
             // Each block's sample of this frame, for the next frame's gradients (as the CPU path keeps them).

@@ -93,15 +93,18 @@ done
 EOF
 chmod +x "$out/slurm/task.sh" "$out/slurm/merge.sh"
 
+# A shard's folder, which exists only when the shard is complete.
+shardDir() { echo "$out/shards/$(printf %04d "$1")/shard_$(printf %03d "$2")"; }
+
 # Only what is missing is submitted.
-todo=()
+missing=()
 for ((t = 0; t < tasks; ++t)); do
   frame=$((first + t / shards)) shard=$((t % shards))
-  [ -d "$out/shards/$(printf %04d $frame)/shard_$(printf %03d $shard)" ] || todo+=("$t")
+  [ -d "$(shardDir $frame $shard)" ] || missing+=("$t")
 done
 merged=0
 for ((frame = first; frame <= last; ++frame)); do [ -d "$out/frames/$(printf %04d $frame)" ] && merged=$((merged + 1)); done
-if [ ${#todo[@]} -eq 0 ] && [ "$merged" -eq "$count" ]; then
+if [ ${#missing[@]} -eq 0 ] && [ "$merged" -eq "$count" ]; then
   echo "all $count frame(s) merged already in $out/frames"
   exit 0
 fi
@@ -110,14 +113,14 @@ common=(--parsable --chdir "$out" $sbatchArgs)
 jobs=()
 dependency=()
 array=""
-if [ ${#todo[@]} -gt 0 ]; then
-  list="$(IFS=,; echo "${todo[*]}")"
+if [ ${#missing[@]} -gt 0 ]; then
+  list="$(IFS=,; echo "${missing[*]}")"
   array="$(sbatch "${common[@]}" --job-name loom-shards --array "$list" \
     --output "$out/slurm/logs/task_%A_%a.log" "$out/slurm/task.sh")"
   array="${array%%;*}"
   jobs+=("$array")
   dependency=(--dependency "afterok:$array" --kill-on-invalid-dep=yes)
-  echo "submitted $array: ${#todo[@]} of $tasks shard task(s) ($count frame(s) x $shards shard(s), $per iteration(s) each)"
+  echo "submitted $array: ${#missing[@]} of $tasks shard task(s) ($count frame(s) x $shards shard(s), $per iteration(s) each)"
 fi
 merge="$(sbatch "${common[@]}" "${dependency[@]}" --job-name loom-merge --output "$out/slurm/logs/merge_%j.log" \
   "$out/slurm/merge.sh")"
@@ -132,8 +135,7 @@ while [ -n "$(squeue -h -j "$ids" -o %i 2> /dev/null)" ]; do sleep 0.2; done
 failed=0
 for ((t = 0; t < tasks; ++t)); do
   frame=$((first + t / shards)) shard=$((t % shards))
-  dest="$out/shards/$(printf %04d $frame)/shard_$(printf %03d $shard)"
-  if [ ! -d "$dest" ]; then
+  if [ ! -d "$(shardDir $frame $shard)" ]; then
     failed=1
     log="$out/slurm/logs/task_${array:-none}_$t.log"
     [ -f "$log" ] || log=""

@@ -15,26 +15,16 @@ constexpr uint32_t kMaxLeafTriangles = 4;
 constexpr uint32_t kMaxLeafInstances = 1;  // an instance costs a ray transform: the top level splits to single ones
 constexpr int kSahDepth = 32;              // below it, median splits: depth <= 32 + log2(items) <= kBvhMaxDepth
 
-struct Box {
-    glm::vec3 lo{FLT_MAX}, hi{-FLT_MAX};
-    void grow(const glm::vec3& p) {
-        lo = glm::min(lo, p);
-        hi = glm::max(hi, p);
-    }
-    void grow(const Box& b) {
-        lo = glm::min(lo, b.lo);
-        hi = glm::max(hi, b.hi);
-    }
-    float area() const {
-        if (!(lo.x <= hi.x)) return 0.f;
-        const glm::vec3 e = hi - lo;
-        return 2.f * (e.x * e.y + e.y * e.z + e.z * e.x);
-    }
-};
+/// The surface area of a box (0 for an empty one): the SAH's measure.
+float surfaceArea(const Bounds& b) {
+    if (!b.valid()) return 0.f;
+    const glm::vec3 e = b.extent();
+    return 2.f * (e.x * e.y + e.y * e.z + e.z * e.x);
+}
 
 /// What a tree is built over: the bounds of each item and its centroid.
 struct Item {
-    Box box;
+    Bounds box;
     glm::vec3 centroid{0.f};
 };
 
@@ -56,10 +46,10 @@ public:
 
 private:
     void split(uint32_t node, uint32_t begin, uint32_t end, int depth) {
-        Box box, centroids;
+        Bounds box, centroids;
         for (uint32_t i = begin; i < end; ++i) {
-            box.grow(mItems[mOrder[i]].box);
-            centroids.grow(mItems[mOrder[i]].centroid);
+            box.extend(mItems[mOrder[i]].box);
+            centroids.extend(mItems[mOrder[i]].centroid);
         }
         mNodes[node].lo = box.lo;
         mNodes[node].hi = box.hi;
@@ -84,39 +74,39 @@ private:
 
     /// The best binned-SAH split of items begin..end, partitioned in place: the first item of the right child, or
     /// `begin` where a leaf costs no more (and may be one: n <= maxLeaf) or no split separates the centroids.
-    uint32_t sahSplit(const Box& box, const Box& centroids, uint32_t begin, uint32_t end) {
+    uint32_t sahSplit(const Bounds& box, const Bounds& centroids, uint32_t begin, uint32_t end) {
         const uint32_t n = end - begin;
         float bestCost = FLT_MAX;
         int bestAxis = -1, bestBin = 0;
         for (int axis = 0; axis < 3; ++axis) {
             const float extent = centroids.hi[axis] - centroids.lo[axis];
             if (!(extent > 0.f)) continue;
-            Box bins[kBins];
+            Bounds bins[kBins];
             uint32_t counts[kBins] = {};
             for (uint32_t i = begin; i < end; ++i) {
                 const Item& it = mItems[mOrder[i]];
                 const int b = binOf(it.centroid[axis], centroids.lo[axis], extent);
-                bins[b].grow(it.box);
+                bins[b].extend(it.box);
                 ++counts[b];
             }
             // Sweep from the right: areas and counts of bins b.. , then from the left for each split plane.
             float rightArea[kBins];
             uint32_t rightCount[kBins];
-            Box acc;
+            Bounds acc;
             uint32_t cnt = 0;
             for (int b = kBins - 1; b > 0; --b) {
-                acc.grow(bins[b]);
+                acc.extend(bins[b]);
                 cnt += counts[b];
-                rightArea[b] = acc.area();
+                rightArea[b] = surfaceArea(acc);
                 rightCount[b] = cnt;
             }
-            acc = Box{};
+            acc = Bounds{};
             cnt = 0;
             for (int b = 1; b < kBins; ++b) {
-                acc.grow(bins[b - 1]);
+                acc.extend(bins[b - 1]);
                 cnt += counts[b - 1];
                 if (cnt == 0 || rightCount[b] == 0) continue;
-                const float cost = acc.area() * float(cnt) + rightArea[b] * float(rightCount[b]);
+                const float cost = surfaceArea(acc) * float(cnt) + rightArea[b] * float(rightCount[b]);
                 if (cost < bestCost) {
                     bestCost = cost;
                     bestAxis = axis;
@@ -126,7 +116,7 @@ private:
         }
         if (bestAxis < 0) return begin;
         // Cost 1 per traversal step and per item: a split costs 1 + (A_L N_L + A_R N_R) / A, a leaf n.
-        const float parentArea = box.area();
+        const float parentArea = surfaceArea(box);
         const float splitCost = parentArea > 0.f ? 1.f + bestCost / parentArea : float(n);
         if (n <= mMaxLeaf && float(n) <= splitCost) return begin;
         const float lo = centroids.lo[bestAxis], extent = centroids.hi[bestAxis] - lo;
@@ -139,7 +129,7 @@ private:
 
     /// Splits items begin..end in halves by their centroids along the widest axis (ties by item id, so the result is
     /// one order, whatever the library's nth_element does with equal keys).
-    uint32_t medianSplit(const Box& centroids, uint32_t begin, uint32_t end) {
+    uint32_t medianSplit(const Bounds& centroids, uint32_t begin, uint32_t end) {
         const glm::vec3 e = centroids.hi - centroids.lo;
         const int axis = e.x >= e.y ? (e.x >= e.z ? 0 : 2) : (e.y >= e.z ? 1 : 2);
         const uint32_t mid = begin + (end - begin) / 2;
@@ -184,10 +174,10 @@ Bvh::Bvh(const Scene& scene) {
                             p2 = mesh.positions[mesh.indices[3 * t + 2]];
             if (glm::cross(p1 - p0, p2 - p0) == glm::vec3(0.f)) continue;
             Item it;
-            it.box.grow(p0);
-            it.box.grow(p1);
-            it.box.grow(p2);
-            it.centroid = 0.5f * (it.box.lo + it.box.hi);
+            it.box.extend(p0);
+            it.box.extend(p1);
+            it.box.extend(p2);
+            it.centroid = it.box.center();
             items.push_back(it);
             prims.push_back(t);
         }
@@ -231,13 +221,13 @@ void Bvh::updateInstances(const Scene& scene) {
         for (int c = 0; c < 8; ++c) {
             const glm::vec3 p((c & 1) ? root.hi.x : root.lo.x, (c & 2) ? root.hi.y : root.lo.y,
                               (c & 4) ? root.hi.z : root.lo.z);
-            it.box.grow(glm::vec3(inst.world * glm::vec4(p, 1.f)));
+            it.box.extend(glm::vec3(inst.world * glm::vec4(p, 1.f)));
         }
         const glm::vec3 mag = glm::max(glm::abs(it.box.lo), glm::abs(it.box.hi));
         const float pad = 1e-5f * std::max({mag.x, mag.y, mag.z, FLT_MIN});
         it.box.lo -= pad;
         it.box.hi += pad;
-        it.centroid = 0.5f * (it.box.lo + it.box.hi);
+        it.centroid = it.box.center();
         items.push_back(it);
         ids.push_back(uint32_t(i));
     }
