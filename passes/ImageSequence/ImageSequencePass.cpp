@@ -374,11 +374,9 @@ ImageSequencePass::Frame ImageSequencePass::readFrame(const Settings& s, const R
 void ImageSequencePass::compile(const CompileInfo& info) {
     mWidth = info.frameWidth;
     mHeight = info.frameHeight;
-    // An observed output counts as consumed: one that is only observed shows what the sequence lacks as zeros.
-    for (int o = 0; o < kOutputCount; ++o) {
-        const char* name = kOutputs[size_t(o)].name;
-        mConsumed[size_t(o)] = info.isOutputConsumed(name) && !info.isObserved(name);
-    }
+    // Only an output something reads must come from the sequence; one that is only observed (a dump, the viewer)
+    // shows what the sequence lacks as zeros. Observing a read output changes nothing.
+    for (int o = 0; o < kOutputCount; ++o) mConsumed[size_t(o)] = info.isOutputRead(kOutputs[size_t(o)].name);
     mPending.reset();  // a read of another size or of other channels
 }
 

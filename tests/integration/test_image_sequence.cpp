@@ -265,3 +265,29 @@ TEST_F(ImageSequence, NonFiniteSamplesAreZeroedAndCounted) {
     }
     EXPECT_EQ(readImage(mDir / "out" / "Frames.linearZ.0000.exr").texel(6, 0, 0), -1.f);
 }
+
+// Dumping a field never changes what a pass receives or what is refused: a sequence without the colour the denoiser
+// reads is bad input whether or not Frames.color is also dumped (a dump of it alone shows zeros instead).
+TEST_F(ImageSequence, DumpingARequiredChannelDoesNotHideThatItIsMissing) {
+    auto ch = blenderFrame(kW, kH, 1);
+    for (const char* c : {"R", "G", "B", "A"}) ch.erase(std::string("ViewLayer.Noisy Image.") + c);
+    for (const char* c : {"R", "G", "B"}) ch.erase(std::string("ViewLayer.Combined.") + c);
+    test::writeExrChannels(mDir / "nocolor_0001.exr", kW, kH, ch);
+    const std::string pattern = (mDir / "nocolor_####.exr").string();
+    const std::string size = "--size " + std::to_string(kW) + "x" + std::to_string(kH);
+    for (const char* dump : {"", " --dump Frames.color", " --dump 'Frames.*'", " --dump '*'"})
+        expectBadInput(renderSequence(pattern, size + dump), {"color"});
+    // Observed only (no pass reads it, nothing marks it): computed as zeros, and the run goes on.
+    nlohmann::json g = readJson(kSequenceGraph);
+    g["passes"] = nlohmann::json::array({passNamed(g, "Frames")});
+    g["passes"][0]["params"]["path"] = pattern;
+    g["edges"] = nlohmann::json::array();
+    g["outputs"] = nlohmann::json::array({"Frames.albedo"});
+    const fs::path only = mDir / "frames_only.json";
+    std::ofstream(only) << g.dump(2);
+    const test::CliResult shown = renderSequence(only.string(), pattern, size + " --dump Frames.color");
+    ASSERT_EQ(shown.code, 0) << shown.output;
+    const Texture color = readImage(mDir / "out" / "Frames.color.0000.exr");
+    for (uint32_t y = 0; y < uint32_t(kH); ++y)
+        for (uint32_t x = 0; x < uint32_t(kW); ++x) EXPECT_EQ(color.texel(x, y, 0), 0.f);
+}

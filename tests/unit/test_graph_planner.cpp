@@ -180,6 +180,28 @@ TEST(GraphPlanner, OptionalOutputsNobodyReadsAreSkipped) {
     EXPECT_NE(resource(observed.plan, "A.mask"), nullptr);
 }
 
+// Observing (dumping, showing) a field never changes what its pass is told it must produce: an output another pass
+// reads, one read next frame through "@prev", or a marked one is read whether or not it is also observed; one that
+// is only observed is consumed (computed) but not read.
+TEST(GraphPlanner, ObservingAnOutputDoesNotChangeWhetherItIsRead) {
+    const std::vector<TestPass> passes = {{"Src", {"opt-out:color", "opt-out:aux", "opt-out:spare", "opt-out:late"}},
+                                          {"Use", {"in:color", "opt-in:lateIn", "out:shown"}}};
+    const std::vector<std::pair<std::string, std::string>> edges = {{"Src.late@prev", "Use.lateIn"}};
+    for (const std::vector<std::string>& observe :
+         {std::vector<std::string>{}, {"Src.color"}, {"Src.*"}, {"Src.color", "Src.late", "Use.*"}}) {
+        const Planned p = plan(passes, edges, {"Use.shown", "Src.aux"}, observe);
+        const CompileInfo& src = p.plan.passes[0].info;
+        const std::string label = ::testing::PrintToString(observe);
+        EXPECT_TRUE(src.isOutputRead("color")) << label;  // Use reads it
+        EXPECT_TRUE(src.isOutputRead("aux")) << label;    // marked
+        EXPECT_TRUE(src.isOutputRead("late")) << label;   // read next frame
+        EXPECT_FALSE(src.isOutputRead("spare")) << label;
+        EXPECT_EQ(src.isOutputConsumed("spare"), std::find(observe.begin(), observe.end(), "Src.*") != observe.end())
+            << label;
+        EXPECT_TRUE(p.plan.passes[1].info.isOutputRead("shown")) << label;
+    }
+}
+
 // A chain ping-pongs: each output lives from its writer to its reader, so two textures' worth of arena serve any
 // length; the marked output lives to the end of the frame.
 TEST(GraphPlanner, ChainPlacementPingPongs) {

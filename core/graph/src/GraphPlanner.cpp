@@ -411,6 +411,8 @@ private:
             if (f.kind == FieldKind::Output &&
                 (mConsumed[p].count(f.name) || mPrevConsumed[p].count(f.name) || !f.optional))
                 info.consumedOutputs.push_back(f.name);
+            if (f.kind == FieldKind::Output && (mRead[p].count(f.name) || mPrevConsumed[p].count(f.name)))
+                info.readOutputs.push_back(f.name);
             if (mObserved[p].count(f.name)) info.observedFields.push_back(f.name);
         }
         return info;
@@ -420,9 +422,11 @@ private:
     // internal and history fields these connections do not use; its inputs and outputs must stay the same.
     void reflectWired() {
         mLeftOut.resize(mDesc.passes.size());
+        mRead.resize(mDesc.passes.size());
         for (const auto& w : mWires) (w.wire.src.prev ? mPrevConsumed : mConsumed)[w.src].insert(w.wire.src.channel);
         for (size_t p = 0; p < mDesc.passes.size(); ++p) {
             mConsumed[p].insert(mMarked[p].begin(), mMarked[p].end());
+            mRead[p] = mConsumed[p];  // before the observed fields join: what the pass must really produce
             mConsumed[p].insert(mObserved[p].begin(), mObserved[p].end());
         }
         for (uint32_t p : mPlan.order) {
@@ -545,7 +549,7 @@ private:
     std::unordered_map<std::string, uint32_t> mIndex;  // pass name -> description index
     std::vector<IndexedWire> mWires;
     std::vector<std::map<std::string, size_t>> mWireInto;  // per pass: input -> wire
-    std::vector<std::set<std::string>> mUnconnected, mConsumed, mPrevConsumed, mMarked, mObserved;
+    std::vector<std::set<std::string>> mUnconnected, mConsumed, mPrevConsumed, mRead, mMarked, mObserved;
     std::vector<std::optional<WiringProblem>> mProblems;
     // Per pass: (output, culled pass that reads it), sorted.
     std::vector<std::vector<std::pair<std::string, uint32_t>>> mCulledReads;

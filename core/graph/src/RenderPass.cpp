@@ -12,6 +12,9 @@ bool CompileInfo::isInputConnected(std::string_view name) const {
 bool CompileInfo::isOutputConsumed(std::string_view name) const {
     return std::find(consumedOutputs.begin(), consumedOutputs.end(), name) != consumedOutputs.end();
 }
+bool CompileInfo::isOutputRead(std::string_view name) const {
+    return std::find(readOutputs.begin(), readOutputs.end(), name) != readOutputs.end();
+}
 bool CompileInfo::isObserved(std::string_view name) const {
     return std::find(observedFields.begin(), observedFields.end(), name) != observedFields.end();
 }

@@ -35,6 +35,12 @@ struct CompileInfo {
     /// not listed here is neither allocated nor expected). Filled when wired.
     std::vector<std::string> connectedInputs;
     std::vector<std::string> consumedOutputs;
+    /// The outputs something other than an observer needs: another pass reads
+    /// them (this frame or, through "@prev", the next), or the graph marks
+    /// them. An output that is only observed (dumped, shown) is consumed but
+    /// not read: a pass may fill what it cannot produce there, and must
+    /// refuse it where the output is read.
+    std::vector<std::string> readOutputs;
     /// This pass's fields that CompileOptions::observe matches (dumped, shown):
     /// a pass that leaves parts of a field unwritten where nothing of its own
     /// reads them must write them in full when the field is observed.
@@ -42,6 +48,7 @@ struct CompileInfo {
     bool wired = false;  ///< the lists above are filled (second reflect, compile)
     bool isInputConnected(std::string_view name) const;
     bool isOutputConsumed(std::string_view name) const;
+    bool isOutputRead(std::string_view name) const;
     bool isObserved(std::string_view name) const;
 };
 
