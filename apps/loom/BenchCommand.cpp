@@ -1039,7 +1039,7 @@ void runBench(BenchOptions o) {
     }
     if (o.frames == 0) throwBadInput("--frames", "frame count is 0", "more frames than --warmup");
     if (o.frames > 100000) throwBadInput("--frames", "too many frames", "at most 100000");
-    if (o.frames <= o.warmup)
+    if (o.frames <= o.warmup && !o.referencesOnly)  // references are rendered for warm-up frames too
         throwBadInput("--frames",
                       fmt::format("{} frame(s) leave nothing to measure after {} warm-up frame(s)", o.frames, o.warmup),
                       "more frames than --warmup", fmt::format("use --frames {} or lower --warmup", o.warmup + 16));
@@ -1054,6 +1054,14 @@ void runBench(BenchOptions o) {
     std::error_code ec;
     if (hasScene && !fs::is_regular_file(o.scene.scene, ec))
         throwBadInput("--scene", "scene '" + o.scene.scene + "' does not exist", "a glTF 2.0 file (.gltf or .glb)");
+    // File numbers i + --reference-first-frame of every bench frame i, in range: no sum may overflow.
+    constexpr int64_t kMaxFileNumber = 999999999999999999;  // 18 digits, the widest a sequence pattern writes
+    if (o.referenceFirstFrame < -kMaxFileNumber || o.referenceFirstFrame > kMaxFileNumber - int64_t(o.frames - 1))
+        throwBadInput("--reference-first-frame",
+                      fmt::format("file numbers {} + 0..{} are out of range", o.referenceFirstFrame, o.frames - 1),
+                      fmt::format("a first file number from -{} to {}", kMaxFileNumber,
+                                  kMaxFileNumber - int64_t(o.frames - 1)),
+                      "the number of the sequence's first file, e.g. 1 for Blender's");
     if (givenReference)  // a pattern without a frame field fails here, before anything is loaded
         (void)sequenceFramePath(parseSequenceSource(o.referenceSequence).pattern, o.referenceFirstFrame,
                                 "--reference-sequence");

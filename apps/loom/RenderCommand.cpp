@@ -50,11 +50,16 @@ std::string frameFileName(const std::string& pass, const std::string& field, uin
     return fmt::format("{}.{}.{:04}.{}", pass, field, frame, imageExtension(f));
 }
 
-void progress(uint64_t done, uint64_t total, double msPerFrame) {
+/// Frame indices stay below 2^32: a pass's random numbers are those of frame index + (seed << 32).
+constexpr uint64_t kMaxFrameIndex = 0xFFFFFFFFull;
+/// Past this many frames, `--warmup auto` is refused rather than started silently (--warmup N or all say it).
+constexpr uint64_t kWarmupLimit = 10000;
+
+void progress(uint64_t done, uint64_t total, double msPerFrame, const char* what = "frames") {
     const int width = 30;
     int filled = int(width * done / std::max<uint64_t>(total, 1));
-    std::fprintf(stderr, "\r[%.*s%*s] %llu/%llu frames  %.2f ms/frame", filled, "##############################",
-                 width - filled, "", (unsigned long long)done, (unsigned long long)total, msPerFrame);
+    std::fprintf(stderr, "\r[%.*s%*s] %llu/%llu %s  %.2f ms/frame", filled, "##############################",
+                 width - filled, "", (unsigned long long)done, (unsigned long long)total, what, msPerFrame);
     if (done == total) std::fprintf(stderr, "\n");
     std::fflush(stderr);
 }
@@ -118,7 +123,24 @@ void runRender(const RenderOptions& o) {
     if (o.seedOffset > 0 && !o.hold)
         throwBadInput("--seed-offset", "--seed-offset shards the samples of a held frame, and there is no --hold",
                       "--hold with --seed-offset", "add --hold, or leave out --seed-offset");
-    if (o.seedOffset > (uint64_t(1) << 40)) throwBadInput("--seed-offset", "too large", "at most 2^40");
+    // A pass's random numbers are those of frame index + (seed << 32): indices below 2^32 never meet another seed's.
+    if (o.seedOffset > kMaxFrameIndex - o.startFrame - (o.frames - 1))
+        throwBadInput("--seed-offset",
+                      fmt::format("--start-frame {} + --seed-offset {} + --frames {} reach frame index {}, past {}: "
+                                  "its random numbers would be those of another seed",
+                                  o.startFrame, o.seedOffset, o.frames, o.startFrame + o.seedOffset + o.frames - 1,
+                                  kMaxFrameIndex),
+                      fmt::format("--seed-offset at most {}", kMaxFrameIndex - o.startFrame - (o.frames - 1)),
+                      "for more samples of one frame, use shards of more iterations each, or set PathTracer.seed");
+    if (warmup > kWarmupLimit && o.warmup == "auto")
+        throwBadInput("--start-frame",
+                      fmt::format("a graph that keeps history enters frame {} as one run from frame 0 would only after "
+                                  "{} unwritten warm-up frames (more than {})",
+                                  o.startFrame, warmup, kWarmupLimit),
+                      "--warmup N: the frames before --start-frame to run first",
+                      fmt::format("give --warmup 64 (history close to one run's once it has forgotten its start), or "
+                                  "--warmup all to run all {} frames",
+                                  warmup));
     bool warming = false;
 
     const std::filesystem::path outDir(o.out);
@@ -160,8 +182,21 @@ void runRender(const RenderOptions& o) {
         }
     };
     warming = true;
-    for (uint64_t i = o.startFrame - warmup; i < o.startFrame && !stopRequested(); ++i)
+    if (warmup > 0 && !o.quiet)
+        spdlog::info("warm-up: frames {}..{} ({} frame(s)) run unwritten first, so history enters frame {} as in one "
+                     "run; --warmup N runs fewer",
+                     o.startFrame - warmup, o.startFrame - 1, warmup, o.startFrame);
+    const auto warmStart = std::chrono::steady_clock::now();
+    for (uint64_t i = o.startFrame - warmup, n = 0; i < o.startFrame && !stopRequested(); ++i, ++n) {
         graph.execute(sceneFrame(scene.get(), i, o.fps, width, height, i == o.startFrame - warmup));
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - warmStart).count();
+        // What the rest will cost, said once its first frames show the pace (and the rest is worth saying).
+        if (n + 1 == std::min<uint64_t>(warmup, 4) && !o.quiet && ms / double(n + 1) * double(warmup) > 10000.0)
+            spdlog::info("warm-up: about {:.0f} s for {} frame(s)", ms / double(n + 1) * double(warmup) / 1000.0,
+                         warmup);
+        if (showProgress) progress(n + 1, warmup, ms / double(n + 1), "warm-up");
+    }
     warming = false;
     if (warmup > 0) statsJson["warmup"] = {{"from", o.startFrame - warmup}, {"frames", warmup}};
     auto start = std::chrono::steady_clock::now();

@@ -1,5 +1,6 @@
 // loom: render graphs headless, check them, list passes, inspect scenes, benchmark run time against error.
 #include <spdlog/sinks/stdout_color_sinks.h>
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -7,12 +8,17 @@
 #include <cstdio>
 #include <functional>
 #include <iostream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
 
 #include "CliUtil.h"
 #include "Interrupt.h"
 #include "loom/Error.h"
 #include "loom/Log.h"
 #include "loom/PartialFiles.h"
+#include "loom/Plugin.h"
 
 namespace {
 
@@ -23,6 +29,38 @@ namespace {
     spdlog::default_logger()->flush();
     std::fflush(nullptr);
     loom::cli::endBySignal(signal);
+}
+
+/// An option the command does not have may be a pass's parameter (`--device cuda`): says which passes declare it
+/// and how to set it, or nothing.
+std::string parameterHint(const std::string& message) {
+    std::set<std::string> names;
+    std::istringstream words(message.substr(std::min(message.find(':'), message.size())));
+    for (std::string w; words >> w;)
+        if (w.size() > 2 && w.rfind("--", 0) == 0) names.insert(w.substr(2, w.find('=') - 2));
+    if (names.empty()) return {};
+    try {
+        loom::PluginRegistry registry = loom::cli::makeRegistry();
+        std::map<std::string, std::vector<std::string>> declaredBy;  // parameter name -> pass types
+        for (const std::string& type : registry.knownTypes()) {
+            try {  // one plugin that does not load takes no hint away from the others
+                const std::unique_ptr<loom::RenderPass> pass = registry.create(type);
+                for (const auto& d : pass->params().decls()) declaredBy[d.name].push_back(type);
+            } catch (const std::exception&) {
+            }
+        }
+        std::string hint;
+        for (const std::string& name : names) {
+            const std::vector<std::string>& types = declaredBy[name];
+            if (!types.empty())
+                hint += fmt::format("'{}' is a parameter of {}, not an option: set it with --set PASS.{}=VALUE (PASS "
+                                    "is the pass's name in the graph; `loom check --graph G` lists them); ",
+                                    name, loom::join(types), name);
+        }
+        return hint;
+    } catch (const std::exception&) {
+        return {};  // a hint, never a second error
+    }
 }
 
 int run(int argc, char** argv) {
@@ -87,6 +125,10 @@ int run(int argc, char** argv) {
         return app.exit(e);
     } catch (const CLI::CallForVersion& e) {
         return app.exit(e);
+    } catch (const CLI::ExtrasError& e) {
+        std::cerr << "error: " << e.what() << "\n  hint: " << parameterHint(e.what())
+                  << "run `loom --help` or `loom <command> --help`\n";
+        return 2;
     } catch (const CLI::ParseError& e) {
         std::cerr << "error: " << e.what() << "\n  hint: run `loom --help` or `loom <command> --help`\n";
         return 2;

@@ -1,6 +1,7 @@
 // The path tracer's CUDA backend: device copies of what PixelKernel.h reads, one launch of renderPixel per frame,
 // and the outputs copied back into the graph's host textures. No decision about a pixel is made here.
 #include <cuda_runtime.h>
+#include <dlfcn.h>
 
 #include <algorithm>
 #include <cstring>
@@ -116,7 +117,13 @@ const CudaDeviceStatus& cudaDeviceStatus() {
         int count = 0;
         const cudaError_t e = cudaGetDeviceCount(&count);
         if (e != cudaSuccess) {
-            s.description = std::string("no usable CUDA device (") + cudaGetErrorString(e) + ")";
+            // With no NVIDIA driver at all the runtime reports an insufficient driver version: say what is missing.
+            if (void* driver = dlopen("libcuda.so.1", RTLD_LAZY | RTLD_LOCAL)) {
+                dlclose(driver);
+                s.description = std::string("no usable CUDA device (") + cudaGetErrorString(e) + ")";
+            } else {
+                s.description = "no NVIDIA driver is installed (libcuda.so.1 cannot be loaded), so no CUDA device";
+            }
             return s;
         }
         if (count == 0) {

@@ -718,6 +718,13 @@ void PathTracer::execute(PassContext& ctx) {
     const pt::PathTracerSettings set = mSettings;
     const bool boxFilter = mPixelFilter == PixelFilter::Box;
     const uint32_t spp = uint32_t(mSamplesPerPixel);
+    // Seed s draws the random numbers of frames s * 2^32 + index: an index past 2^32 would repeat seed s + 1's.
+    if (ctx.frameIndex() > 0xFFFFFFFFull)
+        throw Error(Error::Info{ErrorKind::Runtime, {}, ctx.passName(),
+                                fmt::format("frame index {} is past 2^32 - 1, where seed {}'s random numbers would "
+                                            "repeat those of seed {}",
+                                            ctx.frameIndex(), mSeed, mSeed + 1),
+                                "frame indices below 2^32", "start again from a lower frame index"});
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
     const pt::LightsView lights = mLights;
     // Vertices are shaded several paths at a time in SIMD lanes where the settings allow (the default).
