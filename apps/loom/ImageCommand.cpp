@@ -1,7 +1,8 @@
 // loom image: small image utilities for looking at results.
-//   loom image montage A B C -o side.png   side-by-side of images of equal height
+//   loom image montage A B C -o side.png   side-by-side of images of equal height (B.exr:LAYER: one layer)
 //   loom image merge PART... -o OUT        one frame's partial accumulations (sample shards) into one
-//   loom image compare A B                 whether two images hold the same values, bit for bit
+//   loom image compare A B [--tolerance T] whether two images hold the same values
+// The merge and the comparison themselves are loom/ShardMerge.h; this file parses their options.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -10,18 +11,18 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <map>
-#include <regex>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "CliUtil.h"
 #include "Display.h"
-#include "loom/DoubleTexels.h"
+#include "Interrupt.h"
 #include "loom/Error.h"
 #include "loom/ExrFile.h"
 #include "loom/Files.h"
 #include "loom/ImageIO.h"
+#include "loom/ShardMerge.h"
 
 namespace loom::cli {
 
@@ -29,12 +30,41 @@ namespace {
 
 constexpr uint64_t kMaxMontageWidth = 65536;
 
+/// A montage input: an image file, or FILE.exr:LAYER for one layer of a multilayer EXR.
+Texture readMontageImage(const std::string& spec) {
+    const SequenceSource source = parseSequenceSource(spec);
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(source.pattern, ec))
+        throwBadInput("", std::filesystem::exists(source.pattern, ec) ? "not a file" : "no such file",
+                      "PNG or EXR images (FILE.exr:LAYER for a layer of a multilayer EXR)", "", source.pattern);
+    if (!source.layer.empty()) return ExrFile(source.pattern).readRgba(source.layer);
+    try {
+        return readImage(source.pattern);
+    } catch (const Error& e) {
+        // A multilayer EXR without bare R, G, B: say how montage names a layer.
+        std::optional<ExrFile> exr;
+        try {
+            exr.emplace(source.pattern);
+        } catch (const Error&) {
+            throw e;
+        }
+        const std::vector<std::string> layers = exr->layers();
+        const auto named = std::find_if(layers.begin(), layers.end(), [](const std::string& l) { return !l.empty(); });
+        if (!exr->layerChannels("").empty() || named == layers.end()) throw;
+        Error::Info info = e.info();
+        info.suggestion = "name the layer after the file, e.g. '" + source.pattern + ":" + *named + "'";
+        throw Error(info);
+    }
+}
+
 void runMontage(const std::vector<std::string>& inputs, const std::string& output, uint32_t gap) {
     if (inputs.size() < 2) throwBadInput("loom image montage", "fewer than two input images", "two or more images");
     if (gap > 1024) throwBadInput("--gap", fmt::format("a gap of {} pixels is too wide", gap), "0 to 1024 pixels");
-    checkOutputFile(output, "--out", std::vector<std::filesystem::path>(inputs.begin(), inputs.end()));
+    std::vector<std::filesystem::path> files;
+    for (const std::string& spec : inputs) files.push_back(parseSequenceSource(spec).pattern);
+    checkOutputFile(output, "--out", files);
     std::vector<Texture> images;
-    for (const std::string& path : inputs) images.push_back(readImage(path));
+    for (const std::string& spec : inputs) images.push_back(readMontageImage(spec));
     const uint32_t height = images.front().height();
     uint64_t width = 0;
     for (size_t i = 0; i < images.size(); ++i) {
@@ -60,162 +90,15 @@ void runMontage(const std::vector<std::string>& inputs, const std::string& outpu
     writeImage(output, out);
 }
 
-namespace fs = std::filesystem;
-
-/// One shard's partial accumulation of one frame of one pass: its double sums and sample counts, and where its
-/// samples came from (the header attributes `loom render --hold` writes).
-struct Partial {
-    Texture sumRG, sumBA, count;
-    std::string heldFrame;
-    uint64_t seedOffset = 0, iterations = 0;
-};
-
-uint64_t attributeNumber(const ExrFile& f, const char* name) {
-    const std::optional<std::string> v = f.stringAttribute(name);
-    if (!v || v->empty() || v->find_first_not_of("0123456789") != std::string::npos)
-        throwBadInput(f.path().string(), std::string("no header attribute ") + name + " with a count",
-                      "a partial accumulation written by loom render --hold", "", f.path().string());
-    return std::stoull(*v);
-}
-
-Partial readPartial(const fs::path& dir, const std::string& stem, const std::string& frame) {
-    Partial p;
-    const fs::path rg = dir / (stem + ".partialSumRG." + frame + ".exr");
-    const fs::path ba = dir / (stem + ".partialSumBA." + frame + ".exr");
-    const fs::path count = dir / (stem + ".partialCount." + frame + ".exr");
-    for (const fs::path& f : {rg, ba, count})
-        if (!fs::exists(f))
-            throwBadInput(f.string(),
-                          "missing: each shard needs " + stem +
-                              "'s partialSumRG, partialSumBA and "
-                              "partialCount of frame " +
-                              frame,
-                          "the outputs of every shard's run", "", f.string());
-    p.sumRG = readImage(rg);
-    p.sumBA = readImage(ba);
-    p.count = readImage(count);
-    const ExrFile header(count);
-    p.heldFrame = header.stringAttribute("loomHeldFrame").value_or("");
-    p.seedOffset = attributeNumber(header, "loomSeedOffset");
-    p.iterations = attributeNumber(header, "loomIterations");
-    return p;
-}
-
-/// Sums the shards' partial accumulations of each (pass, frame) found in the first shard's folder and writes the
-/// merged partials (so merges compose) and their mean, <pass>.mean.<frame>.exr, into `out`. Means are formed as
-/// AccumulatePass forms them (double sum / count, rounded to float), so where the double sums are exact (float
-/// samples of a moderate range) the mean equals that of one run over all the shards' samples bit for bit.
-void runMerge(const std::vector<std::string>& parts, const std::string& out) {
-    if (parts.size() < 2) throwBadInput("loom image merge", "fewer than two partial accumulations", "two or more");
-    for (const std::string& p : parts)
-        if (!fs::is_directory(p))
-            throwBadInput(p, "not a folder", "folders written by loom render --hold (one per shard)", "", p);
-    static const std::regex name(R"((.+)\.partialCount\.([0-9]{4,})\.exr)");
-    std::vector<std::pair<std::string, std::string>> groups;  // (pass, frame)
-    for (const auto& e : fs::directory_iterator(parts.front())) {
-        std::smatch m;
-        const std::string file = e.path().filename().string();
-        if (std::regex_match(file, m, name)) groups.emplace_back(m[1], m[2]);
-    }
-    std::sort(groups.begin(), groups.end());
-    if (groups.empty())
-        throwBadInput(parts.front(), "no partial accumulation (PASS.partialCount.FRAME.exr) in the folder",
-                      "the outputs of a graph marking an AccumulatePass's partialSumRG, partialSumBA and partialCount "
-                      "(graphs/ReferenceShard.json)",
-                      "", parts.front());
-    ensureWritableDir(out, "--out");
-    for (const auto& [stem, frame] : groups) {
-        std::vector<Partial> shards;
-        for (const std::string& dir : parts) shards.push_back(readPartial(dir, stem, frame));
-        const uint32_t w = shards.front().count.width(), h = shards.front().count.height();
-        // The shards must be parts of one frame's samples: the same frame and size, disjoint sample ranges.
-        std::vector<std::pair<uint64_t, uint64_t>> ranges;
-        uint64_t iterations = 0;
-        for (size_t i = 0; i < shards.size(); ++i) {
-            const Partial& p = shards[i];
-            for (const Texture* t : {&p.sumRG, &p.sumBA, &p.count})
-                if (t->width() != w || t->height() != h || t->format() != Format::RGBA32U)
-                    throwBadInput(parts[i],
-                                  fmt::format("{} of frame {} is not a {}x{} image of counts", stem, frame, w, h),
-                                  "partials of one frame at one size", "", parts[i]);
-            if (p.heldFrame != shards.front().heldFrame)
-                throwBadInput(
-                    parts[i],
-                    fmt::format("holds frame {}, the first shard frame {}", p.heldFrame, shards.front().heldFrame),
-                    "shards of one frame", "", parts[i]);
-            ranges.emplace_back(p.seedOffset, p.seedOffset + p.iterations);
-            iterations += p.iterations;
-        }
-        std::vector<size_t> order(ranges.size());
-        for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-        std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return ranges[a] < ranges[b]; });
-        for (size_t k = 1; k < order.size(); ++k)
-            if (ranges[order[k]].first < ranges[order[k - 1]].second)
-                throwBadInput(parts[order[k]],
-                              fmt::format("its samples (--seed-offset {}, {} iterations) overlap those of {}",
-                                          ranges[order[k]].first, ranges[order[k]].second - ranges[order[k]].first,
-                                          parts[order[k - 1]]),
-                              "shards with disjoint --seed-offset ranges", "", parts[order[k]]);
-        Texture sumRG(w, h, Format::RGBA32U), sumBA(w, h, Format::RGBA32U), count(w, h, Format::R32U),
-            mean(w, h, Format::RGBA32F);
-        const auto rg = sumRG.view<glm::uvec4>(), ba = sumBA.view<glm::uvec4>();
-        const auto mv = mean.view<glm::vec4>();
-        const auto cv = count.view<uint32_t>();
-        for (uint32_t y = 0; y < h; ++y)
-            for (uint32_t x = 0; x < w; ++x) {
-                glm::dvec4 sum(0.0);
-                uint64_t n = 0;
-                for (const Partial& p : shards) {  // in the order given: the same bits for the same order
-                    sum += unpackDoubleSum(p.sumRG.view<glm::uvec4>().at(x, y), p.sumBA.view<glm::uvec4>().at(x, y));
-                    n += p.count.view<glm::uvec4>().at(x, y).x;
-                }
-                if (n > 0xFFFFFFFFull) throwBadInput("loom image merge", "more than 2^32 samples in a pixel", "fewer");
-                packDoubleSum(sum, rg.at(x, y), ba.at(x, y));
-                cv.at(x, y) = uint32_t(n);
-                mv.at(x, y) = n == 0 ? glm::vec4(0.f) : glm::vec4(sum / double(n));
-            }
-        const std::map<std::string, std::string> attributes = {
-            {"loomHeldFrame", shards.front().heldFrame},
-            {"loomSeedOffset", std::to_string(ranges[order.front()].first)},
-            {"loomIterations", std::to_string(iterations)},
-            {"loomShards", std::to_string(shards.size())}};
-        const fs::path dir(out);
-        writeImage(dir / (stem + ".partialSumRG." + frame + ".exr"), sumRG, attributes);
-        writeImage(dir / (stem + ".partialSumBA." + frame + ".exr"), sumBA, attributes);
-        writeImage(dir / (stem + ".partialCount." + frame + ".exr"), count, attributes);
-        writeImage(dir / (stem + ".mean." + frame + ".exr"), mean, attributes);
-        fmt::print("{} frame {}: {} shards, {} iterations -> {}\n", stem, frame, shards.size(), iterations,
-                   (dir / (stem + ".mean." + frame + ".exr")).string());
-    }
-}
-
-/// Exit 0 when A and B hold the same values bit for bit (size, format, every channel), else 1 with what differs.
-int runCompare(const std::string& a, const std::string& b) {
+/// Exit 0 when A and B hold the same values (bit for bit, or floats within `tolerance`), else 1 saying what differs.
+int runCompare(const std::string& a, const std::string& b, std::optional<double> tolerance) {
+    if (tolerance && !(*tolerance >= 0.0 && std::isfinite(*tolerance)))
+        throwBadInput("--tolerance", fmt::format("{:g} is not a tolerance", *tolerance),
+                      "a finite absolute difference >= 0 (floats only: integers are compared exactly)");
     const Texture x = readImage(a), y = readImage(b);
-    if (x.width() != y.width() || x.height() != y.height() || x.format() != y.format()) {
-        fmt::print("{}x{} {} vs {}x{} {}\n", x.width(), x.height(), formatName(x.format()), y.width(), y.height(),
-                   formatName(y.format()));
-        return 1;
-    }
-    const uint32_t channels = formatInfo(x.format()).channels;
-    uint64_t differ = 0;
-    double largest = 0.0;
-    for (uint32_t j = 0; j < x.height(); ++j)
-        for (uint32_t i = 0; i < x.width(); ++i)
-            for (uint32_t c = 0; c < channels; ++c) {
-                const float u = x.texel(i, j, c), v = y.texel(i, j, c);
-                if (std::memcmp(&u, &v, sizeof u) != 0) {
-                    ++differ;
-                    largest = std::max(largest, double(std::fabs(u - v)));
-                }
-            }
-    const uint64_t total = uint64_t(x.width()) * x.height() * channels;
-    if (differ == 0) {
-        fmt::print("identical: {} values\n", total);
-        return 0;
-    }
-    fmt::print("{} of {} values differ (largest difference {:g})\n", differ, total, largest);
-    return 1;
+    const ImageComparison c = compareImages(x, y, tolerance);
+    fmt::print("{}\n", describeComparison(x, y, c, tolerance));
+    return c.sameShape && c.differ == 0 ? 0 : 1;
 }
 
 }  // namespace
@@ -227,9 +110,11 @@ void addImageCommand(CLI::App& app) {
     static std::vector<std::string> inputs;
     static std::string output;
     static uint32_t gap = 4;
-    montage->add_option("images", inputs, "PNG or EXR images, left to right (EXR: clamped, sRGB-encoded)")
-        ->required()
-        ->check(CLI::ExistingFile);
+    montage
+        ->add_option("images", inputs,
+                     "PNG or EXR images, left to right (EXR: clamped, sRGB-encoded; FILE.exr:LAYER reads one layer "
+                     "of a multilayer EXR)")
+        ->required();
     montage->add_option("-o,--out", output, "output PNG")->required();
     montage->add_option("--gap", gap, "white pixels between images")->capture_default_str();
     montage->callback([] { runMontage(inputs, output, gap); });
@@ -240,18 +125,35 @@ void addImageCommand(CLI::App& app) {
         "marking an AccumulatePass's partialSumRG, partialSumBA and partialCount) into their mean");
     static std::vector<std::string> parts;
     static std::string mergeOut;
-    merge->add_option("parts", parts, "one folder per shard")->required();
-    merge->add_option("-o,--out", mergeOut, "output folder")->required();
-    merge->callback([] { runMerge(parts, mergeOut); });
+    merge->add_option("parts", parts, "one folder per shard (their iterations must not overlap)")->required();
+    merge->add_option("-o,--out", mergeOut, "output folder: new or empty, written whole or not at all")->required();
+    merge->callback([] {
+        // A signal stops the merge between two files; what it wrote so far is removed.
+        StopOnSignal stop;
+        const std::vector<MergedFrame> frames = mergeShards(
+            std::vector<std::filesystem::path>(parts.begin(), parts.end()), mergeOut, [] { throwIfStopRequested(); });
+        for (const MergedFrame& f : frames)
+            fmt::print("{} frame {}: {} shards, {} iterations -> {}\n", f.pass, f.frame, f.shards, f.iterations,
+                       (std::filesystem::path(mergeOut) / f.mean.filename()).string());
+    });
 
     CLI::App* compare = cmd->add_subcommand(
-        "compare", "Exit 0 when two images hold the same values bit for bit, else 1 saying how many differ");
+        "compare",
+        "Exit 0 when two images hold the same values (integers exactly, floats bit for bit or within --tolerance), "
+        "else 1 saying how many differ");
     static std::string first, second;
+    static double tolerance = 0.0;
+    static CLI::Option* toleranceOption = nullptr;
     compare->add_option("a", first, "an image")->required()->check(CLI::ExistingFile);
     compare->add_option("b", second, "another image")->required()->check(CLI::ExistingFile);
+    toleranceOption =
+        compare->add_option("--tolerance", tolerance,
+                            "float values that differ by at most this much (absolute) count as equal; integer channels "
+                            "are always compared exactly");
     compare->callback([] {
         // Different images are an answer, not an error: exit 1 (bad input stays 2).
-        if (runCompare(first, second) != 0) {
+        if (runCompare(first, second, toleranceOption->count() ? std::optional<double>(tolerance) : std::nullopt) !=
+            0) {
             std::fflush(stdout);
             std::exit(1);
         }

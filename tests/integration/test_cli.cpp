@@ -227,11 +227,12 @@ TEST_F(Cli, SampleShardsMergeIntoOneRunsReferenceBitForBit) {
         return loom::readImage(path(a)).samePixels(loom::readImage(path(b)));
     };
     for (const char* order : {"a b", "b a"}) {
-        const RunResult merged = loom(std::string("image merge ") + order + " -o merged");
+        const std::string out = std::string("merged ") + order;  // a merge writes a new folder
+        const RunResult merged = loom(std::string("image merge ") + order + " -o " + quoted(out));
         ASSERT_EQ(merged.code, 0) << merged.output;
         EXPECT_CONTAINS(merged.output, "2 shards, 8 iterations");
-        EXPECT_TRUE(same("merged/Accumulate.mean.0003.exr", "single/Accumulate.dst.0003.exr")) << order;
-        EXPECT_TRUE(same("merged/Accumulate.partialCount.0003.exr", "single/Accumulate.partialCount.0003.exr"));
+        EXPECT_TRUE(same(out + "/Accumulate.mean.0003.exr", "single/Accumulate.dst.0003.exr")) << order;
+        EXPECT_TRUE(same(out + "/Accumulate.partialCount.0003.exr", "single/Accumulate.partialCount.0003.exr"));
     }
     // Neither shard alone is the reference: the merge is what makes it.
     EXPECT_FALSE(same("a/Accumulate.dst.0003.exr", "single/Accumulate.dst.0003.exr"));
