@@ -219,7 +219,8 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& modulation, uint32_t x0
         }
         return;
     }
-    const V zero = hn::Zero(d), one = hn::Set(d, 1.f), minAlbedo = hn::Set(d, kMinAlbedo);
+    const V zero = hn::Zero(d), one = hn::Set(d, 1.f), minAlbedo = hn::Set(d, kMinAlbedo),
+            maxAlbedo = hn::Set(d, kMaxAlbedo);
     // Only the images the group needs (Remodulation::groups): the colour where it has a miss or an alpha other than
     // 1, the albedo where it has a hit, the emission where a hit has some. The images skipped are zero here, which
     // the operations below never use: no hit takes the albedo's place, no miss the colour's, alpha 1 is the colour's.
@@ -239,11 +240,12 @@ HWY_INLINE void remodulateStore(D d, const Remodulation& modulation, uint32_t x0
     }
     hn::LoadInterleaved2(d, &m.linearZ.at(x0, y).x, z, dz);
     const auto hit = hn::Ge(z, zero);
-    // As remodulate(): illum * max(finiteOrZero(albedo), kMinAlbedo) + finiteOrZero(emission) on hits, the colour
-    // with non-finite channels as 0 on misses; alpha is the colour's (1 if not finite).
+    // As remodulate(): illum * clamp(finiteOrZero(albedo), kMinAlbedo, kMaxAlbedo) + finiteOrZero(emission) on hits,
+    // the colour with non-finite channels as 0 on misses; alpha is the colour's (1 if not finite).
     auto channel = [&](V illum, V c, V a, V e) HWY_ATTR {
         a = hn::IfThenElseZero(hn::IsFinite(a), a);
         a = hn::IfThenElse(hn::Gt(a, minAlbedo), a, minAlbedo);
+        a = hn::IfThenElse(hn::Lt(a, maxAlbedo), a, maxAlbedo);
         const V lit = hn::Add(hn::Mul(illum, a), hn::IfThenElseZero(hn::IsFinite(e), e));
         return hn::IfThenElse(hit, lit, hn::IfThenElseZero(hn::IsFinite(c), c));
     };

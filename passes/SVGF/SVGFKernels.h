@@ -31,6 +31,9 @@ namespace loom::svgf {
 inline constexpr float kMinAlbedo = 1e-3f;
 /// Demodulated illumination is clamped to [0, kMaxIllumination], so the second moment l^2 stays finite.
 inline constexpr float kMaxIllumination = 1e16f;
+/// Albedo above this (per channel) is clamped too: a reflectance is at most 1, and the bound keeps the remodulated
+/// illum * albedo (at most 1e22) finite, with any finite emission added, for albedos as large as floats go.
+inline constexpr float kMaxAlbedo = 1e6f;
 /// History shorter than this uses the spatial variance estimate (paper section 4.2).
 inline constexpr float kSpatialVarianceFrames = 4.f;
 /// Disocclusion tests (Falcor's isReprjValid, depth relative to the depth derivative): a previous tap is rejected
@@ -47,10 +50,11 @@ LOOM_HD inline glm::vec3 finiteOrZero(const glm::vec3& v) {
     return glm::vec3(isFinite(v.x) ? v.x : 0.f, isFinite(v.y) ? v.y : 0.f, isFinite(v.z) ? v.z : 0.f);
 }
 
-/// The albedo demodulation divides by (and remodulation multiplies with).
+/// The albedo demodulation divides by (and remodulation multiplies with), in [kMinAlbedo, kMaxAlbedo].
 LOOM_HD inline glm::vec3 guardedAlbedo(const glm::vec4& albedo) {
     const glm::vec3 a = finiteOrZero(glm::vec3(albedo));
-    return glm::vec3(maxf(a.x, kMinAlbedo), maxf(a.y, kMinAlbedo), maxf(a.z, kMinAlbedo));
+    return glm::vec3(minf(maxf(a.x, kMinAlbedo), kMaxAlbedo), minf(maxf(a.y, kMinAlbedo), kMaxAlbedo),
+                     minf(maxf(a.z, kMinAlbedo), kMaxAlbedo));
 }
 
 LOOM_HD inline glm::vec3 clampIllumination(const glm::vec3& v) {

@@ -347,9 +347,10 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         const M lit = hn::Or(hn::Ne(er, zero), hn::Or(hn::Ne(eg, zero), hn::Ne(eb, zero)));
         if (!hn::AllFalse(d, hn::And(hit, lit))) reads |= kReadsEmission;
     }
-    const V minAlbedo = hn::Set(d, kMinAlbedo), maxIllum = hn::Set(d, kMaxIllumination);
+    const V minAlbedo = hn::Set(d, kMinAlbedo), maxAlbedo = hn::Set(d, kMaxAlbedo),
+            maxIllum = hn::Set(d, kMaxIllumination);
     auto demodulate = [&](V c, V e, V a) HWY_ATTR {
-        a = maxOf(hn::IfThenElseZero(hn::IsFinite(a), a), minAlbedo);
+        a = minOf(maxOf(hn::IfThenElseZero(hn::IsFinite(a), a), minAlbedo), maxAlbedo);
         return minOf(maxOf(hn::Div(hn::Sub(c, e), a), zero), maxIllum);
     };
     const V lr = demodulate(cr, er, ar), lg = demodulate(cg, eg, ag), lb = demodulate(cb, eb, ab);
