@@ -96,6 +96,9 @@ struct ImageSequencePass::Resolved {
     std::array<std::string, kOutputCount> pattern;  ///< empty: the sequence has no such channel
     std::array<std::vector<std::string>, kOutputCount> channels;
     std::array<std::string, kOutputCount> described;  ///< "file: layer (components)" for the log
+    /// Where the sequence has no such channel because no alternative's file exists: the parameter that named the
+    /// pattern ("path", or the channel's), and the file of the first frame; empty otherwise.
+    std::array<std::string, kOutputCount> absentParam, absentFile;
 };
 
 ImageSequencePass::ImageSequencePass() = default;
@@ -173,13 +176,49 @@ ImageSequencePass::Settings ImageSequencePass::settings() const {
         if (blender) {
             s.source[i] = kBlenderLayers[i];
         } else if (mPreset == Preset::Loom && *kOutputs[i].loomPass) {
+            // The folder's own '%' are literal ("%%"); its '#' are, as the pattern has a printf field.
+            std::string folder;
+            for (const char c : mPath) folder += c == '%' ? std::string("%%") : std::string(1, c);
             s.source[i] =
-                (fs::path(mPath) / fmt::format("{}.{}.%04d.exr", kOutputs[i].loomPass, kOutputs[i].name)).string() +
+                (fs::path(folder) / fmt::format("{}.{}.%04d.exr", kOutputs[i].loomPass, kOutputs[i].name)).string() +
                 ":";
         }
     }
     return s;
 }
+
+namespace {
+
+/// The file has no layer `layer` for `channel`: what it has, and how to name one.
+[[noreturn]] void missingLayer(const ExrFile& exr, const std::string& layer, const char* channel,
+                               const std::string& at) {
+    const std::string file = exr.path().string();
+    std::vector<std::string> named;
+    for (const std::string& l : exr.layers())
+        if (!l.empty()) named.push_back(l);
+    std::vector<std::string> quoted;
+    for (const std::string& l : exr.layers()) quoted.push_back(l.empty() ? "R, G, B, A" : "'" + l + "'");
+    if (layer.empty())
+        throwBadInput(at,
+                      fmt::format("the layer for {} is empty, which reads the channels R, G, B, A (or Y), and the "
+                                  "file has none (it has {})",
+                                  channel, join(quoted)),
+                      "PATTERN:LAYER with the layer after the colon",
+                      named.empty() ? std::string("name a layer of the file after the colon")
+                                    : fmt::format("write the layer after the colon, e.g. PATTERN:{}", named.front()),
+                      file);
+    if (const int part = layer.empty() ? -1 : exr.partWithLayer(layer); part > 0)
+        throwBadInput(at,
+                      fmt::format("the layer '{}' for {} is in part {} of the file's {} parts, and only the first "
+                                  "part is read (it has {})",
+                                  layer, channel, part + 1, exr.partCount(), join(quoted)),
+                      "the layers of a sequence in the first part of each file",
+                      "write the frames as single-part multilayer EXRs (or with this layer in the first part)", file);
+    throwBadInput(at, fmt::format("the file has no layer '{}' for {} (it has {})", layer, channel, join(quoted)),
+                  "a layer of the file", didYouMean(layer, exr.layers(), ""), file);
+}
+
+}  // namespace
 
 ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_t number) {
     Resolved out;
@@ -193,6 +232,8 @@ ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_
         const size_t i = size_t(o);
         if (s.source[i].empty()) continue;
         std::vector<std::string> tried;
+        bool onlyAbsentFiles = true;
+        std::string absentParam, absentFile;
         for (const std::string& alternative : splitAlternatives(s.source[i])) {
             std::string pattern, layer;
             if (mentionsExr(alternative)) {
@@ -209,26 +250,33 @@ ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_
                 pattern = s.path;
                 layer = s.layerPrefix.empty() || alternative.empty() ? alternative : s.layerPrefix + "." + alternative;
             }
-            const std::string file =
-                sequenceFramePath(pattern, number, where(mentionsExr(alternative) ? kOutputs[i].name : "path"));
-            std::error_code ec;
-            if (s.optional[i] && !fs::exists(file, ec)) {
-                tried.push_back("no file " + file);
-                continue;
+            // The preset's own patterns come from path (the loom preset's too); a channel parameter names its own.
+            const std::string param = s.optional[i] || !mentionsExr(alternative) ? "path" : kOutputs[i].name;
+            const std::string file = sequenceFramePath(pattern, number, where(param));
+            if (s.optional[i]) {
+                if (const std::string absent = fileAbsence(file); !absent.empty()) {
+                    const std::string entry = fmt::format("{} {}", file, absent);
+                    if (std::find(tried.begin(), tried.end(), entry) == tried.end()) tried.push_back(entry);
+                    if (absentParam.empty()) {
+                        absentParam = param;
+                        absentFile = file;
+                    }
+                    continue;
+                }
             }
             ExrFile* exr = open(file);
             std::vector<std::string> channels = exr->layerChannels(layer);
             if (channels.empty()) {
                 if (s.optional[i]) {
-                    tried.push_back(fmt::format("no layer '{}' in {}", layer, file));
+                    onlyAbsentFiles = false;
+                    const int part = layer.empty() ? -1 : exr->partWithLayer(layer);
+                    tried.push_back(part > 0 ? fmt::format("layer '{}' in part {} of {}, and only the first part is "
+                                                           "read: write single-part multilayer EXRs",
+                                                           layer, part + 1, file)
+                                             : fmt::format("no layer '{}' in {}", layer, file));
                     continue;
                 }
-                std::vector<std::string> quoted;
-                for (const std::string& l : exr->layers()) quoted.push_back(l.empty() ? "R, G, B, A" : "'" + l + "'");
-                throwBadInput(
-                    where(kOutputs[i].name),
-                    fmt::format("{} has no layer '{}' for {} (it has {})", file, layer, kOutputs[i].name, join(quoted)),
-                    "a layer of the file", didYouMean(layer, exr->layers(), ""), file);
+                missingLayer(*exr, layer, kOutputs[i].name, where(kOutputs[i].name));
             }
             out.pattern[i] = pattern;
             out.channels[i] = std::move(channels);
@@ -243,17 +291,46 @@ ImageSequencePass::Resolved ImageSequencePass::resolve(const Settings& s, int64_
             out.described[i] = fmt::format("{}({})", prefix, join(shown, " "));
             break;
         }
-        if (out.pattern[i].empty() && !tried.empty())
+        if (out.pattern[i].empty() && !tried.empty()) {
             out.described[i] = fmt::format("not in the sequence ({})", join(tried, "; "));
+            if (onlyAbsentFiles) {
+                out.absentParam[i] = absentParam;
+                out.absentFile[i] = absentFile;
+            }
+        }
     }
     return out;
 }
 
 namespace {
 
-[[noreturn]] void frameError(const std::string& file, int64_t number, const std::string& what,
-                             const std::string& expected, const std::string& suggestion = {}) {
-    throwBadInput("ImageSequence", fmt::format("frame {}: {}", number, what), expected, suggestion, file);
+/// An error reading one frame's file (the pass adds the graph frame and the file number).
+[[noreturn]] void frameError(const std::string& file, const std::string& what, const std::string& expected,
+                             const std::string& suggestion = {}) {
+    throwBadInput("ImageSequence", what, expected, suggestion, file);
+}
+
+/// A frame of another size than the graph's: the --size to render at, or, when the sequence's own frames differ
+/// (this one and the first), that they do.
+[[noreturn]] void sizeError(const ImageSequencePass::Settings& s, const std::string& pattern, const ExrFile& exr,
+                            uint32_t width, uint32_t height) {
+    const std::string file = exr.path().string();
+    const std::string what =
+        fmt::format("the image is {}x{}, the graph renders {}x{}", exr.width(), exr.height(), width, height);
+    const std::string first = sequenceFramePath(pattern, s.firstFrame, where("path"));
+    if (first != file && fileAbsence(first).empty()) {
+        const ExrFile firstExr(first);
+        if (firstExr.width() != exr.width() || firstExr.height() != exr.height())
+            frameError(file,
+                       fmt::format("{}, and the sequence's frames differ in size: its first frame, {}, is {}x{}", what,
+                                   first, firstExr.width(), firstExr.height()),
+                       "every frame of the sequence at one size",
+                       fmt::format("write the sequence again at one size, or render only the frames of one size "
+                                   "(--frames, firstFrame); --size {}x{} fits the first frame",
+                                   firstExr.width(), firstExr.height()));
+    }
+    frameError(file, what, "frames of the graph's size",
+               fmt::format("render at the sequence's size: --size {}x{}", exr.width(), exr.height()));
 }
 
 }  // namespace
@@ -273,18 +350,12 @@ ImageSequencePass::Frame ImageSequencePass::readFrame(const Settings& s, const R
         const std::string file = sequenceFramePath(r.pattern[i], number, where(kOutputs[i].name));
         auto& exr = files[file];
         if (!exr) {
-            std::error_code ec;
-            if (!fs::exists(file, ec))
-                frameError(file, number, fmt::format("the file of {} does not exist", kOutputs[i].name),
+            if (const std::string absent = fileAbsence(file); !absent.empty())
+                frameError(file, fmt::format("the file of {} {}", kOutputs[i].name, absent),
                            fmt::format("file {} for every frame the graph renders", r.pattern[i]),
                            "render fewer frames (--frames), or check firstFrame and the numbering");
             exr = std::make_unique<ExrFile>(file);
-            if (exr->width() != width || exr->height() != height)
-                frameError(file, number,
-                           fmt::format("the image is {}x{}, the graph renders {}x{}", exr->width(), exr->height(),
-                                       width, height),
-                           "frames of the graph's size",
-                           fmt::format("render at the sequence's size: --size {}x{}", exr->width(), exr->height()));
+            if (exr->width() != width || exr->height() != height) sizeError(s, r.pattern[i], *exr, width, height);
         }
         const OutputInfo& info = kOutputs[i];
         const std::vector<std::string>& channels = r.channels[i];
@@ -293,12 +364,11 @@ ImageSequencePass::Frame ImageSequencePass::readFrame(const Settings& s, const R
             if (c.empty()) continue;
             const ExrChannel* ch = exr->findChannel(c);
             if (!ch)
-                frameError(file, number, fmt::format("the file has no channel '{}' for {}", c, info.name),
+                frameError(file, fmt::format("the file has no channel '{}' for {}", c, info.name),
                            "the same channels in every frame");
             allUint = allUint && ch->type == ExrSampleType::Uint;
             if (ch->type == ExrSampleType::Uint && isFloatFormat(info.format))
-                frameError(file, number,
-                           fmt::format("channel '{}' holds UINT samples; {} needs HALF or FLOAT", c, info.name),
+                frameError(file, fmt::format("channel '{}' holds UINT samples; {} needs HALF or FLOAT", c, info.name),
                            "HALF or FLOAT samples", "map the channel to a layer of float samples");
         }
         const bool depthOnly = o == LinearZ && s.depth == DepthKind::Depth;
@@ -317,57 +387,40 @@ ImageSequencePass::Frame ImageSequencePass::readFrame(const Settings& s, const R
     }
     for (auto& [file, list] : reads) files[file]->read(list);
 
-    // Conversions, then the count of what was not finite.
+    // Conversions, with the count of what was not finite or out of range.
     if (!frame.channels[MeshId].empty() && !floatIds[MeshId].empty()) {
         const auto src = floatIds[MeshId].view<float>();
         const auto dst = frame.channels[MeshId].view<uint32_t>();
         for (uint32_t y = 0; y < height; ++y)
             for (uint32_t x = 0; x < width; ++x) dst.at(x, y) = sequence::objectIndexToMeshId(src.at(x, y));
     }
-    if (Texture& z = frame.channels[LinearZ]; !z.empty()) {
-        const auto view = z.view<glm::vec2>();
-        for (uint32_t y = 0; y < height; ++y)
-            for (uint32_t x = 0; x < width; ++x)
-                if (!std::isfinite(view.at(x, y).x)) ++frame.nonFinite;
-        if (s.depth == DepthKind::Depth) {
-            sequence::depthToLinearZ(view, s.missDepth);
-        } else {
-            for (uint32_t y = 0; y < height; ++y)
-                for (uint32_t x = 0; x < width; ++x) {
-                    glm::vec2& p = view.at(x, y);
-                    if (!std::isfinite(p.x)) p = {-1.f, 0.f};
-                    if (!std::isfinite(p.y)) p.y = 0.f;
-                }
-        }
-    }
-    for (int o = 0; o < kOutputCount; ++o)
-        if (o != LinearZ && !frame.channels[size_t(o)].empty() && isFloatFormat(kOutputs[size_t(o)].format))
-            frame.nonFinite += sequence::zeroNonFinite(frame.channels[size_t(o)]);
-    if (Texture& m = frame.channels[Mvec]; !m.empty() && s.motion != MotionKind::Uv) {
-        const auto view = m.view<glm::vec2>();
-        for (uint32_t y = 0; y < height; ++y)
-            for (uint32_t x = 0; x < width; ++x)
-                view.at(x, y) = sequence::motionToUv(view.at(x, y), s.motion, s.motionYUp, width, height);
-    }
-    if (Texture& n = frame.channels[NormW]; !n.empty()) {
-        // Blended at silhouettes (Blender's are down to 0.68 long there): back to unit length. Unit ones, as
-        // Loom's own, keep their bits.
-        const auto view = n.view<glm::vec4>();
-        for (uint32_t y = 0; y < height; ++y)
-            for (uint32_t x = 0; x < width; ++x) view.at(x, y) = sequence::unitNormal(view.at(x, y));
-    }
-    if (Texture& n = frame.channels[NormW]; !n.empty() && s.normals == NormalSpace::Camera) {
-        const auto worldToCamera = files[sequenceFramePath(r.pattern[NormW], number, "")]->worldToCamera();
-        if (worldToCamera) {
-            const auto view = n.view<glm::vec4>();
-            for (uint32_t y = 0; y < height; ++y)
-                for (uint32_t x = 0; x < width; ++x)
-                    view.at(x, y) =
-                        glm::vec4(sequence::cameraNormalToWorld(glm::vec3(view.at(x, y)), *worldToCamera), 0.f);
-        } else {
+    sequence::FrameChannels channels;
+    const auto present = [&](int o) {
+        return frame.channels[size_t(o)].empty() ? nullptr : &frame.channels[size_t(o)];
+    };
+    channels.normW = present(NormW);
+    channels.linearZ = present(LinearZ);
+    channels.mvec = present(Mvec);
+    for (int o : {Albedo, SpecAlbedo})
+        if (Texture* t = present(o)) channels.reflectances.push_back(t);
+    for (int o : {Color, Emission, Gradient, Reference})
+        if (Texture* t = present(o)) channels.others.push_back(t);
+    sequence::ConversionSettings conversion;
+    conversion.depthFromOneChannel = s.depth == DepthKind::Depth;
+    conversion.missDepth = s.missDepth;
+    conversion.motion = s.motion;
+    conversion.motionYUp = s.motionYUp;
+    if (channels.normW && s.normals == NormalSpace::Camera) {
+        const std::string file = sequenceFramePath(r.pattern[NormW], number, "");
+        conversion.worldToCamera = files[file]->worldToCamera();
+        if (conversion.worldToCamera)
+            sequence::requireUsableWorldToCamera(*conversion.worldToCamera, where("normals"), file);
+        else
             frame.cameraNormalsKept = true;
-        }
     }
+    const sequence::Replaced replaced = sequence::convertFrame(channels, conversion);
+    frame.nonFinite = replaced.nonFinite;
+    frame.outOfRange = replaced.outOfRange;
     return frame;
 }
 
@@ -418,10 +471,13 @@ void ImageSequencePass::execute(PassContext& ctx) {
     try {
         frame = take(number, s, wanted);
     } catch (const Error& e) {
-        // The reader names parameters by the pass type; the graph knows this pass by its name.
+        // The reader names parameters by the pass type, and files by name; the graph knows this pass by its name and
+        // the frame by its index.
         Error::Info info = e.info();
         const std::string type = "ImageSequence";
         if (info.where.compare(0, type.size(), type) == 0) info.where = ctx.passName() + info.where.substr(type.size());
+        if (info.where.empty()) info.where = ctx.passName();
+        info.what = fmt::format("graph frame {} (sequence frame {}): {}", ctx.frameIndex(), number, info.what);
         throw Error(info);
     }
     if (!mLogged) {
@@ -461,8 +517,24 @@ void ImageSequencePass::execute(PassContext& ctx) {
         // Observed only (a dump, the viewer): what the sequence lacks shows as the fill, or as zeros.
         const Missing missing = mConsumed[i] ? info.missing : Missing::Fill;
         const float fill = mConsumed[i] || info.missing != Missing::Error ? info.fill : 0.f;
+        if (missing == Missing::Error && !mResolved->absentParam[i].empty()) {
+            // The files themselves are not there: the pattern (or firstFrame) is what to change.
+            const std::string& param = mResolved->absentParam[i];
+            const std::string pattern = param == "path" ? mPath : mSource[i];
+            throwBadInput(fmt::format("{}.{}", ctx.passName(), param),
+                          fmt::format("the graph reads {}.{}, and its file of graph frame {} (sequence frame {}) "
+                                      "{}: {}",
+                                      ctx.passName(), info.name, ctx.frameIndex(), number,
+                                      fileAbsence(mResolved->absentFile[i]), mResolved->absentFile[i]),
+                          param == "path" && mPreset == Preset::Loom
+                              ? std::string("the folder of `loom render --dump`'s files")
+                              : "a numbered file for each frame (#### or %04d stands for the frame number)",
+                          fmt::format("check {}.{} ('{}') and {}.firstFrame ({}, the sequence frame of graph "
+                                      "frame 0)",
+                                      ctx.passName(), param, pattern, ctx.passName(), s.firstFrame));
+        }
         if (missing == Missing::Error)
-            throwBadInput(where(info.name),
+            throwBadInput(fmt::format("{}.{}", ctx.passName(), info.name),
                           fmt::format("the graph reads {}.{}, and the sequence has none: {}", ctx.passName(), info.name,
                                       mResolved->described[i].empty() ? "no source given" : mResolved->described[i]),
                           fmt::format("a source of {}", info.name),
@@ -493,6 +565,14 @@ void ImageSequencePass::execute(PassContext& ctx) {
         }
     }
     ctx.stats().set("nonFinite", double(frame.nonFinite));
+    ctx.stats().set("outOfRange", double(frame.outOfRange));
+    if (frame.outOfRange > 0 && !mOutOfRangeWarned) {
+        mOutOfRangeWarned = true;
+        spdlog::warn(
+            "{}: frame {} holds {} values out of range; they are clamped (albedos into [0, {}], motion into +-{} "
+            "frames); the stat outOfRange counts them every frame",
+            ctx.passName(), number, frame.outOfRange, sequence::kMaxReflectance, sequence::kMaxMotionUv);
+    }
     if (frame.nonFinite > 0 && !mNonFiniteWarned) {
         mNonFiniteWarned = true;
         spdlog::warn(

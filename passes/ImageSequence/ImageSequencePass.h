@@ -9,10 +9,12 @@
 //
 // Conversions: normals from camera space (with the file's worldToCamera attribute), a one-channel depth into
 // linearZ (miss -1, the derivative computed from neighbours), motion in pixels of either sign and y direction
-// into uvPrev - uvCur, float object indices into mesh ids. Non-finite samples become 0 (depth: a miss) and are
-// counted (stat nonFinite). A consumed channel the sequence lacks is filled: albedo 1 (filtering without
-// demodulation, with a warning), specAlbedo, emission, gradient and meshId 0; colour, normals, depth, motion
-// and reference are required (an error names the channel and what the file holds).
+// into uvPrev - uvCur, float object indices into mesh ids (SequenceConversions.h). Non-finite samples, in the file
+// or made by a conversion, become 0 (depth: a miss) and are counted (stat nonFinite); albedos are clamped into
+// [0, 4] and motion into +-1e4 frames (stat outOfRange); a worldToCamera that cannot turn normals (not finite,
+// singular) stops the run with an error naming the file. A consumed channel the sequence lacks is filled: albedo 1
+// (filtering without demodulation, with a warning), specAlbedo, emission, gradient and meshId 0; colour, normals,
+// depth, motion and reference are required (an error names the channel and what the file holds).
 //
 // Frame k of the graph reads file number firstFrame + k. The files of the next frame are read on a background
 // thread while the graph runs the current one, so the pass itself copies memory.
@@ -71,7 +73,8 @@ public:
     struct Frame {
         int64_t number = -1;
         std::array<Texture, kOutputCount> channels;
-        uint64_t nonFinite = 0;
+        uint64_t nonFinite = 0;          ///< samples that were not finite, read as 0
+        uint64_t outOfRange = 0;         ///< finite values clamped into their channel's range (albedos, motion)
         bool cameraNormalsKept = false;  ///< camera-space normals without a worldToCamera to turn them
     };
 
@@ -114,6 +117,7 @@ private:
     std::array<bool, kOutputCount> mFillWarned{};
     bool mLogged = false;
     bool mNonFiniteWarned = false;
+    bool mOutOfRangeWarned = false;
 
     struct Pending {
         int64_t number = -1;

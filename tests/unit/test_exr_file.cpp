@@ -25,7 +25,7 @@ TEST(SequenceFramePath, ExpandsPrintfAndHashFields) {
 }
 
 TEST(SequenceFramePath, RefusesPatternsWithoutOneField) {
-    for (const char* bad : {"beauty.exr", "a_%04d_%04d.exr", "a_##_%d.exr", "a_%s.exr", "a_%", "a_%0999d.exr"}) {
+    for (const char* bad : {"beauty.exr", "a_%04d_%04d.exr", "a_%s.exr", "a_%", "a_%0999d.exr"}) {
         SCOPED_TRACE(bad);
         const Error e = test::expectError([&] { sequenceFramePath(bad, 1, "Frames.path"); });
         EXPECT_EQ(e.kind(), ErrorKind::BadInput);

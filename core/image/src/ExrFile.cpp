@@ -4,6 +4,7 @@
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
+#include <ImfMultiPartInputFile.h>
 #include <ImfStandardAttributes.h>
 #include <ImfStringAttribute.h>
 #include <ImfThreading.h>
@@ -70,49 +71,75 @@ std::string sequenceFramePath(std::string_view pattern, int64_t frame, const std
     const std::string text(pattern);
     const auto bad = [&](const std::string& what) {
         throwBadInput(where, what + " in '" + text + "'",
-                      "one frame field: %04d (printf) or #### (digits, zero-padded)",
+                      "one frame field: %04d (printf: %4d pads with spaces), or a run of # (digits, zero-padded); "
+                      "%% for a literal %",
                       "name the frames like beauty.%04d.exr or beauty.####.exr");
     };
     if (frame < 0) throwBadInput(where, "frame " + std::to_string(frame) + " is negative", "frames from 0 on");
+    constexpr int kMaxDigits = 18;
+    // The printf field, if any: every '#' is then literal.
     size_t fieldAt = std::string::npos, fieldLength = 0;
     int width = 0;
-    for (size_t i = 0; i < text.size();) {
-        size_t start = i, length = 0;
-        int digits = 0;
-        if (text[i] == '%') {
-            size_t j = i + 1;
-            if (j < text.size() && text[j] == '%') {  // "%%" is a literal percent sign
-                i = j + 1;
-                continue;
-            }
-            while (j < text.size() && std::isdigit(static_cast<unsigned char>(text[j])) && j - i <= 2)
-                digits = digits * 10 + (text[j++] - '0');
-            if (j >= text.size() || text[j] != 'd') bad("a '%' that is not %d or %0Nd");
-            if (digits > 18) bad("a frame field wider than 18 digits");
-            length = j + 1 - i;
-        } else if (text[i] == '#') {
-            size_t j = i;
-            while (j < text.size() && text[j] == '#') ++j;
-            length = j - i;
-            digits = int(length);
-            if (digits > 18) bad("a frame field wider than 18 digits");
-        } else {
-            ++i;
+    bool zeros = true;
+    for (size_t i = 0; i < text.size(); ++i) {
+        if (text[i] != '%') continue;
+        size_t j = i + 1;
+        if (j < text.size() && text[j] == '%') {  // "%%" is a literal percent sign
+            i = j;
             continue;
         }
+        const bool zeroFlag = j < text.size() && text[j] == '0';
+        while (j < text.size() && text[j] == '0') ++j;
+        int digits = 0;
+        for (; j < text.size() && std::isdigit(static_cast<unsigned char>(text[j])); ++j)
+            digits = std::min(digits * 10 + (text[j] - '0'), 1000);
+        if (j >= text.size() || text[j] != 'd') bad("a '%' that is not %d, %Nd or %0Nd (write %% for a literal %)");
+        if (digits > kMaxDigits) bad("a frame field wider than 18 digits");
         if (fieldAt != std::string::npos) bad("two frame fields");
-        fieldAt = start;
-        fieldLength = length;
+        fieldAt = i;
+        fieldLength = j + 1 - i;
         width = digits;
-        i = start + length;
+        zeros = zeroFlag;
+        i = j;
     }
-    if (fieldAt == std::string::npos) bad("no frame field");
+    if (fieldAt == std::string::npos) {
+        // Otherwise the last run of '#' (earlier ones, in a folder's name say, are literal).
+        const size_t last = text.rfind('#');
+        if (last == std::string::npos) bad("no frame field");
+        size_t first = last;
+        while (first > 0 && text[first - 1] == '#') --first;
+        fieldAt = first;
+        fieldLength = last + 1 - first;
+        width = int(fieldLength);
+        if (width > kMaxDigits) bad("a frame field wider than 18 digits");
+    }
     std::string number = std::to_string(frame);
-    if (int(number.size()) < width) number.insert(0, size_t(width) - number.size(), '0');
-    std::string out = text.substr(0, fieldAt) + number + text.substr(fieldAt + fieldLength);
-    // "%%" stands for '%' everywhere else in the pattern.
-    for (size_t p = out.find("%%"); p != std::string::npos; p = out.find("%%", p + 1)) out.erase(p, 1);
+    if (int(number.size()) < width) number.insert(0, size_t(width) - number.size(), zeros ? '0' : ' ');
+    // The text around the field, with "%%" as '%'.
+    std::string out;
+    for (size_t i = 0; i < text.size(); ++i) {
+        if (i == fieldAt) {
+            out += number;
+            i += fieldLength - 1;
+        } else {
+            out += text[i];
+            if (text[i] == '%') ++i;  // the second '%' of "%%" (any other '%' is the field)
+        }
+    }
     return out;
+}
+
+std::string fileAbsence(const fs::path& path) {
+    std::error_code ec;
+    const fs::file_status status = fs::status(path, ec);
+    if (ec == std::errc::too_many_symbolic_link_levels) return "is a symbolic link loop";
+    if (!fs::exists(status)) {
+        std::error_code linkEc;
+        if (fs::is_symlink(fs::symlink_status(path, linkEc))) return "is a symbolic link to a missing file";
+        return "does not exist";
+    }
+    if (!fs::is_regular_file(status)) return "is not a regular file";
+    return {};
 }
 
 SequenceSource parseSequenceSource(std::string_view spec) {
@@ -146,9 +173,11 @@ struct ExrFile::Impl {
 ExrFile::ExrFile(const fs::path& path) : mImpl(std::make_unique<Impl>()) {
     limitImageSize();
     mImpl->path = path;
-    std::error_code ec;
-    if (!fs::exists(path, ec)) fail(path, "image file not found", "an existing EXR file", "check the path");
-    if (!fs::is_regular_file(path, ec)) fail(path, "not a regular file", "an EXR file");
+    if (const std::string absent = fileAbsence(path); !absent.empty()) {
+        if (absent == "is not a regular file") fail(path, "not a regular file", "an EXR file");
+        fail(path, absent == "does not exist" ? "image file not found" : "the path " + absent, "an existing EXR file",
+             "check the path");
+    }
     if (::access(path.c_str(), R_OK) != 0)
         fail(path, std::string("cannot read the file: ") + std::strerror(errno), "a readable EXR file",
              "check the file's permissions");
@@ -249,6 +278,28 @@ std::vector<std::string> ExrFile::layers() const {
         names.insert(dot == std::string::npos ? std::string() : c.name.substr(0, dot));
     }
     return {names.begin(), names.end()};
+}
+
+int ExrFile::partCount() const {
+    try {
+        return Imf::MultiPartInputFile(mImpl->path.c_str()).parts();
+    } catch (const std::exception&) {
+        return 1;  // the first part was read; the rest is for messages only
+    }
+}
+
+int ExrFile::partWithLayer(std::string_view layer) const {
+    try {
+        Imf::MultiPartInputFile file(mImpl->path.c_str());
+        const std::string prefix = std::string(layer) + ".";
+        for (int part = 0; part < file.parts(); ++part)
+            for (auto it = file.header(part).channels().begin(); it != file.header(part).channels().end(); ++it) {
+                const std::string name = it.name();
+                if (name == layer || name.compare(0, prefix.size(), prefix) == 0) return part;
+            }
+    } catch (const std::exception&) {
+    }
+    return -1;
 }
 
 namespace {

@@ -17,10 +17,16 @@
 
 namespace loom {
 
-/// The file of frame `frame` of a numbered sequence. `pattern` holds one frame field: printf's "%d" or "%0Nd", or
-/// a run of N '#' (N digits, zero-padded, as Blender names its output). Throws loom::Error (BadInput, at `where`)
-/// when the pattern holds no field, two fields, or a field it cannot read, or when the frame is negative.
+/// The file of frame `frame` of a numbered sequence. `pattern` holds one frame field: printf's "%d", "%Nd" (padded
+/// with spaces) or "%0Nd" (with zeros), N up to 18, with "%%" for a literal '%'; or, without a printf field, the
+/// last run of N '#' (N digits, zero-padded, as Blender names its output; every other '#' is literal). Throws
+/// loom::Error (BadInput, at `where`) when the pattern holds no field, two printf fields, or a '%' it cannot read,
+/// or when the frame is negative.
 std::string sequenceFramePath(std::string_view pattern, int64_t frame, const std::string& where);
+
+/// "" when `path` names an existing file; else why it cannot be opened, to follow the path in a message: "does not
+/// exist", "is a symbolic link loop", "is a symbolic link to a missing file", "is not a regular file".
+std::string fileAbsence(const std::filesystem::path& path);
 
 /// A source of one image per frame: a numbered file pattern and, for a multilayer EXR, the layer to read.
 struct SequenceSource {
@@ -82,6 +88,11 @@ public:
     std::vector<std::string> layerChannels(std::string_view layer) const;
     /// The layers the file holds (each channel's name up to its last dot; "" for bare names), sorted.
     std::vector<std::string> layers() const;
+    /// How many parts the file has (1 for a single-part file; ExrFile reads the first).
+    int partCount() const;
+    /// The part (from 0) of a multi-part file whose channels hold `layer`, -1 if none does; for a message that says
+    /// where a layer ExrFile does not read is.
+    int partWithLayer(std::string_view layer) const;
 
     /// Reads the pixels of the given channels in one pass. Each destination holds width() x height() values.
     void read(const std::vector<ExrChannelRead>& reads);
