@@ -137,14 +137,20 @@ again="$("$src/scripts/slurm/reference.sh" --loom "$loom" --graph "$graph" --sce
 echo "$again" | grep -q "1 of 8 shard task" || fail "the resumed submission did not submit one task: $again"
 "$loom" image compare "$t/single/Accumulate.dst.0002.exr" "$t/run/frames/0002/Accumulate.mean.0002.exr" ||
   fail "frame 2 resumed differs"
-# A task that fails (loom refuses an unknown parameter) is named with its log, the merge is not run, and the
-# command fails.
+# A task that fails on its node (a loom that fails task 2's render; arguments loom refuses are refused before
+# anything is submitted) is named with its log, the merge is not run, and the command fails.
 rm -rf "$t/run/shards/0001" "$t/run/frames/0001"
-if out="$("$src/scripts/slurm/reference.sh" --loom "$loom" --graph "$graph" --scene "$scene" --size "$size" \
-  --frames 0-3 --iterations 8 --shards 2 --out "$t/run" --set PathTracer.noSuchParameter=1 2>&1)"; then
+{
+  echo '#!/usr/bin/env bash'
+  echo 'if [ "$1" = render ] && [ "${SLURM_ARRAY_TASK_ID:-}" = 2 ]; then echo "task 2 failed on purpose" >&2; exit 1; fi'
+  printf 'exec %q "$@"\n' "$loom"
+} > "$t/failing-loom"
+chmod +x "$t/failing-loom"
+if out="$("$src/scripts/slurm/reference.sh" --loom "$t/failing-loom" --graph "$graph" --scene "$scene" \
+  --size "$size" --frames 0-3 --iterations 8 --shards 2 --out "$t/run" "${sets[@]}" 2>&1)"; then
   fail "a submission whose tasks fail succeeded: $out"
 fi
 echo "$out" | grep -q "FAILED: task 2 (frame 1, shard 0)" || fail "the failed task was not reported: $out"
-echo "$out" | grep -q "noSuchParameter" || fail "the failed task's log was not shown: $out"
+echo "$out" | grep -q "task 2 failed on purpose" || fail "the failed task's log was not shown: $out"
 [ ! -d "$t/run/frames/0001" ] || fail "frame 1 was merged although its shards failed"
 echo "PASS"
