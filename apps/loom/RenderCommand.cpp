@@ -43,6 +43,7 @@ struct RenderOptions {
     bool hold = false;
     std::string warmup = "auto";
     uint64_t seedOffset = 0;
+    bool dryRun = false;
     SceneOptions scene;
 };
 
@@ -79,7 +80,14 @@ void runRender(const RenderOptions& o) {
                       "add --scene, or drop --hold");
     std::set<uint64_t> dumpFrames;
     if (!o.dumpFrames.empty()) dumpFrames = parseFrameList(o.dumpFrames, "--dump-frames");
-    ensureWritableDir(o.out, "--out");
+    if (o.dryRun) {  // nothing is created: a folder that is a file is all that can be refused here
+        std::error_code ec;
+        if (std::filesystem::exists(o.out, ec) && !std::filesystem::is_directory(o.out, ec))
+            throwBadInput("--out", "'" + o.out + "' exists and is not a folder", "a folder to write into",
+                          "choose another --out folder");
+    } else {
+        ensureWritableDir(o.out, "--out");
+    }
     // Neither an input nor the statistics may have the name of an image the frames write into --out.
     static const std::regex frameFile(R"([^.]+\.[^.]+\.[0-9]{4,}\.(png|exr))");  // frameFileName's names
     const auto isFrameFile = [](const std::string& name) { return std::regex_match(name, frameFile); };
@@ -141,6 +149,12 @@ void runRender(const RenderOptions& o) {
                       fmt::format("give --warmup 64 (history close to one run's once it has forgotten its start), or "
                                   "--warmup all to run all {} frames",
                                   warmup));
+    if (o.dryRun) {
+        std::cout << fmt::format("dry run: {} frame(s) from frame {} at {}x{} would render{}; nothing was written\n",
+                                 o.frames, o.startFrame, width, height,
+                                 warmup > 0 ? fmt::format(" after {} warm-up frame(s)", warmup) : std::string());
+        return;
+    }
     bool warming = false;
 
     const std::filesystem::path outDir(o.out);
@@ -298,6 +312,9 @@ void addRenderCommand(CLI::App& app) {
                   "hold one frame: run --frames iterations of frame --start-frame at its scene time and camera "
                   "(fresh random numbers each; an accumulating graph converges that frame) and write the outputs "
                   "once, after the last, under that frame's number");
+    cmd->add_flag("--dry-run", o->dryRun,
+                  "check everything (graph, scene, parameters, size, frame and seed limits, warm-up) and stop before "
+                  "the first frame: nothing is rendered or written (exit 0, or 2 naming what is wrong)");
     cmd->add_flag("--poison", o->poison, "fill transient memory with NaN when its lifetime starts (debug)");
     addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runRender(*o); });

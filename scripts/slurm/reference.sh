@@ -18,9 +18,10 @@
 #   --sbatch ARGS      extra sbatch arguments for every job (partition, account, time, ...), split into words at
 #                      whitespace and passed to sbatch as they are: never evaluated, no quotes or expansions
 #   --no-wait          submit and return (the job ids are printed)
-# Everything is checked before anything is submitted: the numbers against the limits of `loom render` (frames up to
-# 1000000000, at most 1000000 iterations a task, a held frame's iterations below 2^32: frame + --iterations - 1 at
-# most 4294967295), and the graph, scene, size and --set by `loom check` on this host with the tasks' arguments.
+# Everything is checked before anything is submitted: the numbers first (decimal, and against the limits of
+# `loom render` before bash's arithmetic could overflow: frames up to 1000000000, at most 1000000 iterations a task,
+# frame + --iterations - 1 at most 4294967295), then the first and last task's exact `loom render` command, run dry
+# (`--dry-run`) on this host: the graph, scene, size, --set and every limit as the tasks would meet them.
 # Values reach the tasks as data: the job scripts hold them as quoted assignments and never evaluate them.
 # Environment: LOOM_THREADS (worker threads per task, default: the CPUs Slurm gives the task).
 # Exit: 0 when every frame is merged, 1 when a task or the merge failed (their logs are named), 2 for bad arguments.
@@ -137,11 +138,17 @@ for c in sbatch squeue; do command -v "$c" > /dev/null || die "$c not found: is 
 sbatchWords=()
 read -r -d '' -a sbatchWords <<< "$sbatchArgs" || true
 
-# What each task's `loom render` would refuse (the graph, the scene, --size, --set), found here before anything is
-# submitted; the frame numbers, iterations and seed offsets are checked above against its limits.
-if ! refusal="$("$loom" check "$graph" --scene "$scene" --size "$size" "${sets[@]}" 2>&1 > /dev/null)"; then
-  die "the tasks would fail: loom check refuses the graph, scene, --size or --set:"$'\n'"$refusal"
-fi
+# What the tasks' `loom render` would refuse (the graph, the scene, --size, --set, its frame and seed limits), found
+# here before anything is submitted: the first and the last task's exact commands (the last has the highest frame
+# and seed offset), run dry (`--dry-run`: checked, nothing rendered or written).
+for t in 0 $((tasks - 1)); do
+  frame=$((first + t / shards)) shard=$((t % shards))
+  if ! refusal="$("$loom" render --dry-run --graph "$graph" --scene "$scene" --size "$size" --start-frame "$frame" \
+    --hold --frames "$per" --seed-offset "$((shard * per))" --threads "${LOOM_THREADS:-0}" --quiet \
+    --out "$out/shards/dry-run" "${sets[@]}" 2>&1 > /dev/null)"; then
+    die "the tasks would fail: loom render refuses task $t (frame $frame, shard $shard):"$'\n'"$refusal"
+  fi
+done
 
 mkdir -p -- "$out/shards" "$out/frames" "$out/slurm/logs"
 

@@ -178,8 +178,8 @@ refused "--set last without its value" "--set needs a value" "${bad[@]}" --set
 refused "--sbatch last without its value" "--sbatch needs a value" "${bad[@]}" --sbatch
 refused "an unknown argument" "unknown argument '--bogus'" "${bad[@]}" --bogus
 refused "a missing scene" "no such file" "${bad[@]}" --scene "$t/nothing.gltf"
-refused "a scene loom cannot load" "loom check refuses" "${bad[@]}" --scene "$graph"
-refused "a graph loom cannot load" "loom check refuses" "${bad[@]}" --graph "$scene"
+refused "a scene loom cannot load" "loom render refuses task 0" "${bad[@]}" --scene "$graph"
+refused "a graph loom cannot load" "loom render refuses task 0" "${bad[@]}" --graph "$scene"
 refused "no loom binary" "no loom binary" "${bad[@]}" --loom "$t/nothing/loom"
 refused "LOOM_THREADS=x" "LOOM_THREADS='x' is not a thread count" env LOOM_THREADS=x "${bad[@]}"
 refused "LOOM_THREADS=2000" "LOOM_THREADS='2000' is not a thread count" env LOOM_THREADS=2000 "${bad[@]}"
@@ -199,7 +199,10 @@ export FAKE_LOOM_CALLS="$t/fake-loom"
 mkdir "$FAKE_LOOM_CALLS"
 cat > "$t/$odd/bin/loom" << 'EOF'
 #!/usr/bin/env bash
-printf '%s\0' "$@" > "$(mktemp "$FAKE_LOOM_CALLS/$1.XXXXXX")"
+name="$1"
+for a in "$@"; do [ "$a" != --dry-run ] || name=dry-run; done
+printf '%s\0' "$@" > "$(mktemp "$FAKE_LOOM_CALLS/$name.XXXXXX")"
+[ "$name" != dry-run ] || exit 0
 while [ $# -gt 0 ]; do
   case "$1" in --out | -o) mkdir -p -- "$2" && : > "$2/fake.exr" ;; esac
   shift
@@ -244,8 +247,15 @@ if [ -f "${merges[0]}" ]; then
 else
   problems+="no merge; "
 fi
-checks=("$FAKE_LOOM_CALLS"/check.*)
-[ -f "${checks[0]}" ] && [ "$(argAfter "${checks[0]}" --set)" = "$setValue" ] || problems+="no loom check of --set; "
+dry=("$FAKE_LOOM_CALLS"/dry-run.*)
+[ ${#dry[@]} -eq 2 ] || problems+="${#dry[@]} dry runs, not 2 (the first and the last task); "
+dryOffsets=""
+for d in "${dry[@]}"; do
+  [ -f "$d" ] || continue
+  [ "$(argAfter "$d" --set)" = "$setValue" ] || problems+="dry run --set $(argAfter "$d" --set); "
+  dryOffsets+="$(argAfter "$d" --seed-offset) "
+done
+[ "$(tr ' ' '\n' <<< "$dryOffsets" | sort -n | xargs)" = "0 2" ] || problems+="dry-run seed offsets $dryOffsets; "
 [ -d "$out/frames/0007" ] && [ -d "$out/shards/0007/shard_001" ] || problems+="the outputs are not in --out; "
 logs=("$out/slurm/logs/"*.log)
 [ ${#logs[@]} -eq 3 ] || problems+="${#logs[@]} job logs in --out, not 3; "

@@ -119,3 +119,23 @@ TEST_F(CliLimits, AParameterGivenAsAnOptionSaysHowToSetIt) {
     EXPECT_EQ(other.code, 2);
     EXPECT_EQ(other.output.find("is a parameter of"), std::string::npos) << other.output;
 }
+
+// --dry-run checks everything a render would (graph, scene, --set, size, frame and seed limits, warm-up) and stops
+// before the first frame: exit 0 with nothing written, or exit 2 naming what the render would refuse.
+TEST_F(CliLimits, DryRunChecksEverythingAndWritesNothing) {
+    const test::CliResult ok = loom(shard("--start-frame 3 --frames 4 --seed-offset 8 --dry-run --out dry"));
+    EXPECT_EQ(ok.code, 0) << ok.output;
+    EXPECT_CONTAINS(ok.output, "dry run: 4 frame(s) from frame 3 at 32x24 would render");
+    EXPECT_FALSE(fs::exists(mDir / "dry"));
+    expectBadInput(loom(shard("--set Nope.x=1 --dry-run --out dry")), {"Nope"});
+    expectBadInput(loom(shard("--set PathTracer.samplesPerPixel=-1 --dry-run --out dry")), {"samplesPerPixel"});
+    expectBadInput(loom(shard("--size 0x0 --dry-run --out dry")), {"--size"});
+    expectBadInput(loom(shard("--seed-offset 4294967295 --frames 2 --dry-run --out dry")), {"--seed-offset"});
+    const std::string svgf = "render --graph " + test::shellQuoted(kSourceDir + "/graphs/PathTracerSVGF.json") +
+                             " --scene " + test::shellQuoted(kDynamic) + " --size 32x24 --dry-run --out dry ";
+    expectBadInput(loom(svgf + "--start-frame 20000"), {"--warmup"});
+    const test::CliResult warm = loom(svgf + "--start-frame 20");
+    EXPECT_EQ(warm.code, 0) << warm.output;
+    EXPECT_CONTAINS(warm.output, "after 20 warm-up frame(s)");
+    EXPECT_FALSE(fs::exists(mDir / "dry"));
+}
