@@ -202,7 +202,7 @@ void damage(Rng& rng, std::vector<Shard>& shards, uint32_t w, uint32_t h) {
                                                               ".0003.exr");
                 if (f.image.format() != loom::Format::RGBA32U) break;
                 const auto v = f.image.view<glm::uvec4>();
-                glm::uvec4& t = v.at(uint32_t(pick(rng, w)), uint32_t(pick(rng, h)));
+                glm::uvec4& t = v.at(uint32_t(pick(rng, v.width)), uint32_t(pick(rng, v.height)));
                 const double d = chance(rng, 0.8) ? kSpecial[pick(rng, std::size(kSpecial))]
                                                   : loom::wordsToDouble(uint32_t(rng()), uint32_t(rng()));
                 const glm::uvec2 words = loom::doubleToWords(d);
@@ -216,7 +216,8 @@ void damage(Rng& rng, std::vector<Shard>& shards, uint32_t w, uint32_t h) {
                 File& f = shards[pick(rng, shards.size())].at("Accumulate.partialCount.0003.exr");
                 if (f.image.format() != loom::Format::R32U) break;
                 const uint32_t values[] = {0u, 0xFFFFFFFFu, 0x80000000u, uint32_t(rng())};
-                f.image.view<uint32_t>().at(uint32_t(pick(rng, w)), uint32_t(pick(rng, h))) = values[pick(rng, 4)];
+                const auto v = f.image.view<uint32_t>();  // the file may have another size by now
+                v.at(uint32_t(pick(rng, v.width)), uint32_t(pick(rng, v.height))) = values[pick(rng, 4)];
                 break;
             }
             case 5: {  // another size or format
@@ -335,14 +336,14 @@ std::string runOne(Rng& rng, const fs::path& work) {
     }
     if (failAt > 0 && calls >= failAt) return "the checkpoint threw, yet the merge returned";
     // Success: finite outputs whose counts and iterations add up.
-    uint64_t inputIterations = 0;
-    for (size_t i = 0; i < shards.size(); ++i) {
-        const loom::ShardHeader hdr = loom::readShardHeader(dirs[i] / "Accumulate.partialCount.0003.exr");
-        inputIterations += loom::iterationCount(hdr.iterations).value_or(0);
-    }
     for (const loom::MergedFrame& f : frames) {
         const fs::path dir = f.mean.parent_path();
         const std::string tail = "." + f.frame + ".exr";
+        uint64_t inputIterations = 0;  // of the shards, each once (a shard given twice holds no iterations)
+        for (size_t i = 0; i < shards.size(); ++i) {
+            const fs::path count = dirs[i] / (f.pass + ".partialCount" + tail);
+            inputIterations += loom::iterationCount(loom::readShardHeader(count).iterations).value_or(0);
+        }
         const loom::Texture mean = loom::readImage(f.mean);
         const loom::Texture count = loom::readImage(dir / (f.pass + ".partialCount" + tail));
         const loom::Texture rg = loom::readImage(dir / (f.pass + ".partialSumRG" + tail));
@@ -365,8 +366,8 @@ std::string runOne(Rng& rng, const fs::path& work) {
         // compare: identical to itself, different with one bit changed.
         if (loom::compareImages(rg, rg).differ != 0) return "compare finds an image different from itself";
         loom::Texture flipped = loom::readImage(dir / (f.pass + ".partialSumRG" + tail));
-        flipped.view<glm::uvec4>().at(uint32_t(pick(rng, w)), uint32_t(pick(rng, h)))[pick(rng, 4)] ^= 1u
-                                                                                                       << pick(rng, 32);
+        flipped.view<glm::uvec4>().at(uint32_t(pick(rng, flipped.width())),
+                                      uint32_t(pick(rng, flipped.height())))[pick(rng, 4)] ^= 1u << pick(rng, 32);
         if (loom::compareImages(rg, flipped).differ != 1) return "compare misses a changed bit";
     }
     for (const auto& e : fs::directory_iterator(work))
