@@ -1056,11 +1056,10 @@ void runBench(BenchOptions o) {
         throwBadInput("--scene", "scene '" + o.scene.scene + "' does not exist", "a glTF 2.0 file (.gltf or .glb)");
     // File numbers i + --reference-first-frame of every bench frame i, in range: no sum may overflow.
     constexpr int64_t kMaxFileNumber = 999999999999999999;  // 18 digits, the widest a sequence pattern writes
-    if (o.referenceFirstFrame < -kMaxFileNumber || o.referenceFirstFrame > kMaxFileNumber - int64_t(o.frames - 1))
+    if (o.referenceFirstFrame < 0 || o.referenceFirstFrame > kMaxFileNumber - int64_t(o.frames - 1))
         throwBadInput("--reference-first-frame",
                       fmt::format("file numbers {} + 0..{} are out of range", o.referenceFirstFrame, o.frames - 1),
-                      fmt::format("a first file number from -{} to {}", kMaxFileNumber,
-                                  kMaxFileNumber - int64_t(o.frames - 1)),
+                      fmt::format("a first file number from 0 to {}", kMaxFileNumber - int64_t(o.frames - 1)),
                       "the number of the sequence's first file, e.g. 1 for Blender's");
     if (givenReference)  // a pattern without a frame field fails here, before anything is loaded
         (void)sequenceFramePath(parseSequenceSource(o.referenceSequence).pattern, o.referenceFirstFrame,
