@@ -139,3 +139,14 @@ TEST_F(CliLimits, DryRunChecksEverythingAndWritesNothing) {
     EXPECT_CONTAINS(warm.output, "after 20 warm-up frame(s)");
     EXPECT_FALSE(fs::exists(mDir / "dry"));
 }
+
+// A multilayer reference named without its layer (or with an empty one after the colon) says how to name one, with
+// a layer the file has.
+TEST_F(CliLimits, AMultilayerReferenceWithoutItsLayerSaysHowToNameIt) {
+    const std::string pattern = kSourceDir + "/data/sequences/blender_cornell/reference_####.exr";
+    for (const std::string& spec : {pattern, pattern + ":"})
+        expectBadInput(loom("bench --graph DenoiseSequence --size 64x48 --frames 4 --warmup 1 --reference-first-frame 1 "
+                            "--reference-sequence " +
+                            test::shellQuoted(spec)),
+                       {"after the file name and a colon", "reference_0001.exr:ViewLayer.Combined'"});
+}

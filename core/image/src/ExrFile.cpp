@@ -310,6 +310,13 @@ std::string listLayers(const std::vector<std::string>& layers) {
     return join(quoted);
 }
 
+/// How to name a layer of `file`, with the first of its `layers` as the example.
+std::string layerHint(const std::string& file, const std::vector<std::string>& layers) {
+    for (const std::string& n : layers)
+        if (!n.empty()) return "name the layer after the file name and a colon, e.g. '" + file + ":" + n + "'";
+    return "name the layer after the file name and a colon (FILE.exr:LAYER)";
+}
+
 }  // namespace
 
 void ExrFile::read(const std::vector<ExrChannelRead>& reads) {
@@ -371,7 +378,7 @@ Texture ExrFile::readRgba(std::string_view layer) {
                  ? "the image has no R, G, B, A or Y channel (it has " + listLayers(layers()) + ")"
                  : "the image has no layer '" + std::string(layer) + "' (it has " + listLayers(layers()) + ")",
              layer.empty() ? "channels named R, G, B and A" : "a layer of the file",
-             layer.empty() ? "name the layer to read" : didYouMean(layer, layers(), ""));
+             layer.empty() ? layerHint(mImpl->path.string(), layers()) : didYouMean(layer, layers(), ""));
     for (const std::string& n : names)
         if (!n.empty() && findChannel(n)->type == ExrSampleType::Uint)
             fail(mImpl->path, "channel '" + n + "' holds UINT samples", "HALF or FLOAT colour samples");
