@@ -127,11 +127,48 @@ LOOM_HD inline glm::vec4 sumAsFloat(Precision precision, const PixelState& s) {
     }
 }
 
-// The double sum lives in RGBA32U history texels, laid out as loom/DoubleTexels.h says: `sumRG` holds R in xy and G
-// in zw, `sumBA` B and A.
+// The double sum lives in RGBA32U texels, laid out as loom/DoubleTexels.h says: the first holds R in xy and G in zw,
+// the second B and A.
 using loom::packDoublePair;
 using loom::packDoubleSum;
 using loom::unpackDoublePair;
 using loom::unpackDoubleSum;
+
+LOOM_HD inline glm::uvec4 floatBits(const glm::vec4& v) {
+    glm::uvec4 u;
+    for (int c = 0; c < 4; ++c) std::memcpy(&u[c], &v[c], sizeof(float));
+    return u;
+}
+
+LOOM_HD inline glm::vec4 bitsToFloat(const glm::uvec4& u) {
+    glm::vec4 v;
+    for (int c = 0; c < 4; ++c) std::memcpy(&v[c], &u[c], sizeof(float));
+    return v;
+}
+
+/// Every precision keeps its running sum in the same two RGBA32U texels, so the storage does not depend on the
+/// precision (reflection must not) and none of it is idle: Double the double sum (R, G | B, A as DoubleTexels.h
+/// lays them out), Kahan the float sum's bits in the first and the compensation's in the second, Float the float
+/// sum's bits in the first (the second is left as it is). The round trip is exact: a state stored and loaded is
+/// the same bits.
+template <Precision P>
+LOOM_HD inline void packSum(const PixelState& s, glm::uvec4& first, glm::uvec4& second) {
+    if constexpr (P == Precision::Double) {
+        packDoubleSum(s.sumDouble, first, second);
+    } else {
+        first = floatBits(s.sum);
+        if constexpr (P == Precision::Kahan) second = floatBits(s.compensation);
+    }
+}
+
+template <Precision P>
+LOOM_HD inline void unpackSum(const glm::uvec4& first, const glm::uvec4& second, PixelState& s) {
+    if constexpr (P == Precision::Double) {
+        s.sumDouble = unpackDoubleSum(first, second);
+    } else {
+        s.sum = bitsToFloat(first);
+        if constexpr (P == Precision::Kahan) s.compensation = bitsToFloat(second);
+    }
+}
 
 }  // namespace loom::accumulate

@@ -18,16 +18,14 @@ const char kSrc[] = "src";
 const char kDenoised[] = "denoised";
 const char kDst[] = "dst";
 const char kSum[] = "sum";
-const char kCompensation[] = "compensation";
-const char kSumRG[] = "sumRG";
-const char kSumBA[] = "sumBA";
+const char kSumExtra[] = "sumExtra";
 const char kCount[] = "count";
 const char kFrames[] = "frames";
 const char kPartialSumRG[] = "partialSumRG";
 const char kPartialSumBA[] = "partialSumBA";
 const char kPartialCount[] = "partialCount";
 
-const char* const kStateFields[] = {kSum, kCompensation, kSumRG, kSumBA, kCount, kFrames};
+const char* const kStateFields[] = {kSum, kSumExtra, kCount, kFrames};
 
 // Counters reported in the frame's stats.
 const char kStatNonFinite[] = "nonFinite";
@@ -40,37 +38,29 @@ struct FrameViews {
     ImageView<const glm::vec4> denoised;  ///< empty when not connected
     float denoisedFrames = 0.f;
     ImageView<glm::vec4> dst;
-    ImageView<const glm::vec4> prevSum, prevCompensation;
-    ImageView<glm::vec4> curSum, curCompensation;
-    ImageView<const glm::uvec4> prevSumRG, prevSumBA;
-    ImageView<glm::uvec4> curSumRG, curSumBA;
+    ImageView<const glm::uvec4> prevSum, prevSumExtra;
+    ImageView<glm::uvec4> curSum, curSumExtra;
     ImageView<const uint32_t> prevCount;
     ImageView<uint32_t> curCount;
 };
 
-// Loads and stores touch only the fields the precision keeps its state in: the
+// Loads and stores touch only the texels the precision keeps its state in: the
 // pass is memory bound, and float precision should not pay for double's state.
 template <AccumulatePass::Precision P>
 PixelState loadState(const FrameViews& v, uint32_t x, uint32_t y) {
-    using Precision = AccumulatePass::Precision;
     PixelState s;
     s.count = v.prevCount.at(x, y);
-    if constexpr (P == Precision::Float || P == Precision::Kahan) s.sum = v.prevSum.at(x, y);
-    if constexpr (P == Precision::Kahan) s.compensation = v.prevCompensation.at(x, y);
-    if constexpr (P == Precision::Double)
-        s.sumDouble = accumulate::unpackDoubleSum(v.prevSumRG.at(x, y), v.prevSumBA.at(x, y));
+    const glm::uvec4 none(0u);
+    accumulate::unpackSum<P>(v.prevSum.at(x, y), P == AccumulatePass::Precision::Float ? none : v.prevSumExtra.at(x, y),
+                             s);
     return s;
 }
 
 template <AccumulatePass::Precision P>
 void storeState(const FrameViews& v, uint32_t x, uint32_t y, const PixelState& s) {
-    using Precision = AccumulatePass::Precision;
     v.curCount.at(x, y) = s.count;
-    // In double precision `sum` is not state but the double sum rounded to float, so a dump of it means something.
-    v.curSum.at(x, y) = P == Precision::Double ? accumulate::sumAsFloat(P, s) : s.sum;
-    if constexpr (P == Precision::Kahan) v.curCompensation.at(x, y) = s.compensation;
-    if constexpr (P == Precision::Double)
-        accumulate::packDoubleSum(s.sumDouble, v.curSumRG.at(x, y), v.curSumBA.at(x, y));
+    glm::uvec4 unused;
+    accumulate::packSum<P>(s, v.curSum.at(x, y), P == AccumulatePass::Precision::Float ? unused : v.curSumExtra.at(x, y));
 }
 
 /// One frame over every pixel: starts from zero when `reset`, adds this frame's
@@ -114,19 +104,21 @@ void AccumulatePass::reflect(Reflection& r, const CompileInfo&) const {
     r.output(kPartialSumRG, Format::RGBA32U)
         .optional()
         .doc(
-            "the running sums of R and G as doubles, laid out as sumRG (any precision: float and kahan sums widened), "
-            "for merging partial accumulations of one frame (`loom image merge`)");
+            "the running sums of R (xy) and G (zw) as doubles, each as the (low, high) words of its bits (any "
+            "precision: float and kahan sums widened), for merging partial accumulations of one frame (`loom image merge`)");
     r.output(kPartialSumBA, Format::RGBA32U).optional().doc("the sums of B and A, as partialSumRG");
     r.output(kPartialCount, Format::R32U)
         .optional()
         .doc("the finite samples in each pixel's sums: dst is partialSum / partialCount (0 where it is 0)");
-    r.history(kSum, Format::RGBA32F)
-        .doc("running sum: the state for float and kahan; for double, the double sum rounded to float (to inspect)");
-    r.history(kCompensation, Format::RGBA32F)
-        .doc("kahan: rounding error of the float sum; the mean is (sum + compensation) / count. Zero otherwise");
-    r.history(kSumRG, Format::RGBA32U)
-        .doc("double: sums of R (xy) and G (zw), each double as the (low, high) words of its bits. Zero otherwise");
-    r.history(kSumBA, Format::RGBA32U).doc("double: sums of B (xy) and A (zw), laid out as sumRG. Zero otherwise");
+    // One layout holds every precision's running sum (accumulate::packSum): 32 bytes a pixel, what double needs.
+    r.history(kSum, Format::RGBA32U)
+        .doc(
+            "running sum, as bits: double: the sums of R (xy) and G (zw), each double as the (low, high) words of its "
+            "bits (the layout of partialSumRG); float and kahan: the float sum's RGBA bits");
+    r.history(kSumExtra, Format::RGBA32U)
+        .doc(
+            "double: the sums of B (xy) and A (zw), laid out as sum; kahan: the bits of the float sum's rounding "
+            "error (the mean is (sum + compensation) / count); float: zero");
     r.history(kCount, Format::R32U).doc("finite samples in the sum of each pixel (non-finite samples are skipped)");
     r.history(kFrames, Format::R32U).fixedSize(1, 1).doc("frames accumulated since the last reset (maxFrames caps it)");
 }
@@ -176,11 +168,7 @@ bool AccumulatePass::sceneMoved(const PassContext& ctx) {
 }
 
 void AccumulatePass::clearUnusedState(PassContext& ctx) const {
-    if (mPrecision != Precision::Kahan) ctx.historyCur(kCompensation).clear();
-    if (mPrecision != Precision::Double) {
-        ctx.historyCur(kSumRG).clear();
-        ctx.historyCur(kSumBA).clear();
-    }
+    if (mPrecision == Precision::Float) ctx.historyCur(kSumExtra).clear();
 }
 
 void AccumulatePass::writePartial(PassContext& ctx) const {
@@ -189,17 +177,17 @@ void AccumulatePass::writePartial(PassContext& ctx) const {
     if (Texture* count = ctx.output(kPartialCount)) count->copyFrom(ctx.historyCur(kCount));
     if (!rgOut && !baOut) return;
     if (mPrecision == Precision::Double) {
-        if (rgOut) rgOut->copyFrom(ctx.historyCur(kSumRG));
-        if (baOut) baOut->copyFrom(ctx.historyCur(kSumBA));
+        if (rgOut) rgOut->copyFrom(ctx.historyCur(kSum));
+        if (baOut) baOut->copyFrom(ctx.historyCur(kSumExtra));
         return;
     }
-    const auto sum = ctx.historyCur(kSum).view<glm::vec4>();
-    const auto comp = ctx.historyCur(kCompensation).view<glm::vec4>();
+    const auto sum = ctx.historyCur(kSum).view<glm::uvec4>();
+    const auto comp = ctx.historyCur(kSumExtra).view<glm::uvec4>();
     const auto rg = rgOut ? rgOut->view<glm::uvec4>() : ImageView<glm::uvec4>{};
     const auto ba = baOut ? baOut->view<glm::uvec4>() : ImageView<glm::uvec4>{};
     parallelForPixels(sum.width, sum.height, [&](uint32_t x, uint32_t y) {
-        glm::dvec4 d(sum.at(x, y));
-        if (mPrecision == Precision::Kahan) d += glm::dvec4(comp.at(x, y));
+        glm::dvec4 d(accumulate::bitsToFloat(sum.at(x, y)));
+        if (mPrecision == Precision::Kahan) d += glm::dvec4(accumulate::bitsToFloat(comp.at(x, y)));
         glm::uvec4 a, b;
         accumulate::packDoubleSum(d, a, b);
         if (rg.data) rg.at(x, y) = a;
@@ -246,14 +234,10 @@ void AccumulatePass::execute(PassContext& ctx) {
     if (denoised) v.denoised = denoised->view<glm::vec4>();
     v.denoisedFrames = mDenoisedFrames;
     v.dst = dst;
-    v.prevSum = ctx.historyPrev(kSum).view<glm::vec4>();
-    v.curSum = ctx.historyCur(kSum).view<glm::vec4>();
-    v.prevCompensation = ctx.historyPrev(kCompensation).view<glm::vec4>();
-    v.curCompensation = ctx.historyCur(kCompensation).view<glm::vec4>();
-    v.prevSumRG = ctx.historyPrev(kSumRG).view<glm::uvec4>();
-    v.curSumRG = ctx.historyCur(kSumRG).view<glm::uvec4>();
-    v.prevSumBA = ctx.historyPrev(kSumBA).view<glm::uvec4>();
-    v.curSumBA = ctx.historyCur(kSumBA).view<glm::uvec4>();
+    v.prevSum = ctx.historyPrev(kSum).view<glm::uvec4>();
+    v.curSum = ctx.historyCur(kSum).view<glm::uvec4>();
+    v.prevSumExtra = ctx.historyPrev(kSumExtra).view<glm::uvec4>();
+    v.curSumExtra = ctx.historyCur(kSumExtra).view<glm::uvec4>();
     v.prevCount = ctx.historyPrev(kCount).view<uint32_t>();
     v.curCount = ctx.historyCur(kCount).view<uint32_t>();
 

@@ -4,13 +4,14 @@
 // be dumped (`--dump 'Accumulate.*'`) and survives recompiles like any other
 // history.
 //
-// State (every field is declared whatever the precision, since reflection must
-// not depend on parameters; a precision leaves the fields it does not use zero):
-//   sum           RGBA32F  float, kahan: the running sum; double: the double sum
-//                          rounded to float, only for inspection
-//   compensation  RGBA32F  kahan: the rounding error of `sum` (Neumaier)
-//   sumRG, sumBA  RGBA32U  double: the sum as doubles, two per texel, each as the
-//                          (low, high) 32-bit words of its bits: R, G | B, A
+// State (reflection must not depend on parameters, so every precision keeps its
+// running sum in the same 32 bytes a pixel, accumulate::packSum; what a precision
+// does not use stays zero):
+//   sum           RGBA32U  double: the sums of R and G as doubles, each as the
+//                          (low, high) 32-bit words of its bits; float, kahan:
+//                          the float sum's bits
+//   sumExtra      RGBA32U  double: the sums of B and A, as `sum`; kahan: the bits
+//                          of the float sum's rounding error (Neumaier); float: 0
 //   count         R32U     per pixel: finite samples in the sum. Per pixel so a
 //                          skipped non-finite sample leaves the other pixels alone
 //   frames        R32U 1x1 frames accumulated since the reset; what maxFrames caps

@@ -27,6 +27,44 @@ TEST(AccumulateKernels, DoublesRoundTripThroughUintTexelsLowWordFirst) {
     EXPECT_EQ(accumulate::unpackDoubleSum(rg, ba), glm::dvec4(1.5, -2.25, 1e20, 7.0));
 }
 
+// Every precision keeps its sum in the same two uint texels: a state must come back bit for bit, NaN payloads and
+// signed zeros included, so the pass's mean is what it would be with the state kept in float and double fields.
+template <accumulate::Precision P>
+accumulate::PixelState packedRoundTrip(const accumulate::PixelState& s) {
+    glm::uvec4 first(0u), second(0u);
+    accumulate::packSum<P>(s, first, second);
+    if (P == accumulate::Precision::Float) {
+        EXPECT_EQ(second, glm::uvec4(0u)) << "float leaves the second texel alone";
+    }
+    accumulate::PixelState back;
+    accumulate::unpackSum<P>(first, second, back);
+    return back;
+}
+
+TEST(AccumulateKernels, EveryPrecisionsSumRoundTripsBitForBitThroughTwoUintTexels) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    accumulate::PixelState s;
+    s.sum = glm::vec4(-0.f, 1.f / 3.f, 3.4e38f, 1e-45f);
+    s.compensation = glm::vec4(nan, -1e-30f, 0.f, -7.f);
+    s.sumDouble = glm::dvec4(-0.0, 1e300, 1.0 / 3.0, 4.9e-324);
+    const auto sameBits = [](const auto& a, const auto& b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+
+    const accumulate::PixelState f = packedRoundTrip<accumulate::Precision::Float>(s);
+    EXPECT_TRUE(sameBits(f.sum, s.sum));
+    const accumulate::PixelState k = packedRoundTrip<accumulate::Precision::Kahan>(s);
+    EXPECT_TRUE(sameBits(k.sum, s.sum));
+    EXPECT_TRUE(sameBits(k.compensation, s.compensation));
+    const accumulate::PixelState d = packedRoundTrip<accumulate::Precision::Double>(s);
+    EXPECT_TRUE(sameBits(d.sumDouble, s.sumDouble));
+
+    // Double's texels are the DoubleTexels layout that partialSumRG / partialSumBA and `loom image merge` use.
+    glm::uvec4 first, second, rg, ba;
+    accumulate::packSum<accumulate::Precision::Double>(s, first, second);
+    accumulate::packDoubleSum(s.sumDouble, rg, ba);
+    EXPECT_EQ(first, rg);
+    EXPECT_EQ(second, ba);
+}
+
 TEST(AccumulateKernels, NeumaierSumKeepsWhatFloatLoses) {
     float sum = 1e8f, compensation = 0.f;
     for (int i = 0; i < 1000; ++i) accumulate::neumaierAdd(sum, compensation, 1.f);

@@ -1,7 +1,8 @@
 #pragma once
 // Doubles in RGBA32U texels: two doubles per texel, each as the (low word, high word) of its IEEE-754 bits. A
 // four-channel double sum takes two texels: R in xy and G in zw of the first, B and A of the second. AccumulatePass
-// keeps its double-precision state so (sumRG, sumBA, partialSumRG, partialSumBA), and `loom image merge` reads it.
+// keeps its double-precision state so (its `sum` and `sumExtra` history, partialSumRG and partialSumBA), and
+// `loom image merge` reads it.
 #include <cstdint>
 #include <cstring>
 #include <glm/glm.hpp>
