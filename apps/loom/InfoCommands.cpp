@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "CliUtil.h"
+#include "loom/Device.h"
 #include "SceneSetup.h"
 #include "loom/Channels.h"
 #include "loom/Error.h"
@@ -24,6 +25,7 @@ struct CheckOptions {
     std::string size = "1280x720";
     std::string dot;
     std::vector<std::string> set;
+    std::string device;
     SceneOptions scene;
 };
 
@@ -36,7 +38,12 @@ void runCheck(const CheckOptions& o) {
         checkOutputFile(o.dot, "--dot", {o.graph, o.scene.scene, o.scene.env});  // a folder is bad input
     PluginRegistry registry = makeRegistry();
     std::shared_ptr<Scene> scene = loadScene(o.scene);
-    RenderGraph graph(loadGraph(o.graph), registry);
+    const GraphDesc desc = loadGraph(o.graph);
+    // A plan for cuda needs no GPU: without one, the graph is planned (placed, wired, memory laid out) and not
+    // compiled.
+    bool asksCuda = o.device.empty() ? desc.device == "cuda" : o.device == "cuda";
+    for (const PassDesc& p : desc.passes) asksCuda = asksCuda || p.device == "cuda";
+    RenderGraph graph(desc, registry);
     // With a scene, the plan also lists the work each pass leaves out for it (RenderPass::skippedWork), for the
     // scene as the first frame sees it (--env and the camera path applied).
     if (scene) {
@@ -47,6 +54,8 @@ void runCheck(const CheckOptions& o) {
     CompileOptions copts;
     copts.width = width;
     copts.height = height;
+    copts.device = o.device;
+    copts.planOnly = asksCuda && !cudaStatus().usable;
     graph.compile(copts);
     std::cout << graph.planText();
     if (!o.dot.empty()) {
@@ -171,6 +180,9 @@ void addCheckCommand(CLI::App& app) {
     cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT used for the memory plan")->capture_default_str();
     cmd->add_option("--dot", o->dot, "write the compiled graph as Graphviz to this file ('-' for stdout)");
     cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
+    cmd->add_option("--device", o->device,
+                    "where passes run unless the graph names a device for them: auto, cpu, cuda or emulated (a plan "
+                    "for cuda needs no GPU)");
     addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runCheck(*o); });
 }

@@ -44,6 +44,7 @@ struct RenderOptions {
     std::string warmup = "auto";
     uint64_t seedOffset = 0;
     bool dryRun = false;
+    std::string device;
     SceneOptions scene;
 };
 
@@ -111,6 +112,7 @@ void runRender(const RenderOptions& o) {
     copts.height = height;
     copts.observe = o.dump;
     copts.poisonTransients = o.poison;
+    copts.device = o.device;
     graph.compile(copts);
 
     // Warm-up: a shard of a sequence (--start-frame K > 0) first runs frames K - W .. K - 1 unwritten, so that a
@@ -312,6 +314,9 @@ void addRenderCommand(CLI::App& app) {
                   "hold one frame: run --frames iterations of frame --start-frame at its scene time and camera "
                   "(fresh random numbers each; an accumulating graph converges that frame) and write the outputs "
                   "once, after the last, under that frame's number");
+    cmd->add_option("--device", o->device,
+                    "where passes run unless the graph names a device for them: auto (CUDA where a GPU is usable), "
+                    "cpu, cuda or emulated (the GPU path on CPU threads, for tests)");
     cmd->add_flag("--dry-run", o->dryRun,
                   "check everything (graph, scene, parameters, size, frame and seed limits, warm-up) and stop before "
                   "the first frame: nothing is rendered or written (exit 0, or 2 naming what is wrong)");

@@ -1,7 +1,6 @@
 // The path tracer's CUDA backend: device copies of what PixelKernel.h reads, one launch of renderPixel per frame,
 // and the outputs copied back into the graph's host textures. No decision about a pixel is made here.
 #include <cuda_runtime.h>
-#include <dlfcn.h>
 
 #include <algorithm>
 #include <cstring>
@@ -110,38 +109,6 @@ __global__ void gatherGradientHits(const glm::uvec4* primary, uint32_t w, uint32
 }
 
 }  // namespace
-
-const CudaDeviceStatus& cudaDeviceStatus() {
-    static const CudaDeviceStatus status = [] {
-        CudaDeviceStatus s;
-        int count = 0;
-        const cudaError_t e = cudaGetDeviceCount(&count);
-        if (e != cudaSuccess) {
-            // With no NVIDIA driver at all the runtime reports an insufficient driver version: say what is missing.
-            if (void* driver = dlopen("libcuda.so.1", RTLD_LAZY | RTLD_LOCAL)) {
-                dlclose(driver);
-                s.description = std::string("no usable CUDA device (") + cudaGetErrorString(e) + ")";
-            } else {
-                s.description = "no NVIDIA driver is installed (libcuda.so.1 cannot be loaded), so no CUDA device";
-            }
-            return s;
-        }
-        if (count == 0) {
-            s.description = "no CUDA device found";
-            return s;
-        }
-        cudaDeviceProp p{};
-        if (cudaGetDeviceProperties(&p, 0) != cudaSuccess) {
-            s.description = "no usable CUDA device (its properties cannot be read)";
-            return s;
-        }
-        s.usable = true;
-        s.description = std::string(p.name) + ", compute " + std::to_string(p.major) + "." + std::to_string(p.minor) +
-                        ", " + std::to_string(p.totalGlobalMem >> 30) + " GiB";
-        return s;
-    }();
-    return status;
-}
 
 struct CudaBackend::Impl {
     uint64_t sceneKey = ~uint64_t(0);

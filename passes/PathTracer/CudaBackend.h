@@ -15,14 +15,7 @@
 
 namespace loom::pt {
 
-/// Whether this process can run the backend: a build with it, a driver and a device.
-struct CudaDeviceStatus {
-    bool usable = false;
-    std::string description;  ///< the device ("NVIDIA H200, compute 9.0, 139 GiB"), or why there is none
-};
-
-/// Probes once per process (the driver's answer does not change) and returns the same status after.
-const CudaDeviceStatus& cudaDeviceStatus();
+// Whether this process can run the backend is core's loom::cudaStatus() (loom/Device.h).
 
 class CudaBackend {
 public:

@@ -4,11 +4,9 @@
 
 namespace loom::pt {
 
-const CudaDeviceStatus& cudaDeviceStatus() {
-    static const CudaDeviceStatus status{
-        false, "this build has no CUDA backend (build with the CUDA toolkit installed, or LOOM_CUDA=ON)"};
-    return status;
-}
+namespace {
+const char* const kNoBackend = "this build has no CUDA backend (build with the CUDA toolkit installed, or LOOM_CUDA=ON)";
+}  // namespace
 
 struct CudaBackend::Impl {};
 
@@ -16,11 +14,11 @@ CudaBackend::CudaBackend() = default;
 CudaBackend::~CudaBackend() = default;
 
 void CudaBackend::launch(const FrameKernel&, uint64_t) {
-    throw Error({ErrorKind::Runtime, "", "PathTracer.device", cudaDeviceStatus().description, "", ""});
+    throw Error({ErrorKind::Runtime, "", "PathTracer.device", kNoBackend, "", ""});
 }
 
 CudaBackend::Counts CudaBackend::finish(const FrameKernel&, glm::uvec4*, uint64_t) {
-    throw Error({ErrorKind::Runtime, "", "PathTracer.device", cudaDeviceStatus().description, "", ""});
+    throw Error({ErrorKind::Runtime, "", "PathTracer.device", kNoBackend, "", ""});
 }
 
 }  // namespace loom::pt

@@ -17,6 +17,7 @@
 #include "loom/CameraRays.h"
 #include "loom/Channels.h"
 #include "loom/EmbreeRays.h"
+#include "loom/Device.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
 #include "loom/RayScene.h"
@@ -301,7 +302,7 @@ void PathTracer::compile(const CompileInfo&) {
         case Device::Auto:
             break;
     }
-    const pt::CudaDeviceStatus& cuda = pt::cudaDeviceStatus();
+    const CudaStatus& cuda = cudaStatus();
     if (mDevice == Device::Cuda && !cuda.usable)
         throwBadInput("PathTracer.device", "device 'cuda' was asked for, and " + cuda.description,
                       "a usable NVIDIA GPU with its driver, in a build with the CUDA backend",

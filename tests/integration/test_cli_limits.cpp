@@ -112,8 +112,8 @@ TEST_F(CliLimits, ReferencesOnlyAcceptsFewerFramesThanTheWarmUp) {
 // A pass's parameter given as an option names the passes that declare it and how to set it.
 TEST_F(CliLimits, AParameterGivenAsAnOptionSaysHowToSetIt) {
     const test::CliResult r = loom("render --graph " + test::shellQuoted(kSourceDir + "/graphs/PathTracer.json") +
-                                   " --device cuda");
-    expectBadInput(r, {"--device", "'device' is a parameter of", "PathTracer", "--set PASS.device=VALUE"});
+                                   " --maxBounces 3");
+    expectBadInput(r, {"--maxBounces", "'maxBounces' is a parameter of", "PathTracer", "--set PASS.maxBounces=VALUE"});
     // An option no pass declares gets the plain hint.
     const test::CliResult other = loom("render --graph x.json --nonsense 1");
     EXPECT_EQ(other.code, 2);

@@ -4,6 +4,7 @@
 
 #include <glm/glm.hpp>
 
+#include "loom/Launch.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 
@@ -13,6 +14,9 @@ namespace {
 
 const char kDst[] = "dst";
 const char kSrc[] = "src";
+
+/// The test passes whose kernels are launch2D functors run on the CPU and on the emulated device.
+bool onHostOrEmulated(DeviceKind device) { return device == DeviceKind::Cpu || device == DeviceKind::Emulated; }
 
 /// Fills dst with a constant colour.
 class ConstantPass final : public RenderPass {
@@ -68,17 +72,24 @@ public:
     void declareParams(ParamList& p) override {
         p.add("scaleA", &mScaleA, 1.f).doc("weight of a");
         p.add("scaleB", &mScaleB, 1.f).doc("weight of b");
+        p.add("readHostView", &mReadHostView, false)
+            .doc("deliberately read input a through a host view (tests that device memory is reached only through "
+                 "device views)");
     }
+    bool runsOn(DeviceKind device) const override { return onHostOrEmulated(device); }
     void execute(PassContext& ctx) override {
-        auto a = ctx.input("a")->view<glm::vec4>();
-        auto b = ctx.input("b")->view<glm::vec4>();
-        auto dst = ctx.output(kDst)->view<glm::vec4>();
-        parallelForPixels(dst.width, dst.height,
-                          [&](uint32_t x, uint32_t y) { dst.at(x, y) = a.at(x, y) * mScaleA + b.at(x, y) * mScaleB; });
+        if (mReadHostView) (void)ctx.input("a")->view<glm::vec4>();
+        const auto a = ctx.input("a")->deviceView<glm::vec4>();
+        const auto b = ctx.input("b")->deviceView<glm::vec4>();
+        const auto dst = ctx.output(kDst)->deviceView<glm::vec4>();
+        const float sa = mScaleA, sb = mScaleB;
+        launch2D(ctx.device(), dst.width, dst.height,
+                 [=](uint32_t x, uint32_t y) { dst.at(x, y) = a.at(x, y) * sa + b.at(x, y) * sb; });
     }
 
 private:
     float mScaleA, mScaleB;
+    bool mReadHostView;
 };
 
 /// Separable box blur through an internal scratch texture (clamped edges).
@@ -94,20 +105,21 @@ public:
         p.add("readScratchFirst", &mReadScratchFirst, false)
             .doc("deliberately read the scratch texture before writing it (tests the NaN-poison mode)");
     }
+    bool runsOn(DeviceKind device) const override { return onHostOrEmulated(device); }
     void execute(PassContext& ctx) override {
-        auto src = ctx.input(kSrc)->view<glm::vec4>();
-        auto tmp = ctx.internal("tmp")->view<glm::vec4>();
-        auto dst = ctx.output(kDst)->view<glm::vec4>();
+        const auto src = ctx.input(kSrc)->deviceView<glm::vec4>();
+        const auto tmp = ctx.internal("tmp")->deviceView<glm::vec4>();
+        const auto dst = ctx.output(kDst)->deviceView<glm::vec4>();
         const int w = int(src.width), h = int(src.height), rad = mRadius;
         const float norm = 1.f / float(2 * rad + 1);
         const bool bug = mReadScratchFirst;
-        parallelForPixels(src.width, src.height, [&](uint32_t x, uint32_t y) {
+        launch2D(ctx.device(), src.width, src.height, [=](uint32_t x, uint32_t y) {
             glm::vec4 sum(0.f);
             for (int k = -rad; k <= rad; ++k) sum += src.at(uint32_t(std::clamp(int(x) + k, 0, w - 1)), y);
             if (bug) sum += tmp.at(x, y) * 0.f;  // read before write: NaN * 0 = NaN in poison mode
             tmp.at(x, y) = sum * norm;
         });
-        parallelForPixels(src.width, src.height, [&](uint32_t x, uint32_t y) {
+        launch2D(ctx.device(), src.width, src.height, [=](uint32_t x, uint32_t y) {
             glm::vec4 sum(0.f);
             for (int k = -rad; k <= rad; ++k) sum += tmp.at(x, uint32_t(std::clamp(int(y) + k, 0, h - 1)));
             dst.at(x, y) = sum * norm;
@@ -127,12 +139,13 @@ public:
         r.history("count", Format::R32F).doc("frames since the last reset");
         r.output(kDst, Format::RGBA32F);
     }
+    bool runsOn(DeviceKind device) const override { return onHostOrEmulated(device); }
     void execute(PassContext& ctx) override {
-        auto prev = ctx.historyPrev("count").view<float>();
-        auto cur = ctx.historyCur("count").view<float>();
-        auto dst = ctx.output(kDst)->view<glm::vec4>();
+        const auto prev = ctx.historyPrev("count").deviceView<float>();
+        const auto cur = ctx.historyCur("count").deviceView<float>();
+        const auto dst = ctx.output(kDst)->deviceView<glm::vec4>();
         const bool valid = ctx.historyValid();
-        parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) {
+        launch2D(ctx.device(), dst.width, dst.height, [=](uint32_t x, uint32_t y) {
             float c = valid ? prev.at(x, y) + 1.f : 1.f;
             cur.at(x, y) = c;
             dst.at(x, y) = glm::vec4(c);

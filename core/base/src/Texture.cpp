@@ -1,5 +1,6 @@
 #include "loom/Texture.h"
 
+#include "loom/Error.h"
 #include "loom/PageMemory.h"
 
 #include <algorithm>
@@ -35,8 +36,28 @@ Texture::Texture(uint32_t width, uint32_t height, Format format)
     mOwner = std::shared_ptr<std::byte>(memory, mData);  // shares the buffer's ownership
 }
 
-Texture Texture::wrap(std::byte* memory, uint32_t width, uint32_t height, Format format) {
+Texture Texture::onDevice(DeviceKind device, uint32_t width, uint32_t height, Format format, const std::string& what) {
+    if (device == DeviceKind::Cpu) return Texture(width, height, format);
+    Texture t = wrap(nullptr, width, height, format, device);
+    if (t.byteSize() == 0) return t;
+    t.mOwner = allocateOnDevice(device, t.byteSize(), what);
+    t.mData = t.mOwner.get();
+    return t;
+}
+
+void throwHostViewOfDeviceTexture(DeviceKind device) {
+    throw Error(Error::Info{ErrorKind::Runtime,
+                            {},
+                            {},
+                            std::string("host code read a texture that lives on the ") + deviceName(device) +
+                                " device: a pass or tool reached device memory without a transfer",
+                            "device memory read only by kernels on its device (deviceView) and by copyTexture",
+                            "place the pass on that device, or let the graph insert a transfer"});
+}
+
+Texture Texture::wrap(std::byte* memory, uint32_t width, uint32_t height, Format format, DeviceKind device) {
     Texture t;
+    t.mResidence = device;
     t.mWidth = width;
     t.mHeight = height;
     t.mFormat = format;
@@ -46,6 +67,10 @@ Texture Texture::wrap(std::byte* memory, uint32_t width, uint32_t height, Format
 }
 
 void Texture::copyFrom(const Texture& other) {
+    if (mResidence != DeviceKind::Cpu || other.mResidence != DeviceKind::Cpu) {
+        copyTexture(*this, other);
+        return;
+    }
     if (other.mWidth != mWidth || other.mHeight != mHeight || other.mFormat != mFormat) {
         throw std::invalid_argument("Texture::copyFrom: cannot copy a " +
                                     shapeString(other.mWidth, other.mHeight, other.mFormat) + " texture into a " +
@@ -61,11 +86,23 @@ void Texture::copyFrom(const Texture& other) {
 }
 
 void Texture::clear() {
-    if (mData) std::memset(mData, 0, byteSize());
+    if (!mData) return;
+    if (mResidence == DeviceKind::Cuda) {
+        const Texture zeros(mWidth, mHeight, mFormat);
+        copyTexture(*this, zeros);
+        return;
+    }
+    std::memset(mData, 0, byteSize());
 }
 
 void Texture::poison() {
     if (!mData) return;
+    if (mResidence == DeviceKind::Cuda) {  // the same pattern, made on the host and copied over
+        Texture pattern(mWidth, mHeight, mFormat);
+        pattern.poison();
+        copyTexture(*this, pattern);
+        return;
+    }
     const FormatInfo& info = formatInfo(mFormat);
     switch (info.component) {
     case ComponentType::Float32: fillWords(mData, byteSize(), 0x7FC00000u); break;  // quiet NaN
@@ -76,6 +113,7 @@ void Texture::poison() {
 }
 
 float Texture::texel(uint32_t x, uint32_t y, uint32_t c) const {
+    if (mResidence != DeviceKind::Cpu) throwHostViewOfDeviceTexture(mResidence);
     const FormatInfo& info = formatInfo(mFormat);
     if (x >= mWidth || y >= mHeight || c >= info.channels || !mData) {
         throw std::out_of_range("Texture::texel: (" + std::to_string(x) + ", " + std::to_string(y) + ") channel " +
@@ -108,6 +146,8 @@ float Texture::texel(uint32_t x, uint32_t y, uint32_t c) const {
 
 bool Texture::samePixels(const Texture& other) const {
     if (other.mWidth != mWidth || other.mHeight != mHeight || other.mFormat != mFormat) return false;
+    if (mResidence != DeviceKind::Cpu) throwHostViewOfDeviceTexture(mResidence);
+    if (other.mResidence != DeviceKind::Cpu) throwHostViewOfDeviceTexture(other.mResidence);
     if (other.mData == mData) return true;
     if (!mData || !other.mData) return byteSize() == 0;
     size_t rowBytes = size_t(mWidth) * formatInfo(mFormat).bytesPerPixel;

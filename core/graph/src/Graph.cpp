@@ -45,6 +45,16 @@ ChannelRef parseChannelRef(const std::string& text, const std::string& where, co
 
 namespace {
 
+/// A "device" value: auto, cpu, cuda or emulated.
+std::string readDevice(const json& v, const std::string& where, const std::string& file) {
+    const std::string text = v.is_string() ? v.get<std::string>() : v.dump();
+    const auto& choices = deviceChoices();
+    if (!v.is_string() || std::find(choices.begin(), choices.end(), text) == choices.end())
+        throwBadInput(where, "unknown device " + (v.is_string() ? "'" + text + "'" : text), "one of: " + join(choices),
+                      v.is_string() ? didYouMean(text, choices, "") : std::string(), file);
+    return text;
+}
+
 void checkKeys(const json& obj, const std::vector<std::string>& allowed, const std::string& where,
                const std::string& file) {
     for (auto it = obj.begin(); it != obj.end(); ++it) {
@@ -84,7 +94,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
                       "check for a missing comma, quote or bracket just before this point", file);
     }
     if (!root.is_object()) throwBadInput("/", "a graph must be a JSON object", "{\"loom_graph\": 1, ...}", {}, file);
-    checkKeys(root, {"loom_graph", "name", "passes", "edges", "outputs"}, "", file);
+    checkKeys(root, {"loom_graph", "name", "device", "passes", "edges", "outputs"}, "", file);
     const json& version = require(root, "loom_graph", json::value_t::number_integer, "an integer", "", file);
     // Compared as a 64-bit value: an int conversion would take 4294967297 for 1.
     if (!version.is_number_integer() || version.get<int64_t>() != int64_t(kGraphFormatVersion))
@@ -97,6 +107,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
         if (!root["name"].is_string()) throwBadInput("/name", "'name' must be a string", "a string", {}, file);
         g.name = root["name"].get<std::string>();
     }
+    if (root.contains("device")) g.device = readDevice(root["device"], "/device", file);
     const json& passes = require(root, "passes", json::value_t::array, "an array of passes", "", file);
     std::set<std::string> names;
     for (size_t i = 0; i < passes.size(); ++i) {
@@ -104,7 +115,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
         const json& p = passes[i];
         if (!p.is_object())
             throwBadInput(where, "a pass must be an object", "{\"name\": ..., \"type\": ...}", {}, file);
-        checkKeys(p, {"name", "type", "params", "unconnected"}, where, file);
+        checkKeys(p, {"name", "type", "params", "unconnected", "device"}, where, file);
         PassDesc d;
         d.name = require(p, "name", json::value_t::string, "a string", where, file).get<std::string>();
         d.type = require(p, "type", json::value_t::string, "a string", where, file).get<std::string>();
@@ -125,6 +136,7 @@ GraphDesc parseGraph(const std::string& text, const std::string& file) {
         if (!names.insert(d.name).second)
             throwBadInput(where + "/name", "duplicate pass name '" + d.name + "'", "unique pass names",
                           "rename one of the passes", file);
+        if (p.contains("device")) d.device = readDevice(p["device"], where + "/device", file);
         if (p.contains("params")) {
             if (!p["params"].is_object())
                 throwBadInput(where + "/params", "'params' must be an object", "{\"name\": value, ...}", {}, file);
@@ -185,11 +197,13 @@ json graphToJson(const GraphDesc& g) {
     json root = json::object();
     root["loom_graph"] = kGraphFormatVersion;
     root["name"] = g.name;
+    if (!g.device.empty()) root["device"] = g.device;
     json passes = json::array();
     for (const auto& p : g.passes) {
         json jp = {{"name", p.name}, {"type", p.type}};
         if (!p.params.empty()) jp["params"] = p.params;
         if (!p.unconnected.empty()) jp["unconnected"] = p.unconnected;
+        if (!p.device.empty()) jp["device"] = p.device;
         passes.push_back(std::move(jp));
     }
     root["passes"] = std::move(passes);

@@ -8,6 +8,7 @@
 #include <optional>
 #include <queue>
 #include <set>
+#include <tuple>
 #include <unordered_map>
 
 #include "loom/Error.h"
@@ -368,7 +369,13 @@ private:
                 if (--indegree[s] == 0) ready.push(s);
         }
         if (order.size() < liveCount) reportCycle();
-        for (uint32_t p : order) mPlan.summary.order.push_back(mDesc.passes[p].name);
+        for (uint32_t p : order) {
+            mPlan.summary.order.push_back(mDesc.passes[p].name);
+            PassPlan& pp = mPlan.passes[p];
+            if (p < mIn.devices.size()) pp.device = mIn.devices[p];
+            mPlan.summary.placement.push_back(
+                {mDesc.passes[p].name, pp.device, p < mIn.deviceNotes.size() ? mIn.deviceNotes[p] : std::string()});
+        }
     }
 
     // Every remaining pass waits on another remaining pass: walk predecessors from the first one until one repeats,
@@ -596,6 +603,95 @@ private:
     std::vector<std::vector<std::pair<int, size_t>>> mByFirst;
 };
 
+/// Places the transients `ids` (all of one device's arena) largest first, each at the lowest offset free of every
+/// placed transient whose lifetime overlaps its own; returns the arena's size.
+size_t placeTransients(std::vector<ResourceInfo>& transients, std::vector<size_t> ids, int positions) {
+    std::stable_sort(ids.begin(), ids.end(),
+                     [&](size_t a, size_t b) { return transients[a].bytes > transients[b].bytes; });
+    LifetimeIndex placed(positions);
+    size_t peak = 0;
+    std::vector<std::pair<size_t, size_t>> busy;
+    for (size_t i : ids) {
+        ResourceInfo& r = transients[i];
+        busy.clear();
+        placed.overlapping(r.firstUse, r.lastUse, [&](size_t j) {
+            busy.push_back({transients[j].offset, transients[j].offset + transients[j].bytes});
+        });
+        std::sort(busy.begin(), busy.end());
+        size_t offset = 0;
+        for (const auto& [b, e] : busy) {
+            if (offset + r.bytes <= b) break;
+            offset = std::max(offset, alignUp(e, kRowAlignment));
+        }
+        r.offset = offset;
+        peak = std::max(peak, offset + r.bytes);
+        placed.add(r.firstUse, r.lastUse, i);
+    }
+    return peak;
+}
+
+/// Copies where a field crosses devices: into each reader placed elsewhere than the field's writer (one copy per
+/// field and device, a transient on the reader's device living from its first reader there to its last, made
+/// before the first), and to the host for each marked output or observed field of a pass off the host.
+void planTransfers(GraphPlan& plan, const GraphDesc& desc, std::vector<ResourceInfo>& transients) {
+    CompiledPlan& s = plan.summary;
+    std::map<std::tuple<uint32_t, std::string, bool, DeviceKind>, int> copies;  // (writer, field, prev, device)
+    for (uint32_t p : plan.order) {
+        PassPlan& pp = plan.passes[p];
+        for (PlannedInput& in : pp.inputs) {
+            const PassPlan& src = plan.passes[in.srcPass];
+            if (src.device == pp.device) continue;
+            const auto key = std::make_tuple(in.srcPass, in.srcField, in.prev, pp.device);
+            auto [it, added] = copies.emplace(key, int(s.transfers.size()));
+            if (added) {
+                const FieldDesc* f = src.reflection.find(in.srcField);
+                uint32_t w = s.width, h = s.height;
+                if (f) f->resolveSize(s.width, s.height, w, h);
+                const Format format = f ? f->format : Format::RGBA32F;
+                TransferInfo t;
+                t.field = fieldKey(desc.passes[in.srcPass].name, in.srcField) + (in.prev ? "@prev" : "");
+                t.from = src.device;
+                t.to = pp.device;
+                t.bytes = textureByteSize(w, h, format);
+                t.position = pp.position;
+                t.reason = "for " + desc.passes[p].name;
+                t.resource = t.field + " on " + deviceName(pp.device);
+                s.transfers.push_back(t);
+                transients.push_back(ResourceInfo{t.resource, p, in.field, ResourceKind::Transient, format, w, h,
+                                                  t.bytes, pp.device, pp.position, pp.position, 0});
+            } else {
+                TransferInfo& t = s.transfers[size_t(it->second)];
+                if (t.reason.find(" " + desc.passes[p].name) == std::string::npos) t.reason += ", " + desc.passes[p].name;
+                for (auto& r : transients)
+                    if (r.name == t.resource) r.lastUse = std::max(r.lastUse, pp.position);
+            }
+            in.transfer = it->second;
+        }
+    }
+    for (uint32_t p : plan.order) {
+        const PassPlan& pp = plan.passes[p];
+        if (pp.device == DeviceKind::Cpu) continue;
+        for (const auto& f : pp.reflection.fields()) {
+            if (!pp.kept.count(f.name) && std::find(pp.observed.begin(), pp.observed.end(), f.name) == pp.observed.end())
+                continue;
+            uint32_t w, h;
+            f.resolveSize(s.width, s.height, w, h);
+            TransferInfo t;
+            t.field = fieldKey(desc.passes[p].name, f.name);
+            t.from = pp.device;
+            t.to = DeviceKind::Cpu;
+            t.bytes = textureByteSize(w, h, f.format);
+            t.position = pp.position;
+            t.after = true;
+            const bool marked = std::any_of(s.outputs.begin(), s.outputs.end(), [&](const ChannelRef& o) {
+                return o.pass == desc.passes[p].name && o.channel == f.name;
+            });
+            t.reason = marked ? "marked output" : "observed";
+            s.transfers.push_back(t);
+        }
+    }
+}
+
 }  // namespace
 
 GraphPlan planGraph(const PlannerInput& input) {
@@ -624,7 +720,7 @@ void planResources(GraphPlan& plan, const GraphDesc& desc) {
             f.resolveSize(s.width, s.height, w, h);
             ResourceInfo r{key,         p,           f.name, ResourceKind::Transient,
                            f.format,    w,           h,      textureByteSize(w, h, f.format),
-                           pp.position, pp.position, 0};
+                           pp.device,   pp.position, pp.position, 0};
             const bool history = pp.history.count(f.name) > 0;
             if (f.kind == FieldKind::Output && f.optional && !pp.consumed.count(f.name) && !history) {
                 s.skippedOutputs.push_back(key);
@@ -635,6 +731,7 @@ void planResources(GraphPlan& plan, const GraphDesc& desc) {
                 r.firstUse = 0;
                 r.lastUse = n;
                 s.historyBytes += 2 * r.bytes;
+                s.deviceHistoryBytes[size_t(r.device)] += 2 * r.bytes;
                 s.resources.push_back(std::move(r));
                 continue;
             }
@@ -646,32 +743,18 @@ void planResources(GraphPlan& plan, const GraphDesc& desc) {
             transients.push_back(std::move(r));
         }
     }
+    planTransfers(plan, desc, transients);
 
-    std::vector<size_t> bySize(transients.size());
-    for (size_t i = 0; i < bySize.size(); ++i) bySize[i] = i;
-    std::stable_sort(bySize.begin(), bySize.end(),
-                     [&](size_t a, size_t b) { return transients[a].bytes > transients[b].bytes; });
-    LifetimeIndex placed(n);
-    size_t peak = 0;
-    std::vector<std::pair<size_t, size_t>> busy;
-    for (size_t i : bySize) {
-        ResourceInfo& r = transients[i];
-        busy.clear();
-        placed.overlapping(r.firstUse, r.lastUse, [&](size_t j) {
-            busy.push_back({transients[j].offset, transients[j].offset + transients[j].bytes});
-        });
-        std::sort(busy.begin(), busy.end());
-        size_t offset = 0;
-        for (const auto& [b, e] : busy) {
-            if (offset + r.bytes <= b) break;
-            offset = std::max(offset, alignUp(e, kRowAlignment));
-        }
-        r.offset = offset;
-        peak = std::max(peak, offset + r.bytes);
-        s.transientSumBytes += r.bytes;
-        placed.add(r.firstUse, r.lastUse, i);
+    // Each device has its own arena: transients are placed per device.
+    for (DeviceKind device : {DeviceKind::Cpu, DeviceKind::Cuda, DeviceKind::Emulated}) {
+        std::vector<size_t> bySize;
+        for (size_t i = 0; i < transients.size(); ++i)
+            if (transients[i].device == device) bySize.push_back(i);
+        if (bySize.empty()) continue;
+        s.devicePeakBytes[size_t(device)] = placeTransients(transients, bySize, n);
+        s.transientPeakBytes += s.devicePeakBytes[size_t(device)];
     }
-    s.transientPeakBytes = peak;
+    for (const auto& t : transients) s.transientSumBytes += t.bytes;
     for (auto& t : transients) s.resources.push_back(std::move(t));
 }
 

@@ -93,6 +93,9 @@ struct PassNode {
     std::vector<std::string> observeBefore;  // inputs
     std::vector<std::string> observeAfter;   // outputs, internals, history
     std::vector<Texture*> poisonAtStart;     // transients whose lifetime starts here
+    DeviceKind device = DeviceKind::Cpu;     // where it runs
+    std::vector<std::pair<Texture*, const Texture*>> copiesBefore;  // (to, from): inputs from another device
+    std::vector<std::pair<Texture*, const Texture*>> copiesAfter;   // (host copy, field): outputs off the host
     std::vector<const bool*> validFlags;     // history validity this pass depends on
     std::vector<PassNode*> sources;          // the passes whose outputs it reads (this frame's or @prev)
     bool paramsChanged = true;               // a parameter that counts changed value since the last frame
@@ -105,9 +108,12 @@ struct RenderGraph::Impl {
     std::vector<std::unique_ptr<PassNode>> nodes;  // in description order
     std::vector<PassNode*> order;                  // live, in execution order
     std::map<std::string, std::unique_ptr<HistoryEntry>> history;
-    Arena arena;
+    Arena arena;                                   // the host's transients
+    std::shared_ptr<std::byte> deviceArenas[3];    // the other devices' transients (by DeviceKind)
+    size_t deviceArenaBytes[3] = {0, 0, 0};
     std::vector<std::unique_ptr<Texture>> transients;
     std::map<std::string, Texture*> fieldTextures;
+    std::map<std::string, Texture> hostCopies;     // host copies of marked or observed fields off the host
 
     Impl(GraphDesc d, PluginRegistry& r) : desc(std::move(d)), registry(r) {}
 
@@ -129,6 +135,8 @@ struct RenderGraph::Impl {
     std::unique_ptr<PassNode> makeNode(const PassDesc& pd, size_t index) const;
     void allocate(const CompiledPlan& plan, const std::string& file);
     void bind(GraphPlan& plan);
+    std::byte* arenaBase(DeviceKind device, size_t bytes);
+    void place(const CompileOptions& options, std::vector<DeviceKind>& devices, std::vector<std::string>& notes) const;
 };
 
 std::unique_ptr<PassNode> RenderGraph::Impl::makeNode(const PassDesc& pd, size_t index) const {
@@ -157,21 +165,75 @@ std::unique_ptr<PassNode> RenderGraph::Impl::makeNode(const PassDesc& pd, size_t
     return n;
 }
 
-/// The arena for the plan's transients, and its history pairs (kept when their declaration is unchanged).
+/// Where each pass runs: its own "device", else --device (CompileOptions::device), else the graph's; auto is CUDA
+/// where a usable GPU is present, else the CPU. A pass without a version for the device asked for runs on the CPU
+/// (the note says so, and the plan's transfers what it costs). Cuda without a usable GPU is bad input, except when
+/// only planning.
+void RenderGraph::Impl::place(const CompileOptions& options, std::vector<DeviceKind>& devices,
+                              std::vector<std::string>& notes) const {
+    if (!options.device.empty() && !parseDeviceKind(options.device) && options.device != "auto")
+        throwBadInput("--device", "unknown device '" + options.device + "'", "one of: " + join(deviceChoices()),
+                      didYouMean(options.device, deviceChoices(), ""));
+    devices.assign(nodes.size(), DeviceKind::Cpu);
+    notes.assign(nodes.size(), std::string());
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        const PassNode& n = *nodes[i];
+        const std::string& asked = !n.desc.device.empty()  ? n.desc.device
+                                   : !options.device.empty() ? options.device
+                                                             : desc.device;
+        DeviceKind d = DeviceKind::Cpu;
+        if (asked.empty() || asked == "auto") {
+            d = cudaStatus().usable ? DeviceKind::Cuda : DeviceKind::Cpu;
+        } else {
+            d = *parseDeviceKind(asked);
+            if (d == DeviceKind::Cuda && !cudaStatus().usable && !options.planOnly)
+                throw Error(Error::Info{ErrorKind::BadInput, desc.file.string(), n.desc.name + ".device",
+                                        "device 'cuda' was asked for, and " + cudaStatus().description,
+                                        "a usable NVIDIA GPU with its driver, in a build with CUDA support",
+                                        "use device auto (CUDA where usable, else the CPU), cpu or emulated"});
+        }
+        if (d != DeviceKind::Cpu && !n.pass->runsOn(d)) {
+            notes[i] = fmt::format("{} has no {} version: runs on the CPU", n.desc.type, deviceName(d));
+            d = DeviceKind::Cpu;
+        }
+        devices[i] = d;
+    }
+}
+
+/// The transient arena of a device other than the host, grown to `bytes` (and kept while it fits).
+std::byte* RenderGraph::Impl::arenaBase(DeviceKind device, size_t bytes) {
+    const size_t d = size_t(device);
+    if (bytes > deviceArenaBytes[d] || bytes * 2 < deviceArenaBytes[d]) {
+        deviceArenas[d].reset();
+        deviceArenaBytes[d] = 0;
+        if (bytes > 0)
+            deviceArenas[d] = allocateOnDevice(device, bytes, fmt::format("the {} transient arena", deviceName(device)));
+        deviceArenaBytes[d] = bytes;
+    }
+    return deviceArenas[d].get();
+}
+
+/// The arena for the plan's transients, and its history pairs (kept when their declaration is unchanged), on each
+/// device; host copies of the fields that leave a device.
 void RenderGraph::Impl::allocate(const CompiledPlan& plan, const std::string& file) {
     transients.clear();
     fieldTextures.clear();
-    if (!arena.reserve(plan.transientPeakBytes))
+    hostCopies.clear();
+    if (!arena.reserve(plan.devicePeakBytes[size_t(DeviceKind::Cpu)]))
         throw Error(Error::Info{ErrorKind::Runtime,
                                 file,
                                 {},
                                 "out of memory for " + bytesText(plan.transientPeakBytes) + " of frame data",
                                 {},
                                 "render at a smaller size"});
+    std::byte* bases[3] = {arena.data(), nullptr, nullptr};
+    for (DeviceKind d : {DeviceKind::Cuda, DeviceKind::Emulated})
+        bases[size_t(d)] = arenaBase(d, plan.devicePeakBytes[size_t(d)]);
     std::set<std::string> historyKeys;
     for (const ResourceInfo& r : plan.resources) {
         if (r.kind == ResourceKind::Transient) {
-            auto tex = std::make_unique<Texture>(Texture::wrap(arena.data() + r.offset, r.width, r.height, r.format));
+            auto tex = std::make_unique<Texture>(
+                Texture::wrap(bases[size_t(r.device)] + r.offset, r.width, r.height, r.format, r.device));
             fieldTextures[r.name] = tex.get();
             transients.push_back(std::move(tex));
         } else {
@@ -190,15 +252,15 @@ void RenderGraph::Impl::allocate(const CompiledPlan& plan, const std::string& fi
         const std::string& type = desc.passes[r.pass].type;
         auto& entry = history[r.name];
         if (!entry || entry->passType != type || entry->format != r.format || entry->width != r.width ||
-            entry->height != r.height) {
+            entry->height != r.height || entry->cur.residence() != r.device) {
             entry = std::make_unique<HistoryEntry>();
             entry->key = r.name;
             entry->passType = type;
             entry->format = r.format;
             entry->width = r.width;
             entry->height = r.height;
-            entry->cur = Texture(r.width, r.height, r.format);
-            entry->prev = Texture(r.width, r.height, r.format);
+            entry->cur = Texture::onDevice(r.device, r.width, r.height, r.format, r.name);
+            entry->prev = Texture::onDevice(r.device, r.width, r.height, r.format, r.name);
         }
         fieldTextures[r.name] = &entry->cur;
     }
@@ -215,11 +277,15 @@ void RenderGraph::Impl::bind(GraphPlan& plan) {
         n.poisonAtStart.clear();
         n.validFlags.clear();
         n.sources.clear();
+        n.copiesBefore.clear();
+        n.copiesAfter.clear();
         n.live = pp.live;
         n.position = pp.position;
+        n.device = pp.device;
         n.refl = std::move(pp.reflection);
         if (!n.live) continue;
         n.ctx.mPassName = n.desc.name;
+        n.ctx.mDevice = pp.device;
         n.ctx.mStats = &n.stats;
         const std::set<std::string> observed(pp.observed.begin(), pp.observed.end());
         for (const auto& f : n.refl.fields()) {
@@ -239,6 +305,12 @@ void RenderGraph::Impl::bind(GraphPlan& plan) {
                     } else {
                         b.cur = fieldTextures.at(srcKey);
                     }
+                    if (in->transfer >= 0) {  // the source lives on another device: read its copy here
+                        const TransferInfo& t = plan.summary.transfers[size_t(in->transfer)];
+                        Texture* copy = fieldTextures.at(t.resource);
+                        if (t.position == n.position) n.copiesBefore.emplace_back(copy, b.cur);
+                        b.cur = copy;
+                    }
                 }
             } else if (f.kind == FieldKind::History || (f.kind == FieldKind::Output && history.count(key))) {
                 HistoryEntry& e = *history.at(key);
@@ -254,6 +326,16 @@ void RenderGraph::Impl::bind(GraphPlan& plan) {
                 (f.kind == FieldKind::Input ? n.observeBefore : n.observeAfter).push_back(f.name);
             n.ctx.mFields.push_back(b);
         }
+        for (const TransferInfo& t : plan.summary.transfers)
+            if (t.after && t.position == n.position) {
+                const std::string field = t.field.substr(n.desc.name.size() + 1);
+                for (const BoundField& b : n.ctx.mFields)
+                    if (b.name == field && b.cur) {
+                        auto [copy, _] = hostCopies.try_emplace(
+                            t.field, Texture(b.cur->width(), b.cur->height(), b.cur->format()));
+                        n.copiesAfter.emplace_back(&copy->second, b.cur);
+                    }
+            }
         n.info = pp.info;
         n.pass->compile(n.info);
     }
@@ -370,9 +452,17 @@ void RenderGraph::compile(const CompileOptions& options) {
         m.nodes[pass]->pass->reflect(wired, info);
         return wired;
     };
+    m.place(options, input.devices, input.deviceNotes);
     GraphPlan graphPlan = planGraph(input);
     planResources(graphPlan, m.desc);
     CompiledPlan& plan = graphPlan.summary;
+    if (options.planOnly) {  // loom check: the plan, with nothing allocated or compiled
+        mCompiled = false;
+        m.order.clear();
+        mPlan = std::move(plan);
+        mOptions = options;
+        return;
+    }
 
     // The old plan's memory is released first, so until this compile succeeds there is no plan to execute.
     mCompiled = false;
@@ -387,6 +477,9 @@ void RenderGraph::compile(const CompileOptions& options) {
 }
 
 void RenderGraph::execute(const FrameInfo& frame) {
+    if (mOptions.planOnly)
+        throw Error(Error::Info{ErrorKind::Runtime, {}, {}, "the graph was compiled to plan only, not to run",
+                                "a compile without planOnly", {}});
     if (!mCompiled) compile(mOptions);
     Impl& m = *mImpl;
     // Last frame's "cur" becomes this frame's "prev" (a swap, no copy).
@@ -419,14 +512,19 @@ void RenderGraph::execute(const FrameInfo& frame) {
         ctx.mCamera = frame.camera;
         ctx.mHistoryValid = true;
         for (const bool* v : n->validFlags) ctx.mHistoryValid = ctx.mHistoryValid && *v;
-        if (mObserver)
+        for (const auto& [to, from] : n->copiesBefore) copyTexture(*to, *from);
+        const bool onHost = n->device == DeviceKind::Cpu;
+        if (mObserver && onHost)
             for (const auto& name : n->observeBefore) mObserver(frame, n->desc.name, name, *ctx.input(name));
         n->stats.clear();
         auto t0 = std::chrono::steady_clock::now();
         try {
             n->pass->execute(ctx);
-        } catch (const Error&) {
-            throw;
+        } catch (const Error& e) {
+            if (!e.info().where.empty() && e.info().where != "device") throw;
+            Error::Info info = e.info();  // a device's failure: name the pass it failed in
+            info.where = n->desc.name;
+            throw Error(std::move(info));
         } catch (const std::bad_alloc&) {
             throw;
         } catch (const std::exception& e) {
@@ -446,10 +544,19 @@ void RenderGraph::execute(const FrameInfo& frame) {
         n->timing.lastMs = ms;
         n->timing.totalMs += ms;
         ++n->timing.runs;
+        for (const auto& [to, from] : n->copiesAfter) copyTexture(*to, *from);
         if (mObserver) {
+            // Off the host, the observer sees the host copies (inputs too, which the pass does not change).
+            const auto shown = [&](const std::string& name, const Texture& t) -> const Texture& {
+                if (onHost) return t;
+                return mImpl->hostCopies.at(fieldKey(n->desc.name, name));
+            };
+            if (!onHost)
+                for (const auto& name : n->observeBefore) mObserver(frame, n->desc.name, name, shown(name, *ctx.input(name)));
             for (const auto& name : n->observeAfter)
                 for (const auto& b : ctx.mFields)
-                    if (b.name == name && b.kind != FieldKind::Input) mObserver(frame, n->desc.name, name, *b.cur);
+                    if (b.name == name && b.kind != FieldKind::Input)
+                        mObserver(frame, n->desc.name, name, shown(name, *b.cur));
         }
     }
     for (auto& [_, e] : m.history) e->pendingSwap = true;
@@ -467,6 +574,7 @@ void RenderGraph::resetHistory() {
 }
 
 const Texture* RenderGraph::fieldTexture(const std::string& passDotField) const {
+    if (auto copy = mImpl->hostCopies.find(passDotField); copy != mImpl->hostCopies.end()) return &copy->second;
     auto it = mImpl->fieldTextures.find(passDotField);
     return it == mImpl->fieldTextures.end() ? nullptr : it->second;
 }
@@ -518,10 +626,29 @@ std::string RenderGraph::planText() const {
                              r.lastUse >= int(p.order.size()) ? std::string("end") : std::to_string(r.lastUse + 1),
                              bytesText(r.offset));
     }
+    s << "\nDevices:\n";
+    for (const PlacedPass& pp : p.placement)
+        s << fmt::format("  {:28} {}{}\n", pp.name, deviceName(pp.device), pp.note.empty() ? "" : "   (" + pp.note + ")");
+    size_t perFrame = 0;
+    for (const TransferInfo& t : p.transfers) perFrame += t.bytes;
+    s << "\nTransfers per frame:" << (p.transfers.empty() ? " none\n" : fmt::format(" {}\n", bytesText(perFrame)));
+    for (const TransferInfo& t : p.transfers)
+        s << fmt::format("  {:34} {:>8} -> {:<8} {:>11}  {} {} ({})\n", t.field, deviceName(t.from), deviceName(t.to),
+                         bytesText(t.bytes), t.after ? "after" : "before",
+                         t.position < int(p.order.size()) ? p.order[size_t(t.position)] : std::string("?"), t.reason);
     double saved = p.transientSumBytes ? 100.0 * (1.0 - double(p.transientPeakBytes) / p.transientSumBytes) : 0.0;
-    s << fmt::format("\nMemory: transient arena {} (unshared {}, {:.0f}% saved); history {}; peak {}\n",
+    const double pixels = double(std::max<uint64_t>(uint64_t(p.width) * p.height, 1));
+    s << fmt::format("\nMemory: transient arena {} (unshared {}, {:.0f}% saved); history {}; peak {} ({:.0f} bytes a "
+                     "pixel)\n",
                      bytesText(p.transientPeakBytes), bytesText(p.transientSumBytes), saved, bytesText(p.historyBytes),
-                     bytesText(p.transientPeakBytes + p.historyBytes));
+                     bytesText(p.transientPeakBytes + p.historyBytes),
+                     double(p.transientPeakBytes + p.historyBytes) / pixels);
+    for (DeviceKind d : {DeviceKind::Cpu, DeviceKind::Cuda, DeviceKind::Emulated}) {
+        const size_t arenaBytes = p.devicePeakBytes[size_t(d)], historyBytes = p.deviceHistoryBytes[size_t(d)];
+        if (arenaBytes + historyBytes == 0) continue;
+        s << fmt::format("  on {:8}: transient arena {}, history {}, peak {}\n", deviceName(d), bytesText(arenaBytes),
+                         bytesText(historyBytes), bytesText(arenaBytes + historyBytes));
+    }
     for (const auto& w : p.warnings) s << "warning: " << w << "\n";
     return s.str();
 }

@@ -1,5 +1,5 @@
 #pragma once
-// A 2D image in host memory with 64-byte aligned rows, and typed views of it.
+// A 2D image with 64-byte aligned rows, in host memory or on a device (loom/Device.h), and typed views of it.
 #include <cassert>
 #include <cstddef>
 #include <cstdint>
@@ -7,6 +7,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "loom/Device.h"
 #include "loom/Format.h"
 #include "loom/Kernel.h"
 
@@ -37,16 +38,29 @@ struct ImageView {
     LOOM_HD T& at(uint32_t x, uint32_t y) const { return row(y)[x]; }
 };
 
+/// Throws loom::Error (runtime): host code asked for a host view of a texture on `device`.
+[[noreturn]] void throwHostViewOfDeviceTexture(DeviceKind device);
+
 /// A 2D image. Either owns its memory or views memory owned elsewhere (a
 /// transient arena of a compiled graph). Non-copyable: copying pixels is
-/// explicit (copyFrom).
+/// explicit (copyFrom, or copyTexture across devices).
+///
+/// Residence: host memory (cpu) by default. A texture on a device is reached
+/// only through deviceView() (kernels launched on that device) and
+/// copyTexture(); view(), row(), data() and texel() are for host textures, and
+/// view() throws for a device texture, so a pass that reads device memory
+/// without a transfer fails where it does so (on the emulated device too).
 class Texture {
 public:
     Texture() = default;
-    /// Allocates zero-filled, 64-byte aligned memory.
+    /// Allocates zero-filled, 64-byte aligned host memory.
     Texture(uint32_t width, uint32_t height, Format format);
-    /// Views external memory of at least textureByteSize() bytes.
-    static Texture wrap(std::byte* memory, uint32_t width, uint32_t height, Format format);
+    /// Allocates zero-filled memory on `device`; `what` names it in an out-of-memory error.
+    static Texture onDevice(DeviceKind device, uint32_t width, uint32_t height, Format format,
+                            const std::string& what = "a texture");
+    /// Views external memory of at least textureByteSize() bytes, residing on `device`.
+    static Texture wrap(std::byte* memory, uint32_t width, uint32_t height, Format format,
+                        DeviceKind device = DeviceKind::Cpu);
 
     Texture(const Texture&) = delete;
     Texture& operator=(const Texture&) = delete;
@@ -58,6 +72,7 @@ public:
         mRowPitch = std::exchange(o.mRowPitch, 0);
         mData = std::exchange(o.mData, nullptr);
         mOwner = std::move(o.mOwner);
+        mResidence = o.mResidence;
         return *this;
     }
 
@@ -67,20 +82,34 @@ public:
     size_t rowPitch() const { return mRowPitch; }
     size_t byteSize() const { return mRowPitch * mHeight; }
     bool empty() const { return mData == nullptr; }
+    /// The device whose memory holds the pixels.
+    DeviceKind residence() const { return mResidence; }
+    bool onHost() const { return mResidence == DeviceKind::Cpu; }
 
     std::byte* data() { return mData; }
     const std::byte* data() const { return mData; }
     std::byte* row(uint32_t y) { return mData + mRowPitch * y; }
     const std::byte* row(uint32_t y) const { return mData + mRowPitch * y; }
 
-    /// Typed view; T's size must equal the format's bytes per pixel.
+    /// Typed host view; T's size must equal the format's bytes per pixel. Throws for a device texture.
     template <class T>
     ImageView<T> view() {
+        if (mResidence != DeviceKind::Cpu) throwHostViewOfDeviceTexture(mResidence);
+        return deviceView<T>();
+    }
+    template <class T>
+    ImageView<const T> view() const {
+        if (mResidence != DeviceKind::Cpu) throwHostViewOfDeviceTexture(mResidence);
+        return deviceView<T>();
+    }
+    /// Typed view of the memory wherever it resides: for kernels launched on the texture's device (launch2D).
+    template <class T>
+    ImageView<T> deviceView() {
         assert(sizeof(T) == formatInfo(mFormat).bytesPerPixel);
         return {reinterpret_cast<T*>(mData), mWidth, mHeight, mRowPitch};
     }
     template <class T>
-    ImageView<const T> view() const {
+    ImageView<const T> deviceView() const {
         assert(sizeof(T) == formatInfo(mFormat).bytesPerPixel);
         return {reinterpret_cast<const T*>(mData), mWidth, mHeight, mRowPitch};
     }
@@ -105,6 +134,7 @@ private:
     size_t mRowPitch = 0;
     std::byte* mData = nullptr;
     std::shared_ptr<std::byte> mOwner;  // empty for views
+    DeviceKind mResidence = DeviceKind::Cpu;
 };
 
 /// Converts IEEE half bits to float and back (round to nearest even).

@@ -17,6 +17,8 @@ struct PassDesc {
     /// Optional inputs left unconnected: wiring by name skips them (e.g. SVGF's direct/indirect when the
     /// combined colour is to be filtered although the path tracer could split it).
     std::vector<std::string> unconnected;
+    /// Where the pass runs: "" (the graph's device), "auto", "cpu", "cuda" or "emulated" (docs/GRAPHS.md).
+    std::string device;
     bool operator==(const PassDesc&) const = default;
 };
 
@@ -40,14 +42,22 @@ struct GraphDesc {
     std::vector<PassDesc> passes;
     std::vector<EdgeDesc> edges;
     std::vector<ChannelRef> outputs;
+    /// Where passes run unless they say otherwise: "" (auto), "auto", "cpu", "cuda" or "emulated".
+    std::string device;
     std::filesystem::path file;  ///< where it was loaded from (for error messages)
 
     const PassDesc* findPass(const std::string& name) const;
     /// Structural equality (ignores `file`).
     bool sameAs(const GraphDesc& o) const {
-        return name == o.name && passes == o.passes && edges == o.edges && outputs == o.outputs;
+        return name == o.name && passes == o.passes && edges == o.edges && outputs == o.outputs && device == o.device;
     }
 };
+
+/// The device names a graph accepts: auto, cpu, cuda, emulated.
+inline const std::vector<std::string>& deviceChoices() {
+    static const std::vector<std::string> choices = {"auto", "cpu", "cuda", "emulated"};
+    return choices;
+}
 
 /// Parses "Pass.channel[@prev]". Throws loom::Error naming `where` and `file`.
 ChannelRef parseChannelRef(const std::string& text, const std::string& where, const std::string& file = {});

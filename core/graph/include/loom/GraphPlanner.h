@@ -23,6 +23,10 @@ struct PlannerInput {
     std::vector<Reflection> reflections;
     uint32_t width = 0, height = 0;
     std::vector<std::string> observe;  ///< CompileOptions::observe
+    /// Where each pass runs, in description order (empty: all on the CPU); notes say why a pass runs elsewhere
+    /// than asked.
+    std::vector<DeviceKind> devices;
+    std::vector<std::string> deviceNotes;
     /// A live pass's second reflection, given its connections (CompileInfo::wired); empty: the first one stays.
     std::function<Reflection(size_t pass, const CompileInfo& info)> reflectWired;
 };
@@ -33,12 +37,14 @@ struct PlannedInput {
     uint32_t srcPass = 0;  ///< index in the description
     std::string srcField;
     bool prev = false;  ///< last frame's value (the source is a history pair)
+    int transfer = -1;  ///< the copy it reads (summary.transfers) when the source is on another device
 };
 
 /// One pass of the plan, at its index in the description.
 struct PassPlan {
     bool live = false;
     int position = -1;                  ///< in the execution order; -1 when culled
+    DeviceKind device = DeviceKind::Cpu;  ///< where it runs; its outputs, internals and history live there
     Reflection reflection;              ///< the second reflection of a live pass, else the first
     CompileInfo info;                   ///< wired: what compile() receives
     std::vector<PlannedInput> inputs;   ///< connected inputs
@@ -62,7 +68,9 @@ struct GraphPlan {
 GraphPlan planGraph(const PlannerInput& input);
 
 /// Lifetimes and memory: fills summary.resources (history pairs, then transients with their arena offsets), the
-/// byte counts and the skipped optional outputs. Transients are placed largest first, each at the lowest offset
+/// byte counts and the skipped optional outputs, and the transfers where a field crosses devices (a copy on the
+/// reader's device, a transient there, made before the first reader on that device runs; a host copy of each
+/// marked output and observed field of a pass off the host). Each device has its own arena. Transients are placed largest first, each at the lowest offset
 /// free of every placed transient whose lifetime overlaps its own.
 void planResources(GraphPlan& plan, const GraphDesc& desc);
 

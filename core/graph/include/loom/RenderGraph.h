@@ -23,6 +23,13 @@ struct CompileOptions {
     /// Fill transient memory with NaN (0xFFFFFFFF for integers) when its
     /// lifetime starts, so a read-before-write shows up.
     bool poisonTransients = false;
+    /// Where passes run unless their graph entry names a device: "" (the
+    /// graph's "device"), "auto", "cpu", "cuda" or "emulated" (--device).
+    std::string device;
+    /// Plan only (`loom check`): place, wire and plan memory without
+    /// allocating or compiling passes, so a plan for cuda needs no GPU. A
+    /// graph compiled so cannot execute.
+    bool planOnly = false;
 };
 
 struct FrameInfo {
@@ -50,9 +57,30 @@ struct ResourceInfo {
     Format format = Format::RGBA32F;
     uint32_t width = 0, height = 0;
     size_t bytes = 0;        ///< per texture (a history pair holds two)
+    DeviceKind device = DeviceKind::Cpu;  ///< whose memory holds it
     int firstUse = 0;        ///< execution position of the writer
     int lastUse = 0;         ///< last execution position that reads it (order size = after the frame)
     size_t offset = 0;       ///< transient: offset into the shared arena
+};
+
+/// A copy the graph makes each frame because a field crosses devices: into a pass placed on another device than
+/// the field's writer (before that pass runs), or to the host for a marked output or an observed field (after the
+/// pass that writes it).
+struct TransferInfo {
+    std::string field;     ///< "Pass.field" (with "@prev" for last frame's value)
+    DeviceKind from = DeviceKind::Cpu, to = DeviceKind::Cpu;
+    size_t bytes = 0;      ///< per frame
+    int position = 0;      ///< the execution position it runs at: before that pass (inputs), after it (to the host)
+    bool after = false;    ///< after the pass at `position` (marked outputs, observed fields)
+    std::string reason;    ///< "for SVGF", "marked output", "observed"
+    std::string resource;  ///< the copy's resource name (inputs), empty for copies to the host
+};
+
+/// Where a live pass runs, and why it runs elsewhere than asked where it does.
+struct PlacedPass {
+    std::string name;
+    DeviceKind device = DeviceKind::Cpu;
+    std::string note;  ///< e.g. "asked for cuda; this pass has no cuda version"
 };
 
 struct CulledPass {
@@ -96,6 +124,12 @@ struct CompiledPlan {
     size_t transientPeakBytes = 0;     ///< size of the shared transient arena
     size_t transientSumBytes = 0;      ///< what the transients would take unshared
     size_t historyBytes = 0;           ///< both sides of every history pair
+    std::vector<PlacedPass> placement;       ///< live passes in execution order
+    std::vector<TransferInfo> transfers;     ///< every copy between devices, per frame
+    /// Per device (indexed by DeviceKind): its transient arena and its history; transientPeakBytes and
+    /// historyBytes above are the sums over devices.
+    size_t devicePeakBytes[3] = {0, 0, 0};
+    size_t deviceHistoryBytes[3] = {0, 0, 0};
 };
 
 struct PassTiming {

@@ -8,6 +8,7 @@
 #include <string_view>
 #include <vector>
 
+#include "loom/Device.h"
 #include "loom/Params.h"
 #include "loom/Reflection.h"
 #include "loom/Texture.h"
@@ -103,11 +104,14 @@ public:
     const Camera* camera() const { return mCamera; }
     Stats& stats() const { return *mStats; }
     const std::string& passName() const { return mPassName; }
+    /// The device the graph placed the pass on: where its fields live and its kernels launch (launch2D).
+    DeviceKind device() const { return mDevice; }
 
 private:
     friend class RenderGraph;
     const BoundField* find(std::string_view name, FieldKind kind) const;
     std::string mPassName;
+    DeviceKind mDevice = DeviceKind::Cpu;
     std::vector<BoundField> mFields;
     bool mHistoryValid = false;
     bool mInputParamsChanged = false;
@@ -141,6 +145,9 @@ public:
     /// "emissive-triangle sampling: the scene has no emissive triangles"). `loom check` lists them; the graph
     /// never calls it while rendering. Called after setScene and compile.
     virtual std::vector<std::string> skippedWork() const { return {}; }
+    /// Whether the pass's kernels run on `device` (docs/KERNELS.md). The CPU only by default: the graph runs such a
+    /// pass on the CPU wherever it is asked to run, and transfers what crosses devices.
+    virtual bool runsOn(DeviceKind device) const { return device == DeviceKind::Cpu; }
 
     ParamList& params() { return mParams; }
     const ParamList& params() const { return mParams; }
