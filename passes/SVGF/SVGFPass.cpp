@@ -50,8 +50,6 @@ const char kIntegrated[] = "integrated";
 const char kIntegratedIndirect[] = "integratedIndirect";
 const char kEstimate[] = "estimate";
 const char kEstimateIndirect[] = "estimateIndirect";
-const char kDemodulationAlbedo[] = "demodulationAlbedo";
-const char kGradientSamples[] = "gradientSamples";
 const char kChange[] = "shadingChange";
 
 // Frame stats.
@@ -180,17 +178,15 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
     r.internal(kEstimate, Format::RGBA32F)
         .doc("input of the a-trous levels: integrated colour with its variance estimate (spatial while short)");
     if (splitFields) r.internal(kEstimateIndirect, Format::RGBA32F).doc("indirect, as estimate (split only)");
-    if (!info.wired || info.isInputConnected(kGradient)) {
-        r.internal(kGradientSamples, Format::RG32F)
-            .doc("the gradient sample (new, old) of each 3x3 block, on the block grid (gradient only)");
+    // Two kinds of scratch need no field of their own, since they are dead before a field they fit in is written
+    // (memory at the frame's peak, where SVGF runs): the gradient samples of the 3x3 blocks live in `estimate` until
+    // the temporal stage writes it, and albedo + specAlbedo, the demodulation albedo, in `filtered` until the
+    // remodulation overwrites each pixel with its result (it reads a pixel's albedo only to write that pixel).
+    if (!info.wired || info.isInputConnected(kGradient))
         r.internal(kChange, Format::RG32F)
             .doc(
                 "shading change on last frame's grid, what the anti-lag reprojects: lambda in [0, 1] and the "
                 "luminance ratio now / then (gradient only)");
-    }
-    if (!info.wired || info.isInputConnected(kSpecAlbedo))
-        r.internal(kDemodulationAlbedo, Format::RGBA32F)
-            .doc("albedo + specAlbedo, what the signal is demodulated by and remodulated with (specAlbedo only)");
 }
 
 void SVGFPass::declareParams(ParamList& p) {
@@ -265,7 +261,8 @@ ImageView<const glm::vec4> SVGFPass::demodulationAlbedo(PassContext& ctx) const 
     const auto albedo = inputView<glm::vec4>(ctx, kAlbedo);
     const auto specular = inputView<glm::vec4>(ctx, kSpecAlbedo);
     if (!specular.data) return albedo;
-    const auto sum = ctx.internal(kDemodulationAlbedo)->view<glm::vec4>();
+    // In the output, until the remodulation replaces each pixel's albedo with its result (see reflect).
+    const auto sum = ctx.output(kFiltered)->view<glm::vec4>();
     parallelFor2D(
         sum.width, sum.height,
         [&](const Tile& t) {
@@ -282,9 +279,13 @@ ImageView<const glm::vec4> SVGFPass::demodulationAlbedo(PassContext& ctx) const 
 ImageView<const glm::vec2> SVGFPass::shadingChange(PassContext& ctx) const {
     const auto gradient = inputView<glm::vec2>(ctx, kGradient);
     if (!gradient.data || !mTemporal) return {};
-    const auto samples = ctx.internal(kGradientSamples)->view<glm::vec2>();
     const auto change = ctx.internal(kChange)->view<glm::vec2>();
     const uint32_t w = change.width, h = change.height;
+    // The samples, on the block grid, live in the estimate scratch: the temporal stage writes it after this one.
+    const auto estimate = ctx.internal(kEstimate)->view<glm::vec4>();
+    const ImageView<glm::vec2> samples{reinterpret_cast<glm::vec2*>(estimate.data),
+                                       (w + kGradientBlock - 1) / kGradientBlock,
+                                       (h + kGradientBlock - 1) / kGradientBlock, estimate.rowPitch};
     // One sample per block (the channel replicates it over the block): its terms on the block grid, then for each
     // block the sums over the 3x3 blocks around it, written to the block's pixels. Fixed-order sums: any thread
     // count gives the same bits.
