@@ -70,6 +70,7 @@ const char* const kColorField = channel::kColor;
 
 struct BenchOptions {
     SceneOptions scene;
+    std::string device;  ///< --device: where the benchmarked graphs' passes run (references: the graphs' own)
     uint64_t frames = 32;
     std::string size = "640x360";
     std::vector<std::string> graphs;
@@ -235,7 +236,8 @@ struct PreparedGraph {
 PreparedGraph prepareGraph(const GraphDesc& desc, const std::string& file, PluginRegistry& registry,
                            const std::shared_ptr<Scene>& scene, const std::vector<std::string>& set,
                            bool onlyKnownPasses, const std::function<void(RenderGraph&)>& configure,
-                           const std::string& measure, uint32_t width, uint32_t height) {
+                           const std::string& measure, uint32_t width, uint32_t height,
+                           const std::string& device) {
     PreparedGraph p;
     p.graph = std::make_unique<RenderGraph>(desc, registry);
     if (scene) p.graph->setScene(scene);
@@ -244,6 +246,7 @@ PreparedGraph prepareGraph(const GraphDesc& desc, const std::string& file, Plugi
     CompileOptions copts;
     copts.width = width;
     copts.height = height;
+    copts.device = device;
     p.graph->compile(copts);
     p.measured = measuredField(*p.graph, measure, file);
     if (!p.graph->pass(p.measured.pass))
@@ -1136,7 +1139,8 @@ void runBench(BenchOptions o) {
     std::vector<std::pair<std::string, std::pair<int, int>>> bounces;  // variant label -> (maxBounces, rrStart)
     for (const Variant& v : vars) {
         PreparedGraph p =
-            prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height);
+            prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height,
+                         o.device);
         const std::string tracer = tracerOf(v.desc, registry);
         if (!tracer.empty())
             bounces.emplace_back(v.desc.name + (v.sweep ? " " + v.label() : ""),
@@ -1148,7 +1152,7 @@ void runBench(BenchOptions o) {
     std::string bruteTracer;
     if (!spps.empty()) {
         const GraphDesc bruteDesc = loadGraph(o.bruteForceGraph);
-        brute = prepareGraph(bruteDesc, o.bruteForceGraph, registry, scene, o.set, true, {}, "", width, height);
+        brute = prepareGraph(bruteDesc, o.bruteForceGraph, registry, scene, o.set, true, {}, "", width, height, o.device);
         bruteTracer = tracerOf(bruteDesc, registry);
         if (bruteTracer.empty())
             throwBadInput("--brute-force-graph", "the brute-force graph has no path tracer",
@@ -1293,7 +1297,8 @@ void runBench(BenchOptions o) {
     std::vector<Run> results;
     for (const Variant& v : vars) {
         PreparedGraph p =
-            prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height);
+            prepareGraph(v.desc, v.file, registry, scene, o.set, false, configureVariant(v), o.measure, width, height,
+                         o.device);
         Run r;
         r.graph = v.desc.name;
         r.graphFile = v.file;
@@ -1388,6 +1393,9 @@ void addBenchCommand(CLI::App& app) {
                     "run each graph with this pass once per value: Pass.param=v1,v2,... (repeatable; one sweep at "
                     "a time, not their product)");
     cmd->add_option("--set", o->set, "set a parameter on every graph: Pass.param=value (repeatable)");
+    cmd->add_option("--device", o->device,
+                    "where the benchmarked graphs' passes run unless a graph names a device for them: auto, cpu, "
+                    "cuda or emulated (references are rendered as their graphs say)");
     cmd->add_option("--measure", o->measure,
                     "field to measure in every graph (default: the input of ToneMap.src, else the first output)");
     cmd->add_option("--reference-sequence", o->referenceSequence,

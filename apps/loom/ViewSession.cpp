@@ -143,6 +143,7 @@ ViewSession::ViewSession(const ViewOptions& options)
     CompileOptions copts;
     copts.width = mWidth;
     copts.height = mHeight;
+    copts.device = options.device;
     mGraph->compile(copts);
     listFields();
     view(options.field.empty() ? defaultField() : options.field);

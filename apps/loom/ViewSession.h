@@ -23,6 +23,7 @@ struct ViewOptions {
     std::string graph;
     std::string size = "640x360";
     std::vector<std::string> set;
+    std::string device;    ///< where passes run unless the graph names a device for them (--device)
     std::string field;     ///< field shown first ("Pass.field"); empty: the graph's first output
     float exposure = 0.f;  ///< EV applied to float fields on display
     double fps = 60.0;
