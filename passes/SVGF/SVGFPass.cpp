@@ -5,6 +5,7 @@
 #include <chrono>
 #include <string>
 
+#include "SVGFDevice.h"
 #include "loom/Camera.h"
 #include "loom/Channels.h"
 #include "loom/Parallel.h"
@@ -79,16 +80,27 @@ double msSince(Clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+/// A field's pixels as the pass's kernels reach them: a host view on the CPU (which fails for device memory), the
+/// device view on any other device (SVGFDevice.h's launches).
+template <class T>
+ImageView<T> pixels(const PassContext& ctx, Texture& t) {
+    return ctx.device() == DeviceKind::Cpu ? t.view<T>() : t.deviceView<T>();
+}
+template <class T>
+ImageView<const T> pixels(const PassContext& ctx, const Texture& t) {
+    return ctx.device() == DeviceKind::Cpu ? t.view<T>() : t.deviceView<T>();
+}
+
 template <class T>
 ImageView<const T> inputView(const PassContext& ctx, const char* name) {
     const Texture* t = ctx.input(name);
-    return t ? t->view<T>() : ImageView<const T>{};
+    return t ? pixels<T>(ctx, *t) : ImageView<const T>{};
 }
 
 template <class T>
 ImageView<T> outputView(const PassContext& ctx, const char* name) {
     Texture* t = ctx.output(name);
-    return t ? t->view<T>() : ImageView<T>{};
+    return t ? pixels<T>(ctx, *t) : ImageView<T>{};
 }
 
 template <class T>
@@ -362,7 +374,8 @@ void SVGFPass::bindFrame(Frame& f) {
     f.h = ctx.output(kFiltered)->height();
     f.ap = mEdgeStopping;
     f.scales = varianceScales(f.ap);
-    f.pipe = choosePipeline(f.scales);
+    // A device runs the scalar reference stages (SVGFDevice.h), the CPU its fused fast path.
+    f.pipe = ctx.device() == DeviceKind::Cpu ? choosePipeline(f.scales) : Pipeline{};
     f.referencePixels = uint64_t(f.w) * f.h;
 
     TemporalViews& tv = f.tv;
@@ -371,17 +384,18 @@ void SVGFPass::bindFrame(Frame& f) {
         tv.direct = inputView<glm::vec4>(ctx, kDirect);
         tv.indirect = inputView<glm::vec4>(ctx, kIndirect);
     }
-    tv.albedo = demodulationAlbedo(ctx);
+    // On a device the sum albedo + specAlbedo is formed per pixel by the stages that read it (SVGFDevice.h).
+    tv.albedo = ctx.device() == DeviceKind::Cpu ? demodulationAlbedo(ctx) : inputView<glm::vec4>(ctx, kAlbedo);
     tv.emission = inputView<glm::vec4>(ctx, kEmission);
     tv.normW = inputView<glm::vec4>(ctx, kNormW);
     tv.linearZ = inputView<glm::vec2>(ctx, kLinearZ);
     tv.mvec = inputView<glm::vec2>(ctx, kMvec);
     tv.meshId = inputView<uint32_t>(ctx, kMeshId);
-    tv.prevIllum0 = ctx.historyPrev(kIllumHistory).view<glm::vec4>();
-    if (f.split) tv.prevIllum1 = ctx.historyPrev(kIndirectHistory).view<glm::vec4>();
-    tv.prevMoments0 = ctx.historyPrev(kMomentsHistory).view<glm::vec2>();
-    if (f.split) tv.prevMoments1 = ctx.historyPrev(kIndirectMomentsHistory).view<glm::vec2>();
-    tv.prevLength = ctx.historyPrev(kLengthHistory).view<float>();
+    tv.prevIllum0 = pixels<glm::vec4>(ctx, ctx.historyPrev(kIllumHistory));
+    if (f.split) tv.prevIllum1 = pixels<glm::vec4>(ctx, ctx.historyPrev(kIndirectHistory));
+    tv.prevMoments0 = pixels<glm::vec2>(ctx, ctx.historyPrev(kMomentsHistory));
+    if (f.split) tv.prevMoments1 = pixels<glm::vec2>(ctx, ctx.historyPrev(kIndirectMomentsHistory));
+    tv.prevLength = pixels<float>(ctx, ctx.historyPrev(kLengthHistory));
     // Last frame's guides: the G-buffer's own previous outputs when the graph feeds them (@prev edges), else the
     // copies this pass keeps.
     f.sharedGuides = sharedPrevGuides(connected);
@@ -390,19 +404,19 @@ void SVGFPass::bindFrame(Frame& f) {
         tv.prevNormW = inputView<glm::vec4>(ctx, kNormWPrev);
         tv.prevMeshId = inputView<uint32_t>(ctx, kMeshIdPrev);
     } else {
-        tv.prevLinearZ = ctx.historyPrev(kPrevLinearZ).view<glm::vec2>();
-        tv.prevNormW = ctx.historyPrev(kPrevNormW).view<glm::vec4>();
-        tv.prevMeshId = ctx.historyPrev(kPrevMeshId).view<uint32_t>();
+        tv.prevLinearZ = pixels<glm::vec2>(ctx, ctx.historyPrev(kPrevLinearZ));
+        tv.prevNormW = pixels<glm::vec4>(ctx, ctx.historyPrev(kPrevNormW));
+        tv.prevMeshId = pixels<uint32_t>(ctx, ctx.historyPrev(kPrevMeshId));
     }
-    tv.integrated0 = ctx.internal(kIntegrated)->view<glm::vec4>();
-    if (f.split) tv.integrated1 = ctx.internal(kIntegratedIndirect)->view<glm::vec4>();
-    tv.curMoments0 = ctx.historyCur(kMomentsHistory).view<glm::vec2>();
-    if (f.split) tv.curMoments1 = ctx.historyCur(kIndirectMomentsHistory).view<glm::vec2>();
-    tv.curLength = ctx.historyCur(kLengthHistory).view<float>();
+    tv.integrated0 = pixels<glm::vec4>(ctx, *ctx.internal(kIntegrated));
+    if (f.split) tv.integrated1 = pixels<glm::vec4>(ctx, *ctx.internal(kIntegratedIndirect));
+    tv.curMoments0 = pixels<glm::vec2>(ctx, ctx.historyCur(kMomentsHistory));
+    if (f.split) tv.curMoments1 = pixels<glm::vec2>(ctx, ctx.historyCur(kIndirectMomentsHistory));
+    tv.curLength = pixels<float>(ctx, ctx.historyCur(kLengthHistory));
     if (!f.sharedGuides) {  // else left empty: nothing is copied
-        tv.curLinearZ = ctx.historyCur(kPrevLinearZ).view<glm::vec2>();
-        tv.curNormW = ctx.historyCur(kPrevNormW).view<glm::vec4>();
-        tv.curMeshId = ctx.historyCur(kPrevMeshId).view<uint32_t>();
+        tv.curLinearZ = pixels<glm::vec2>(ctx, ctx.historyCur(kPrevLinearZ));
+        tv.curNormW = pixels<glm::vec4>(ctx, ctx.historyCur(kPrevNormW));
+        tv.curMeshId = pixels<uint32_t>(ctx, ctx.historyCur(kPrevMeshId));
     }
 
     TemporalParams& tp = f.tp;
@@ -421,8 +435,8 @@ void SVGFPass::bindFrame(Frame& f) {
     vv.normW = tv.normW;
     vv.linearZ = tv.linearZ;
     vv.length = asConst(tv.curLength);
-    vv.estimate0 = ctx.internal(kEstimate)->view<glm::vec4>();
-    if (f.split) vv.estimate1 = ctx.internal(kEstimateIndirect)->view<glm::vec4>();
+    vv.estimate0 = pixels<glm::vec4>(ctx, *ctx.internal(kEstimate));
+    if (f.split) vv.estimate1 = pixels<glm::vec4>(ctx, *ctx.internal(kEstimateIndirect));
     vv.variance = outputView<float>(ctx, kVariance);
 }
 
@@ -518,7 +532,7 @@ ModulateViews SVGFPass::modulateViews(const Frame& f) const {
     mv.albedo = f.tv.albedo;
     mv.emission = f.tv.emission;
     mv.linearZ = f.tv.linearZ;
-    mv.dst = f.ctx.output(kFiltered)->view<glm::vec4>();
+    mv.dst = outputView<glm::vec4>(f.ctx, kFiltered);
     return mv;
 }
 
@@ -579,7 +593,16 @@ void SVGFPass::modulateStage(Frame& f) {
         kStreamTileSize);
 }
 
+bool SVGFPass::runsOn(DeviceKind device) const {
+    return device == DeviceKind::Cpu || device == DeviceKind::Emulated ||
+           (device == DeviceKind::Cuda && svgf::device::launchesOnCuda());
+}
+
 void SVGFPass::execute(PassContext& ctx) {
+    if (ctx.device() != DeviceKind::Cpu) {
+        executeOnDevice(ctx);
+        return;
+    }
     Stats& stats = ctx.stats();
     if (!mEnabled) {
         passThrough(ctx);
@@ -602,6 +625,68 @@ void SVGFPass::execute(PassContext& ctx) {
     }
     stats.set(kStatNonFinite, double(f.nonFinite));
     stats.set(kStatReferencePixels, double(f.referencePixels) / (double(f.w) * f.h));
+    stats.set(kStatSplit, f.split ? 1 : 0);
+    stats.set(kStatSharedGuides, f.sharedGuides ? 1 : 0);
+}
+
+void SVGFPass::executeOnDevice(PassContext& ctx) {
+    namespace dev = svgf::device;
+    const DeviceKind device = ctx.device();
+    Stats& stats = ctx.stats();
+    if (!mEnabled) {
+        dev::passThrough(device, inputView<glm::vec4>(ctx, kColor), outputView<glm::vec4>(ctx, kFiltered));
+        if (Texture* t = ctx.output(kVariance)) t->clear();
+        if (Texture* t = ctx.output(kHistoryLength)) t->clear();
+        ctx.historyCur(kLengthHistory).clear();  // length 0 everywhere: no history when enabled again
+        stats.set(kStatNonFinite, 0);
+        return;
+    }
+    // The stages of the reference path (referenceStages, referenceAtrous), each a launch over the scalar kernels;
+    // the scratch is the graph's fields (the demodulation albedo, the à-trous ping-pong: see SVGFDevice.h).
+    Frame f{ctx};
+    bindFrame(f);
+    const auto albedo = inputView<glm::vec4>(ctx, kAlbedo), specAlbedo = inputView<glm::vec4>(ctx, kSpecAlbedo);
+    auto t0 = Clock::now();
+    const auto gradient = inputView<glm::vec2>(ctx, kGradient);
+    if (gradient.data && mTemporal) {
+        const auto change = pixels<glm::vec2>(ctx, *ctx.internal(kChange));
+        // The samples, on the block grid, live in the estimate scratch until the temporal stage writes it.
+        const ImageView<glm::vec2> samples{reinterpret_cast<glm::vec2*>(f.vv.estimate0.data),
+                                           (f.w + kGradientBlock - 1) / kGradientBlock,
+                                           (f.h + kGradientBlock - 1) / kGradientBlock, f.vv.estimate0.rowPitch};
+        dev::antilag(device, gradient, samples, change);
+        f.tv.prevChange = asConst(change);
+    }
+    stats.set(kStatAntilag, msSince(t0));
+
+    t0 = Clock::now();
+    f.nonFinite = dev::temporal(device, f.tv, f.tp, albedo, specAlbedo);
+    stats.set(kStatReproject, msSince(t0));
+
+    t0 = Clock::now();
+    dev::variance(device, f.vv, f.scales, f.split);
+    stats.set(kStatVariance, msSince(t0));
+    stats.set(kStatVarianceReference, 1.0);
+
+    // The levels ping-pong between the integrated field (free since the variance stage; it takes the result) and
+    // the output, which the remodulation writes last.
+    t0 = Clock::now();
+    const auto scratch = outputView<glm::vec4>(ctx, kFiltered);
+    const auto normW = f.tv.normW;
+    dev::atrous(device, asConst(f.vv.estimate0), f.tv.integrated0, scratch, f.tv.linearZ, normW, mIterations, f.ap,
+                mFeedbackTap, pixels<glm::vec4>(ctx, ctx.historyCur(kIllumHistory)));
+    if (f.split)
+        dev::atrous(device, asConst(f.vv.estimate1), f.tv.integrated1, scratch, f.tv.linearZ, normW, mIterations,
+                    f.ap, mFeedbackTap, pixels<glm::vec4>(ctx, ctx.historyCur(kIndirectHistory)));
+    stats.set(kStatAtrous, msSince(t0));
+
+    t0 = Clock::now();
+    dev::modulate(device, modulateViews(f), f.split, albedo, specAlbedo, outputView<float>(ctx, kHistoryLength),
+                  asConst(f.tv.curLength));
+    stats.set(kStatModulate, msSince(t0));
+
+    stats.set(kStatNonFinite, double(f.nonFinite));
+    stats.set(kStatReferencePixels, 1.0);
     stats.set(kStatSplit, f.split ? 1 : 0);
     stats.set(kStatSharedGuides, f.sharedGuides ? 1 : 0);
 }

@@ -33,6 +33,8 @@ public:
     void declareParams(ParamList& p) override;
     void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
+    /// cpu (the Highway twins) and emulated always; cuda where the device stages are compiled by nvcc.
+    bool runsOn(DeviceKind device) const override;
 
 private:
     struct Pipeline;
@@ -48,6 +50,8 @@ private:
     svgf::ModulateViews modulateViews(const Frame& f) const;
 
     void passThrough(PassContext& ctx) const;
+    /// A frame on a device other than the CPU: every stage through launch2D over the scalar kernels (SVGFDevice.h).
+    void executeOnDevice(PassContext& ctx);
     /// What the signal is demodulated by: albedo, or albedo + specAlbedo (in an internal image) when connected.
     ImageView<const glm::vec4> demodulationAlbedo(PassContext& ctx) const;
     /// The anti-lag's shading change on last frame's grid from the gradient input (empty without it).
