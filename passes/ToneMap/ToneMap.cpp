@@ -8,6 +8,7 @@
 #include <cmath>
 #include <vector>
 
+#include "ToneMapDevice.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
 #include "loom/simd/KernelMath-inl.h"
@@ -248,8 +249,8 @@ uint64_t mapRow(const ToneMapParams& p, const SrgbEncodeTable& table, const glm:
 }
 
 /// The same row with the per-pixel reference kernel only.
-uint64_t mapRowReference(const ToneMapParams& p, const SrgbEncodeTable& table, const glm::vec4* in,
-                         uint32_t* out, glm::vec4* outFloat, uint32_t x0, uint32_t x1) {
+uint64_t mapRowReference(const ToneMapParams& p, const SrgbEncodeTable& table, const glm::vec4* in, uint32_t* out,
+                         glm::vec4* outFloat, uint32_t x0, uint32_t x1) {
     uint64_t nonFinite = 0;
     for (uint32_t x = x0; x < x1; ++x) {
         const glm::vec4 c = in[x];
@@ -288,9 +289,7 @@ struct LogAverageSums {
             sum += sums[i];
             count += counts[i];
         }
-        if (count == 0) return false;
-        result = std::exp2(sum / double(count));
-        return true;
+        return tonemap::logAverageOf(sum, count, result);
     }
     std::vector<double> sums;
     std::vector<uint64_t> counts;
@@ -401,12 +400,23 @@ bool ToneMapPass::measureLogAverage(const Texture& srcTexture, double& logAverag
     return sums.logAverage(logAverage);
 }
 
+bool ToneMapPass::runsOn(DeviceKind device) const {
+    return device == DeviceKind::Cpu || tonemap::deviceRuns(device);
+}
+
 void ToneMapPass::execute(PassContext& ctx) {
     const Texture& src = *ctx.input(kSrc);
     Texture& dst = *ctx.output(kDst);
     Texture* dstFloat = ctx.output(kDstFloat);
-    const glm::vec4 prevState = ctx.historyPrev(kAdaptedLuminance).view<glm::vec4>().at(0, 0);
-    glm::vec4& state = ctx.historyCur(kAdaptedLuminance).view<glm::vec4>().at(0, 0);
+    // Off the host (emulated, cuda) the kernels run through launch2D and the frame's sums through reduceRows; the
+    // state texel comes and goes through them too (ToneMapDevice.h). The sums come first there: the log-average
+    // when auto exposure needs it, and the non-finite pixels.
+    const DeviceKind device = ctx.device();
+    const bool onDevice = device != DeviceKind::Cpu;
+    const glm::vec4 prevState = onDevice ? tonemap::loadState(device, ctx.historyPrev(kAdaptedLuminance))
+                                         : ctx.historyPrev(kAdaptedLuminance).view<glm::vec4>().at(0, 0);
+    tonemap::FrameSums deviceSums;
+    if (onDevice) deviceSums = tonemap::sumFrame(device, src, mAutoExposure ? kMeasureRowStep : 0);
 
     // The frame time as a float pair (hi + lo == the double time to ~48 bits).
     const double time = ctx.time();
@@ -430,9 +440,9 @@ void ToneMapPass::execute(PassContext& ctx) {
         } else {
             double logAverage = 0.0;
             // Nothing finite to measure: keep the previous adaptation, or the key itself (scale 1).
-            adapted = measureLogAverage(src, logAverage) ? (measured = float(logAverage))
-                      : prevUsable                       ? prevState.x
-                                                         : mKey;
+            const bool finite = onDevice ? tonemap::logAverageOf(deviceSums.logSum, deviceSums.logCount, logAverage)
+                                         : measureLogAverage(src, logAverage);
+            adapted = finite ? (measured = float(logAverage)) : prevUsable ? prevState.x : mKey;
         }
         scale *= double(mKey) / double(adapted);
     }
@@ -443,34 +453,48 @@ void ToneMapPass::execute(PassContext& ctx) {
     params.hableInvWhite = 1.f / tonemap::hableCurve(tonemap::kHableWhite);
 
     std::unique_ptr<LogAverageSums> sums;
-    if (measureWhileMapping) sums = std::make_unique<LogAverageSums>(src.height());
+    if (measureWhileMapping && !onDevice) sums = std::make_unique<LogAverageSums>(src.height());
     uint64_t nonFinite = 0;
-    switch (params.op) {
-        case Operator::Linear:
-            nonFinite = mapFrame<Operator::Linear>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
-            break;
-        case Operator::Reinhard:
-            nonFinite = mapFrame<Operator::Reinhard>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
-            break;
-        case Operator::ModifiedReinhard:
-            nonFinite =
-                mapFrame<Operator::ModifiedReinhard>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
-            break;
-        case Operator::Aces:
-            nonFinite = mapFrame<Operator::Aces>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
-            break;
-        case Operator::Hable:
-            nonFinite = mapFrame<Operator::Hable>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
-            break;
+    if (onDevice) {
+        if (mDeviceSrgbTable.empty() || mDeviceSrgbTable.residence() != device)
+            mDeviceSrgbTable = tonemap::uploadSrgbTable(device, *mSrgbTable);
+        tonemap::mapFrame(device, params, mDeviceSrgbTable, src, dst, dstFloat);
+        nonFinite = deviceSums.nonFinite;
+    } else {
+        switch (params.op) {
+            case Operator::Linear:
+                nonFinite = mapFrame<Operator::Linear>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
+                break;
+            case Operator::Reinhard:
+                nonFinite =
+                    mapFrame<Operator::Reinhard>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
+                break;
+            case Operator::ModifiedReinhard:
+                nonFinite = mapFrame<Operator::ModifiedReinhard>(params, *mSrgbTable, src, dst, dstFloat, sums.get(),
+                                                                 mReference);
+                break;
+            case Operator::Aces:
+                nonFinite = mapFrame<Operator::Aces>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
+                break;
+            case Operator::Hable:
+                nonFinite = mapFrame<Operator::Hable>(params, *mSrgbTable, src, dst, dstFloat, sums.get(), mReference);
+                break;
+        }
     }
-    if (sums) {
+    if (measureWhileMapping) {
         double logAverage = 0.0;
-        if (sums->logAverage(logAverage)) {
+        const bool finite = onDevice ? tonemap::logAverageOf(deviceSums.logSum, deviceSums.logCount, logAverage)
+                                     : sums->logAverage(logAverage);
+        if (finite) {
             measured = float(logAverage);
             adapted = tonemap::adaptLuminance(prevState.x, measured, dt, mAdaptationTime);
         }  // else: nothing finite, the adaptation stays where it was
     }
-    state = glm::vec4(adapted, measured, timeHi, timeLo);
+    const glm::vec4 state(adapted, measured, timeHi, timeLo);
+    if (onDevice)
+        tonemap::storeState(device, ctx.historyCur(kAdaptedLuminance), state);
+    else
+        ctx.historyCur(kAdaptedLuminance).view<glm::vec4>().at(0, 0) = state;
 
     ctx.stats().set(kStatExposure, scale);
     ctx.stats().set(kStatMeasured, measured);

@@ -26,10 +26,14 @@
 //
 // The CPU path (ToneMap.cpp) runs 8 pixels per AVX2 vector (Google Highway)
 // and gives the same bits as the per-pixel kernels (`reference` runs those).
+// On emulated and cuda the per-pixel kernels run through launch2D and the
+// log-average through reduceRows (ToneMapDevice.h): the same mapping, and the
+// log-average summed in another order (a last-bit difference in its double).
 #include <memory>
 
 #include "ToneMapKernels.h"
 #include "loom/RenderPass.h"
+#include "loom/Texture.h"
 
 namespace loom {
 
@@ -40,6 +44,8 @@ public:
     ToneMapPass();
     void reflect(Reflection& r, const CompileInfo& info) const override;
     void declareParams(ParamList& p) override;
+    /// cpu (the vector path) and emulated always; cuda where nvcc compiled ToneMapDevice.cpp.
+    bool runsOn(DeviceKind device) const override;
     void execute(PassContext& ctx) override;
 
 private:
@@ -59,6 +65,7 @@ private:
     bool mReference = false;
 
     std::unique_ptr<SrgbEncodeTable> mSrgbTable;
+    Texture mDeviceSrgbTable;  ///< mSrgbTable in the memory of the device the pass last ran on (not the host)
 };
 
 }  // namespace loom

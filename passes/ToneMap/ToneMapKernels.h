@@ -149,6 +149,13 @@ LOOM_HD inline bool logLuminance(const glm::vec4& c, float& out) {
     return true;
 }
 
+/// The log-average luminance of `count` terms summing to `sum`: exp2 of their mean; false when there are none.
+inline bool logAverageOf(double sum, uint64_t count, double& result) {
+    if (count == 0) return false;
+    result = std::exp2(sum / double(count));
+    return true;
+}
+
 /// Exponential adaptation towards the measured luminance with time constant
 /// tau (seconds): after dt the remaining gap is exp(-dt / tau) of what it was.
 /// tau = 0 adapts immediately.
