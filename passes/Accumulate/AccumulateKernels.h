@@ -22,6 +22,7 @@
 #include "loom/DoubleTexels.h"
 #include "loom/Kernel.h"
 #include "loom/KernelMath.h"
+#include "loom/Texture.h"
 
 namespace loom::accumulate {
 
@@ -169,6 +170,58 @@ LOOM_HD inline void unpackSum(const glm::uvec4& first, const glm::uvec4& second,
         s.sum = bitsToFloat(first);
         if constexpr (P == Precision::Kahan) s.compensation = bitsToFloat(second);
     }
+}
+
+/// Every texture one frame touches, as typed views (the same on the host and on a device).
+struct FrameViews {
+    ImageView<const glm::vec4> src;
+    ImageView<const glm::vec4> denoised;  ///< empty when not connected
+    float denoisedFrames = 0.f;
+    ImageView<glm::vec4> dst;
+    ImageView<const glm::uvec4> prevSum, prevSumExtra;
+    ImageView<glm::uvec4> curSum, curSumExtra;
+    ImageView<const uint32_t> prevCount;
+    ImageView<uint32_t> curCount;
+};
+
+// Loads and stores touch only the texels the precision keeps its state in: the
+// pass is memory bound, and float precision should not pay for double's state.
+template <Precision P>
+LOOM_HD inline PixelState loadState(const FrameViews& v, uint32_t x, uint32_t y) {
+    PixelState s;
+    s.count = v.prevCount.at(x, y);
+    const glm::uvec4 none(0u);
+    unpackSum<P>(v.prevSum.at(x, y), P == Precision::Float ? none : v.prevSumExtra.at(x, y), s);
+    return s;
+}
+
+template <Precision P>
+LOOM_HD inline void storeState(const FrameViews& v, uint32_t x, uint32_t y, const PixelState& s) {
+    v.curCount.at(x, y) = s.count;
+    glm::uvec4 unused;
+    packSum<P>(s, v.curSum.at(x, y), P == Precision::Float ? unused : v.curSumExtra.at(x, y));
+}
+
+/// One pixel of one frame: starts from zero when `reset`, adds this frame's sample when `addSamples`, writes the
+/// state and the mean (blended with the denoised image when there is one). Returns false when the sample was
+/// skipped as non-finite.
+template <Precision P>
+LOOM_HD inline bool accumulatePixel(const FrameViews& v, uint32_t x, uint32_t y, bool reset, bool addSamples) {
+    PixelState s = reset ? PixelState{} : loadState<P>(v, x, y);
+    const bool added = !addSamples || addSample(P, s, v.src.at(x, y));
+    storeState<P>(v, x, y, s);
+    const glm::vec4 m = mean(P, s);
+    v.dst.at(x, y) = v.denoised.data ? blendDenoised(v.denoised.at(x, y), m, s.count, v.denoisedFrames) : m;
+    return added;
+}
+
+/// The partial* outputs' texels (the running sum as doubles, packDoubleSum's layout) of a float or Kahan state
+/// stored as packSum lays it out: the float sum widened, plus the compensation for Kahan.
+LOOM_HD inline void widenedSum(Precision precision, const glm::uvec4& first, const glm::uvec4& second, glm::uvec4& rg,
+                               glm::uvec4& ba) {
+    glm::dvec4 d(bitsToFloat(first));
+    if (precision == Precision::Kahan) d += glm::dvec4(bitsToFloat(second));
+    packDoubleSum(d, rg, ba);
 }
 
 }  // namespace loom::accumulate

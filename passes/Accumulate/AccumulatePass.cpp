@@ -2,6 +2,7 @@
 
 #include <atomic>
 
+#include "AccumulateDevice.h"
 #include "loom/Camera.h"
 #include "loom/Parallel.h"
 #include "loom/Plugin.h"
@@ -10,7 +11,7 @@
 
 namespace loom {
 
-using accumulate::PixelState;
+using accumulate::FrameViews;
 
 namespace {
 
@@ -32,37 +33,6 @@ const char kStatNonFinite[] = "nonFinite";
 const char kStatReset[] = "reset";
 const char kStatMeanWeight[] = "meanWeight";
 
-/// Every texture one frame touches, as typed views.
-struct FrameViews {
-    ImageView<const glm::vec4> src;
-    ImageView<const glm::vec4> denoised;  ///< empty when not connected
-    float denoisedFrames = 0.f;
-    ImageView<glm::vec4> dst;
-    ImageView<const glm::uvec4> prevSum, prevSumExtra;
-    ImageView<glm::uvec4> curSum, curSumExtra;
-    ImageView<const uint32_t> prevCount;
-    ImageView<uint32_t> curCount;
-};
-
-// Loads and stores touch only the texels the precision keeps its state in: the
-// pass is memory bound, and float precision should not pay for double's state.
-template <AccumulatePass::Precision P>
-PixelState loadState(const FrameViews& v, uint32_t x, uint32_t y) {
-    PixelState s;
-    s.count = v.prevCount.at(x, y);
-    const glm::uvec4 none(0u);
-    accumulate::unpackSum<P>(v.prevSum.at(x, y), P == AccumulatePass::Precision::Float ? none : v.prevSumExtra.at(x, y),
-                             s);
-    return s;
-}
-
-template <AccumulatePass::Precision P>
-void storeState(const FrameViews& v, uint32_t x, uint32_t y, const PixelState& s) {
-    v.curCount.at(x, y) = s.count;
-    glm::uvec4 unused;
-    accumulate::packSum<P>(s, v.curSum.at(x, y), P == AccumulatePass::Precision::Float ? unused : v.curSumExtra.at(x, y));
-}
-
 /// One frame over every pixel: starts from zero when `reset`, adds this frame's
 /// sample when `addSamples`, writes the state and the mean (blended with the
 /// denoised image when there is one). Returns the number of pixels whose sample
@@ -74,12 +44,7 @@ uint64_t accumulateFrame(const FrameViews& v, bool reset, bool addSamples) {
         uint64_t tileSkipped = 0;
         for (uint32_t y = t.y0; y < t.y1; ++y) {
             for (uint32_t x = t.x0; x < t.x1; ++x) {
-                PixelState s = reset ? PixelState{} : loadState<P>(v, x, y);
-                if (addSamples && !accumulate::addSample(P, s, v.src.at(x, y))) ++tileSkipped;
-                storeState<P>(v, x, y, s);
-                const glm::vec4 m = accumulate::mean(P, s);
-                v.dst.at(x, y) =
-                    v.denoised.data ? accumulate::blendDenoised(v.denoised.at(x, y), m, s.count, v.denoisedFrames) : m;
+                if (!accumulate::accumulatePixel<P>(v, x, y, reset, addSamples)) ++tileSkipped;
             }
         }
         // An integer sum: the same total whatever order the tiles finish in.
@@ -105,7 +70,8 @@ void AccumulatePass::reflect(Reflection& r, const CompileInfo&) const {
         .optional()
         .doc(
             "the running sums of R (xy) and G (zw) as doubles, each as the (low, high) words of its bits (any "
-            "precision: float and kahan sums widened), for merging partial accumulations of one frame (`loom image merge`)");
+            "precision: float and kahan sums widened), for merging partial accumulations of one frame (`loom image "
+            "merge`)");
     r.output(kPartialSumBA, Format::RGBA32U).optional().doc("the sums of B and A, as partialSumRG");
     r.output(kPartialCount, Format::R32U)
         .optional()
@@ -181,28 +147,36 @@ void AccumulatePass::writePartial(PassContext& ctx) const {
         if (baOut) baOut->copyFrom(ctx.historyCur(kSumExtra));
         return;
     }
+    if (ctx.device() != DeviceKind::Cpu) {
+        accumulate::widenOnDevice(ctx.device(), mPrecision, ctx.historyCur(kSum), ctx.historyCur(kSumExtra), rgOut,
+                                  baOut);
+        return;
+    }
     const auto sum = ctx.historyCur(kSum).view<glm::uvec4>();
     const auto comp = ctx.historyCur(kSumExtra).view<glm::uvec4>();
     const auto rg = rgOut ? rgOut->view<glm::uvec4>() : ImageView<glm::uvec4>{};
     const auto ba = baOut ? baOut->view<glm::uvec4>() : ImageView<glm::uvec4>{};
     parallelForPixels(sum.width, sum.height, [&](uint32_t x, uint32_t y) {
-        glm::dvec4 d(accumulate::bitsToFloat(sum.at(x, y)));
-        if (mPrecision == Precision::Kahan) d += glm::dvec4(accumulate::bitsToFloat(comp.at(x, y)));
         glm::uvec4 a, b;
-        accumulate::packDoubleSum(d, a, b);
+        accumulate::widenedSum(mPrecision, sum.at(x, y), comp.at(x, y), a, b);
         if (rg.data) rg.at(x, y) = a;
         if (ba.data) ba.at(x, y) = b;
     });
 }
 
+bool AccumulatePass::runsOn(DeviceKind device) const {
+    return device == DeviceKind::Cpu || accumulate::deviceRuns(device);
+}
+
 void AccumulatePass::execute(PassContext& ctx) {
-    const auto src = ctx.input(kSrc)->view<glm::vec4>();
-    const auto dst = ctx.output(kDst)->view<glm::vec4>();
+    // Off the host (emulated, cuda) the same per-pixel kernel runs through launch2D, the counts through reduceRows
+    // (AccumulateDevice.h); views are device views there, host views (which check the residence) on the CPU.
+    const DeviceKind device = ctx.device();
+    const bool onDevice = device != DeviceKind::Cpu;
     const Texture* denoised = ctx.input(kDenoised);
 
     if (!mEnabled) {
-        const auto pass = denoised ? denoised->view<glm::vec4>() : src;
-        parallelForPixels(dst.width, dst.height, [&](uint32_t x, uint32_t y) { dst.at(x, y) = pass.at(x, y); });
+        ctx.output(kDst)->copyFrom(denoised ? *denoised : *ctx.input(kSrc));
         for (const char* field : kStateFields) ctx.historyCur(field).clear();
         for (const char* field : {kPartialSumRG, kPartialSumBA, kPartialCount})
             if (Texture* t = ctx.output(field)) t->clear();
@@ -215,7 +189,8 @@ void AccumulatePass::execute(PassContext& ctx) {
     }
 
     // Frames in the previous mean; zero after a graph-level reset, which clears history.
-    const uint32_t prevFrames = ctx.historyPrev(kFrames).view<uint32_t>().at(0, 0);
+    const uint32_t prevFrames = onDevice ? accumulate::loadFrames(device, ctx.historyPrev(kFrames))
+                                         : ctx.historyPrev(kFrames).view<uint32_t>().at(0, 0);
     const uint32_t maxFrames = uint32_t(mMaxFrames);
     const bool precisionChanged = mPrecision != mStatePrecision;
     const bool moved = sceneMoved(ctx);  // every frame: it keeps the lights' poses for the next
@@ -229,32 +204,43 @@ void AccumulatePass::execute(PassContext& ctx) {
     const bool frozen = maxFrames > 0 && framesBefore >= maxFrames;
     const uint32_t frames = frozen ? framesBefore : framesBefore + 1;
 
+    const auto view = [onDevice](auto& texture, auto texel) {
+        using T = decltype(texel);
+        return onDevice ? texture.template deviceView<T>() : texture.template view<T>();
+    };
     FrameViews v;
-    v.src = src;
-    if (denoised) v.denoised = denoised->view<glm::vec4>();
+    v.src = view(*ctx.input(kSrc), glm::vec4());
+    if (denoised) v.denoised = view(*denoised, glm::vec4());
     v.denoisedFrames = mDenoisedFrames;
-    v.dst = dst;
-    v.prevSum = ctx.historyPrev(kSum).view<glm::uvec4>();
-    v.curSum = ctx.historyCur(kSum).view<glm::uvec4>();
-    v.prevSumExtra = ctx.historyPrev(kSumExtra).view<glm::uvec4>();
-    v.curSumExtra = ctx.historyCur(kSumExtra).view<glm::uvec4>();
-    v.prevCount = ctx.historyPrev(kCount).view<uint32_t>();
-    v.curCount = ctx.historyCur(kCount).view<uint32_t>();
+    v.dst = view(*ctx.output(kDst), glm::vec4());
+    v.prevSum = view(ctx.historyPrev(kSum), glm::uvec4());
+    v.curSum = view(ctx.historyCur(kSum), glm::uvec4());
+    v.prevSumExtra = view(ctx.historyPrev(kSumExtra), glm::uvec4());
+    v.curSumExtra = view(ctx.historyCur(kSumExtra), glm::uvec4());
+    v.prevCount = view(ctx.historyPrev(kCount), uint32_t());
+    v.curCount = view(ctx.historyCur(kCount), uint32_t());
 
     // A frozen mean still rewrites the state: history is ping-ponged, so this frame's side must hold it too.
     uint64_t skipped = 0;
-    switch (mPrecision) {
-        case Precision::Float:
-            skipped = accumulateFrame<Precision::Float>(v, reset, !frozen);
-            break;
-        case Precision::Kahan:
-            skipped = accumulateFrame<Precision::Kahan>(v, reset, !frozen);
-            break;
-        case Precision::Double:
-            skipped = accumulateFrame<Precision::Double>(v, reset, !frozen);
-            break;
+    if (onDevice) {
+        skipped = accumulate::accumulateOnDevice(device, mPrecision, v, reset, !frozen);
+    } else {
+        switch (mPrecision) {
+            case Precision::Float:
+                skipped = accumulateFrame<Precision::Float>(v, reset, !frozen);
+                break;
+            case Precision::Kahan:
+                skipped = accumulateFrame<Precision::Kahan>(v, reset, !frozen);
+                break;
+            case Precision::Double:
+                skipped = accumulateFrame<Precision::Double>(v, reset, !frozen);
+                break;
+        }
     }
-    ctx.historyCur(kFrames).view<uint32_t>().at(0, 0) = frames;
+    if (onDevice)
+        accumulate::storeFrames(device, ctx.historyCur(kFrames), frames);
+    else
+        ctx.historyCur(kFrames).view<uint32_t>().at(0, 0) = frames;
     writePartial(ctx);
     if (mStaleFrames > 0) {
         clearUnusedState(ctx);

@@ -41,6 +41,8 @@ public:
 
     void reflect(Reflection& r, const CompileInfo& info) const override;
     void declareParams(ParamList& p) override;
+    /// cpu and emulated always; cuda where nvcc compiled AccumulateDevice.cpp.
+    bool runsOn(DeviceKind device) const override;
     void execute(PassContext& ctx) override;
 
 private:
