@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 
+#include "TAADevice.h"
 #include "TAASimd.h"
 #include "loom/Channels.h"
 #include "loom/Parallel.h"
@@ -65,7 +66,18 @@ void TAAPass::declareParams(ParamList& p) {
         .doc("run the plain per-pixel reference kernel instead of the tiled CPU path (agrees to 1e-4, slower)");
 }
 
+bool TAAPass::runsOn(DeviceKind device) const {
+    return device == DeviceKind::Cpu || taa::deviceRuns(device);
+}
+
 void TAAPass::execute(PassContext& ctx) {
+    if (ctx.device() != DeviceKind::Cpu) {  // the reference kernel through launch2D (TAADevice.h)
+        const Counts counts = taa::resolveOnDevice(
+            ctx.device(), mParams, ctx.historyValid(), mHdrCompress, *ctx.input(kColorIn), *ctx.input(kMvec),
+            ctx.historyPrev(kColorHistory), *ctx.output(kColorOut), ctx.historyCur(kColorHistory));
+        setStats(ctx, counts, 0);
+        return;
+    }
     TaaInputs in;
     in.color = clamped<glm::vec4>(*ctx.input(kColorIn));
     in.compress = mHdrCompress;
@@ -93,10 +105,14 @@ void TAAPass::execute(PassContext& ctx) {
         },
         kTileW, kTileH);
 
-    ctx.stats().set(kStatNonFinite, double(nonFinite));
-    ctx.stats().set(kStatNoHistory, double(noHistory));
-    ctx.stats().set(kStatClipped, double(clipped));
-    ctx.stats().set(kStatVectorLanes, reference ? 0.0 : double(taa::vectorLanes()));
+    setStats(ctx, Counts{nonFinite, noHistory, clipped}, reference ? 0 : taa::vectorLanes());
+}
+
+void TAAPass::setStats(PassContext& ctx, const Counts& counts, uint32_t vectorLanes) {
+    ctx.stats().set(kStatNonFinite, double(counts.nonFinite));
+    ctx.stats().set(kStatNoHistory, double(counts.noHistory));
+    ctx.stats().set(kStatClipped, double(counts.clipped));
+    ctx.stats().set(kStatVectorLanes, double(vectorLanes));
 }
 
 }  // namespace loom

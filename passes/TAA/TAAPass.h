@@ -18,6 +18,7 @@
 // position outside the frame: the output is the current colour. Non-finite
 // input pixels never reach the output or the history.
 #include "TAAKernels.h"
+#include "TAASimd.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
@@ -26,6 +27,9 @@ class TAAPass final : public RenderPass {
 public:
     void reflect(Reflection& r, const CompileInfo& info) const override;
     void declareParams(ParamList& p) override;
+    /// cpu (the tiled vector path) and emulated always; cuda where nvcc compiled TAADevice.cpp. Off the host the
+    /// reference kernel runs (the same as `reference` on the CPU, bit for bit).
+    bool runsOn(DeviceKind device) const override;
     void execute(PassContext& ctx) override;
 
     /// Runs the per-pixel reference kernel instead of the tiled CPU path (for tests comparing the two; they agree to
@@ -33,6 +37,8 @@ public:
     void useReferenceKernel(bool on) { mReference = on; }
 
 private:
+    static void setStats(PassContext& ctx, const taa::Counts& counts, uint32_t vectorLanes);
+
     taa::TaaParams mParams;
     bool mReference = false;
     bool mHdrCompress = false;
