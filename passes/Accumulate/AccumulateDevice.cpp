@@ -5,7 +5,7 @@
 namespace loom::accumulate {
 
 bool deviceRuns(DeviceKind device) {
-#if LOOM_ACCUMULATE_CUDA
+#if defined(__CUDACC__)
     if (device == DeviceKind::Cuda) return true;
 #endif
     return device == DeviceKind::Emulated;

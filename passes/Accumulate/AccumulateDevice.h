@@ -1,7 +1,7 @@
 #pragma once
 // AccumulatePass off the host (docs/KERNELS.md): on the emulated and cuda devices accumulatePixel
 // (AccumulateKernels.h) runs through launch2D over device views, and the skipped samples are counted through
-// reduceRows. AccumulateDevice.cpp is compiled by nvcc where the CUDA toolkit is found (LOOM_ACCUMULATE_CUDA), by
+// reduceRows. AccumulateDevice.cpp is compiled by nvcc where the CUDA toolkit is found, by
 // the host compiler otherwise.
 #include <cstdint>
 

@@ -5,7 +5,7 @@
 namespace loom::taa {
 
 bool deviceRuns(DeviceKind device) {
-#if LOOM_TAA_CUDA
+#if defined(__CUDACC__)
     if (device == DeviceKind::Cuda) return true;
 #endif
     return device == DeviceKind::Emulated;

@@ -2,7 +2,7 @@
 // TAAPass off the host (docs/KERNELS.md): on the emulated and cuda devices the reference kernel (resolvePixel and
 // outputColor of TAAKernels.h) runs through launch2D over device views, and the frame's pixel counts come from
 // reduceRows. The CPU keeps its tiled vector path (TAASimd.h). TAADevice.cpp is compiled by nvcc where the CUDA
-// toolkit is found (LOOM_TAA_CUDA), by the host compiler otherwise.
+// toolkit is found, by the host compiler otherwise.
 #include "TAAKernels.h"
 #include "TAASimd.h"
 #include "loom/Device.h"

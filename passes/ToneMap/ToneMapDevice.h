@@ -2,7 +2,7 @@
 // ToneMap off the host (docs/KERNELS.md): on the emulated and cuda devices the per-pixel kernels of
 // ToneMapKernels.h run through launch2D and the frame's sums through reduceRows, over device views only. The CPU
 // keeps its own vector path (ToneMap.cpp). ToneMapDevice.cpp is compiled by nvcc where the CUDA toolkit is found
-// (LOOM_TONEMAP_CUDA), by the host compiler otherwise.
+//, by the host compiler otherwise.
 #include <cstdint>
 #include <glm/glm.hpp>
 
