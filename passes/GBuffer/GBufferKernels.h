@@ -5,8 +5,10 @@
 
 #include <glm/glm.hpp>
 
+#include "loom/BvhTraversal.h"
 #include "loom/CameraKernels.h"
 #include "loom/Kernel.h"
+#include "loom/Texture.h"
 #include "loom/SceneView.h"
 #include "loom/SurfaceKernels.h"
 
@@ -111,6 +113,45 @@ LOOM_HD inline GBufferSample hitSample(const SceneView& scene, const CameraData&
     g.vbuffer = glm::uvec4(instance, prim, floatBits(u), floatBits(v));
     g.meshId = instance;
     return g;
+}
+
+/// The channels a G-buffer pass writes, as views of its outputs (host views on the CPU, device views elsewhere);
+/// data == nullptr for a channel nobody consumes.
+struct GBufferViews {
+    ImageView<glm::vec4> posW, normW, faceNormalW, albedo, specAlbedo, emission;
+    ImageView<glm::vec2> linearZ, pnFwidth, mvec;
+    ImageView<glm::uvec4> vbuffer;
+    ImageView<uint32_t> meshId;
+};
+
+/// Writes pixel (x, y) of every channel that has a view.
+LOOM_HD inline void storeSample(const GBufferViews& o, uint32_t x, uint32_t y, const GBufferSample& g) {
+    if (o.posW.data) o.posW.at(x, y) = g.posW;
+    if (o.normW.data) o.normW.at(x, y) = g.normW;
+    if (o.faceNormalW.data) o.faceNormalW.at(x, y) = g.faceNormalW;
+    if (o.linearZ.data) o.linearZ.at(x, y) = g.linearZ;
+    if (o.pnFwidth.data) o.pnFwidth.at(x, y) = g.pnFwidth;
+    if (o.mvec.data) o.mvec.at(x, y) = g.mvec;
+    if (o.albedo.data) o.albedo.at(x, y) = g.albedo;
+    if (o.specAlbedo.data) o.specAlbedo.at(x, y) = g.specAlbedo;
+    if (o.emission.data) o.emission.at(x, y) = g.emission;
+    if (o.vbuffer.data) o.vbuffer.at(x, y) = g.vbuffer;
+    if (o.meshId.data) o.meshId.at(x, y) = g.meshId;
+}
+
+/// GBufferRT's pixel (x, y) off the CPU: its camera ray through the BVH (BvhTraversal.h) under `rules`, then the
+/// sample of the hit or the miss. The ray and its rules are those the CPU's Embree packets trace
+/// (traceCameraRays): direction pixelRayDir, t in (0, 1e30], coverage key cameraCoverageKey(x, y, frame) where
+/// alpha-tested geometry is traced (`keyed`), else 0. So the two find the same triangles, up to ties at shared
+/// edges, with t and barycentrics equal up to float rounding.
+template <bool Moving = true>
+LOOM_HD inline GBufferSample tracedSample(const BvhView& bvh, const CameraData& cam, uint32_t x, uint32_t y,
+                                          uint32_t rules, bool keyed, uint32_t frame) {
+    const glm::vec3 dir = pixelRayDir(cam, x, y);
+    const uint32_t key = keyed ? cameraCoverageKey(x, y, frame) : 0u;
+    const RayHit hit = bvhIntersect(bvh, cam.origin, dir, 0.f, 1e30f, rules, key);
+    return hit.hit() ? hitSample<Moving>(bvh.scene, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
+                     : missSample(cam, dir);
 }
 
 }  // namespace loom::gbuffer

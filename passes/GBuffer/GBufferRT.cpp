@@ -4,6 +4,7 @@
 
 #include "GBufferCommon.h"
 #include "GBufferKernels.h"
+#include "loom/Bvh.h"
 #include "loom/CameraRays.h"
 #include "loom/Error.h"
 #include "loom/Parallel.h"
@@ -31,6 +32,13 @@ void GBufferRT::declareParams(ParamList& p) {
             "generic kernel, for comparison");
 }
 
+GBufferRT::GBufferRT() : mDeviceScene(std::make_unique<device::DeviceScene>()) {}
+GBufferRT::~GBufferRT() = default;
+
+bool GBufferRT::runsOn(DeviceKind d) const {
+    return d == DeviceKind::Cpu || d == DeviceKind::Emulated || (d == DeviceKind::Cuda && device::launchesOnCuda());
+}
+
 void GBufferRT::setScene(const std::shared_ptr<const Scene>& scene) {
     mScene = scene;
 }
@@ -42,32 +50,22 @@ std::vector<std::string> GBufferRT::skippedWork() const {
 
 namespace {
 
-/// Typed output views; data == nullptr for channels nobody consumes.
-struct Outputs {
-    ImageView<glm::vec4> posW, normW, faceNormalW, albedo, specAlbedo, emission;
-    ImageView<glm::vec2> linearZ, pnFwidth, mvec;
-    ImageView<glm::uvec4> vbuffer;
-    ImageView<uint32_t> meshId;
-};
-
+/// The view of output `name` where this pass's kernels reach it: a host view on the CPU (which fails for device
+/// memory), the device view elsewhere; empty for a channel nobody consumes.
 template <class T>
 ImageView<T> viewOf(const PassContext& ctx, const char* name) {
     Texture* t = ctx.output(name);
-    return t ? t->view<T>() : ImageView<T>{};
+    if (!t) return ImageView<T>{};
+    return ctx.device() == DeviceKind::Cpu ? t->view<T>() : t->deviceView<T>();
 }
 
-void store(const Outputs& o, uint32_t x, uint32_t y, const GBufferSample& g) {
-    if (o.posW.data) o.posW.at(x, y) = g.posW;
-    if (o.normW.data) o.normW.at(x, y) = g.normW;
-    if (o.faceNormalW.data) o.faceNormalW.at(x, y) = g.faceNormalW;
-    if (o.linearZ.data) o.linearZ.at(x, y) = g.linearZ;
-    if (o.pnFwidth.data) o.pnFwidth.at(x, y) = g.pnFwidth;
-    if (o.mvec.data) o.mvec.at(x, y) = g.mvec;
-    if (o.albedo.data) o.albedo.at(x, y) = g.albedo;
-    if (o.specAlbedo.data) o.specAlbedo.at(x, y) = g.specAlbedo;
-    if (o.emission.data) o.emission.at(x, y) = g.emission;
-    if (o.vbuffer.data) o.vbuffer.at(x, y) = g.vbuffer;
-    if (o.meshId.data) o.meshId.at(x, y) = g.meshId;
+GBufferViews outputViews(const PassContext& ctx) {
+    return GBufferViews{viewOf<glm::vec4>(ctx, kPosW),       viewOf<glm::vec4>(ctx, kNormW),
+                        viewOf<glm::vec4>(ctx, kFaceNormalW), viewOf<glm::vec4>(ctx, kAlbedo),
+                        viewOf<glm::vec4>(ctx, kSpecAlbedo),  viewOf<glm::vec4>(ctx, kEmission),
+                        viewOf<glm::vec2>(ctx, kLinearZ),     viewOf<glm::vec2>(ctx, kPnFwidth),
+                        viewOf<glm::vec2>(ctx, kMvec),        viewOf<glm::uvec4>(ctx, kVBuffer),
+                        viewOf<uint32_t>(ctx, kMeshId)};
 }
 
 }  // namespace
@@ -77,12 +75,7 @@ void GBufferRT::execute(PassContext& ctx) {
     if (!scene || !ctx.camera())
         throwBadInput(ctx.passName(), "GBufferRT needs a scene", "a scene given with --scene",
                       "render with `loom render --scene data/scenes/cornell_box.gltf ...`");
-    Outputs o{viewOf<glm::vec4>(ctx, kPosW),       viewOf<glm::vec4>(ctx, kNormW),
-              viewOf<glm::vec4>(ctx, kFaceNormalW), viewOf<glm::vec4>(ctx, kAlbedo),
-              viewOf<glm::vec4>(ctx, kSpecAlbedo),  viewOf<glm::vec4>(ctx, kEmission),
-              viewOf<glm::vec2>(ctx, kLinearZ),     viewOf<glm::vec2>(ctx, kPnFwidth),
-              viewOf<glm::vec2>(ctx, kMvec),        viewOf<glm::uvec4>(ctx, kVBuffer),
-              viewOf<uint32_t>(ctx, kMeshId)};
+    const GBufferViews o = outputViews(ctx);
     const uint32_t w = ctx.frameWidth(), h = ctx.frameHeight();
     Camera camera = *ctx.camera();
     camera.aspect = float(w) / float(h);
@@ -97,10 +90,17 @@ void GBufferRT::execute(PassContext& ctx) {
     // Decided once per frame: whether any instance moved since the last one (its prevWorld differs from its world).
     const bool moving = !mSpecialize || std::any_of(scene->instances.begin(), scene->instances.end(),
                                                     [](const Instance& i) { return i.prevWorld != i.world; });
+    ctx.stats().set("staticInstances", moving ? 0.0 : 1.0);
+    if (ctx.device() != DeviceKind::Cpu) {
+        // The same rays, rules and keys as traceCameraRays below, through the BVH.
+        const bool keyed = (rules & kRayAlphaTest) && rays.hasAlphaTestedGeometry();
+        executeOnDevice(ctx, *scene, device::TraceParams{cam, w, h, rules, frame, keyed, moving}, o);
+        return;
+    }
     auto run = [&]<bool Moving>() {
         parallelFor2D(w, h, [&](const Tile& t) {
             traceCameraRays(rays, cam, t, rules, frame, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
-                store(o, x, y,
+                storeSample(o, x, y,
                       hit.hit() ? hitSample<Moving>(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
                                 : missSample(cam, dir));
             });
@@ -110,7 +110,24 @@ void GBufferRT::execute(PassContext& ctx) {
         run.template operator()<true>();
     else
         run.template operator()<false>();
-    ctx.stats().set("staticInstances", moving ? 0.0 : 1.0);
+}
+
+const Bvh& GBufferRT::sceneBvh(const Scene& scene) {
+    if (!mBvh || mBvhScene != &scene || mBvhMeshVersion != scene.meshVersion()) {
+        mBvh = std::make_unique<Bvh>(scene);
+        mBvhScene = &scene;
+        mBvhMeshVersion = scene.meshVersion();
+        ++mBvhBuilds;
+    } else {
+        mBvh->updateInstances(scene);  // moving instances rebuild the top level only
+    }
+    return *mBvh;
+}
+
+void GBufferRT::executeOnDevice(PassContext& ctx, const Scene& scene, const device::TraceParams& params,
+                                const GBufferViews& out) {
+    const BvhView host = sceneBvh(scene).view(scene.view());
+    device::trace(ctx.device(), mDeviceScene->view(ctx.device(), host, mBvhBuilds), params, out);
 }
 
 }  // namespace loom
