@@ -11,32 +11,32 @@ bool deviceRuns(DeviceKind device) {
     return device == DeviceKind::Emulated;
 }
 
+/// One frame's update of every pixel; with samples added, the count of those skipped (not finite). Each pixel is
+/// updated exactly once, by the reduction's value when it counts (the state is updated in place, so it cannot be
+/// read back afterwards to tell what was added).
 template <Precision P>
-void launchFrame(DeviceKind device, const FrameViews& v, bool reset, bool addSamples) {
-    launch2D(device, v.dst.width, v.dst.height,
-             [=] LOOM_HD(uint32_t x, uint32_t y) { accumulatePixel<P>(v, x, y, reset, addSamples); });
+uint64_t runFrame(DeviceKind device, const FrameViews& v, bool reset, bool addSamples) {
+    if (!addSamples) {
+        launch2D(device, v.dst.width, v.dst.height,
+                 [=] LOOM_HD(uint32_t x, uint32_t y) { accumulatePixel<P>(v, x, y, reset, false); });
+        return 0;
+    }
+    return reduceRows(
+        device, v.dst.width, v.dst.height, uint64_t(0),
+        [=] LOOM_HD(uint32_t x, uint32_t y) { return uint64_t(!accumulatePixel<P>(v, x, y, reset, true)); },
+        [] LOOM_HD(uint64_t a, uint64_t b) { return a + b; });
 }
 
 uint64_t accumulateOnDevice(DeviceKind device, Precision precision, const FrameViews& v, bool reset, bool addSamples) {
     switch (precision) {
         case Precision::Float:
-            launchFrame<Precision::Float>(device, v, reset, addSamples);
-            break;
+            return runFrame<Precision::Float>(device, v, reset, addSamples);
         case Precision::Kahan:
-            launchFrame<Precision::Kahan>(device, v, reset, addSamples);
-            break;
+            return runFrame<Precision::Kahan>(device, v, reset, addSamples);
         case Precision::Double:
-            launchFrame<Precision::Double>(device, v, reset, addSamples);
-            break;
+            return runFrame<Precision::Double>(device, v, reset, addSamples);
     }
-    if (!addSamples) return 0;
-    // A sample added raises the pixel's count by one; a skipped one leaves it where the frame started.
-    const auto prev = v.prevCount;
-    const auto cur = v.curCount;
-    return reduceRows(
-        device, cur.width, cur.height, uint64_t(0),
-        [=] LOOM_HD(uint32_t x, uint32_t y) { return uint64_t(cur.at(x, y) == (reset ? 0u : prev.at(x, y))); },
-        [] LOOM_HD(uint64_t a, uint64_t b) { return a + b; });
+    return 0;
 }
 
 void widenOnDevice(DeviceKind device, Precision precision, const Texture& sum, const Texture& sumExtra, Texture* rg,

@@ -77,16 +77,20 @@ void AccumulatePass::reflect(Reflection& r, const CompileInfo&) const {
         .optional()
         .doc("the finite samples in each pixel's sums: dst is partialSum / partialCount (0 where it is 0)");
     // One layout holds every precision's running sum (accumulate::packSum): 32 bytes a pixel, what double needs.
+    // Each texel is loaded and stored by its own pixel alone (accumulatePixel), so the state is updated in place:
+    // one texture per field, not a ping-pong pair.
     r.history(kSum, Format::RGBA32U)
+        .inPlace()
         .doc(
             "running sum, as bits: double: the sums of R (xy) and G (zw), each double as the (low, high) words of its "
             "bits (the layout of partialSumRG); float and kahan: the float sum's RGBA bits");
     r.history(kSumExtra, Format::RGBA32U)
+        .inPlace()
         .doc(
             "double: the sums of B (xy) and A (zw), laid out as sum; kahan: the bits of the float sum's rounding "
             "error (the mean is (sum + compensation) / count); float: zero");
-    r.history(kCount, Format::R32U).doc("finite samples in the sum of each pixel (non-finite samples are skipped)");
-    r.history(kFrames, Format::R32U).fixedSize(1, 1).doc("frames accumulated since the last reset (maxFrames caps it)");
+    r.history(kCount, Format::R32U).inPlace().doc("finite samples in the sum of each pixel (non-finite samples are skipped)");
+    r.history(kFrames, Format::R32U).fixedSize(1, 1).inPlace().doc("frames accumulated since the last reset (maxFrames caps it)");
 }
 
 void AccumulatePass::declareParams(ParamList& p) {
@@ -220,7 +224,7 @@ void AccumulatePass::execute(PassContext& ctx) {
     v.prevCount = view(ctx.historyPrev(kCount), uint32_t());
     v.curCount = view(ctx.historyCur(kCount), uint32_t());
 
-    // A frozen mean still rewrites the state: history is ping-ponged, so this frame's side must hold it too.
+    // A frozen mean still stores the state it loaded (the state is updated in place, texel by texel: see reflect).
     uint64_t skipped = 0;
     if (onDevice) {
         skipped = accumulate::accumulateOnDevice(device, mPrecision, v, reset, !frozen);

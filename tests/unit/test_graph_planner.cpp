@@ -39,6 +39,8 @@ Reflection reflectionOf(const std::vector<std::string>& fields) {
         if (kind == "opt-out") r.output(name, Format::RGBA32F).optional();
         if (kind == "int") r.internal(name, Format::RGBA32F);
         if (kind == "hist") r.history(name, Format::RGBA32F);
+        if (kind == "hist-in-place") r.history(name, Format::RGBA32F).inPlace();
+        if (kind == "int-in-place") r.internal(name, Format::RGBA32F).inPlace();
     }
     return r;
 }
@@ -449,4 +451,20 @@ TEST(GraphPlanner, AFieldRoleFitsOneFieldOfItsKind) {
     wrongFormat.input("src", Format::R32F).optional().role(FieldRole::DisplayInput);
     e = expectError([&] { (void)planWith(wrongFormat); });
     EXPECT_TRUE(contains(e.what(), "cannot play the role")) << e.what();
+}
+
+// A history field updated in place is one texture: it counts once in the history bytes; inPlace on any other kind of
+// field is the pass's error.
+TEST(GraphPlanner, InPlaceHistoryIsOneTexture) {
+    const Planned pair = plan({{"A", {"out:x", "hist:state"}}}, {}, {"A.x"});
+    const Planned one = plan({{"A", {"out:x", "hist-in-place:state"}}}, {}, {"A.x"});
+    const ResourceInfo* p = resource(pair.plan, "A.state");
+    const ResourceInfo* o = resource(one.plan, "A.state");
+    ASSERT_TRUE(p && o);
+    EXPECT_FALSE(p->inPlace);
+    EXPECT_TRUE(o->inPlace);
+    EXPECT_EQ(pair.plan.summary.historyBytes, 2 * p->bytes);
+    EXPECT_EQ(one.plan.summary.historyBytes, o->bytes);
+    Error e = expectError([&] { (void)plan({{"A", {"out:x", "int-in-place:scratch"}}}, {}, {"A.x"}); });
+    EXPECT_TRUE(contains(e.what(), "inPlace on history fields only")) << e.what();
 }

@@ -40,6 +40,14 @@ void checkFields(const Reflection& r, const PassDesc& pass) {
                                         "at most one field per role: displayInput on an RGBA32F input",
                                         "fix the pass's reflect()"});
         }
+        if (f.inPlace && f.kind != FieldKind::History)
+            throw Error(Error::Info{ErrorKind::Runtime,
+                                    {},
+                                    fieldKey(pass.name, f.name),
+                                    "pass type '" + pass.type + "' declares " + fieldKindName(f.kind) + " field '" +
+                                        printable(f.name) + "' in place",
+                                    "inPlace on history fields only",
+                                    "fix the pass's reflect()"});
         if (!isPlainName(f.name))
             throw Error(Error::Info{ErrorKind::Runtime,
                                     {},
@@ -730,8 +738,9 @@ void planResources(GraphPlan& plan, const GraphDesc& desc) {
                 r.kind = ResourceKind::History;
                 r.firstUse = 0;
                 r.lastUse = n;
-                s.historyBytes += 2 * r.bytes;
-                s.deviceHistoryBytes[size_t(r.device)] += 2 * r.bytes;
+                r.inPlace = f.kind == FieldKind::History && f.inPlace;
+                s.historyBytes += (r.inPlace ? 1 : 2) * r.bytes;
+                s.deviceHistoryBytes[size_t(r.device)] += (r.inPlace ? 1 : 2) * r.bytes;
                 s.resources.push_back(std::move(r));
                 continue;
             }

@@ -75,6 +75,7 @@ struct HistoryEntry {
     std::string passType;
     Format format = Format::RGBA32F;
     uint32_t width = 0, height = 0;
+    bool inPlace = false;  // one texture: prev views cur's memory, and there is nothing to swap
     Texture cur, prev;
     bool valid = false;        // prev holds a real frame
     bool pendingSwap = false;  // cur was written by the last frame
@@ -252,15 +253,17 @@ void RenderGraph::Impl::allocate(const CompiledPlan& plan, const std::string& fi
         const std::string& type = desc.passes[r.pass].type;
         auto& entry = history[r.name];
         if (!entry || entry->passType != type || entry->format != r.format || entry->width != r.width ||
-            entry->height != r.height || entry->cur.residence() != r.device) {
+            entry->height != r.height || entry->cur.residence() != r.device || entry->inPlace != r.inPlace) {
             entry = std::make_unique<HistoryEntry>();
             entry->key = r.name;
             entry->passType = type;
             entry->format = r.format;
             entry->width = r.width;
             entry->height = r.height;
+            entry->inPlace = r.inPlace;
             entry->cur = Texture::onDevice(r.device, r.width, r.height, r.format, r.name);
-            entry->prev = Texture::onDevice(r.device, r.width, r.height, r.format, r.name);
+            entry->prev = r.inPlace ? Texture::wrap(entry->cur.data(), r.width, r.height, r.format, r.device)
+                                    : Texture::onDevice(r.device, r.width, r.height, r.format, r.name);
         }
         fieldTextures[r.name] = &entry->cur;
     }
@@ -485,7 +488,7 @@ void RenderGraph::execute(const FrameInfo& frame) {
     // Last frame's "cur" becomes this frame's "prev" (a swap, no copy).
     for (auto& [_, e] : m.history) {
         if (e->pendingSwap) {
-            std::swap(e->cur, e->prev);
+            if (!e->inPlace) std::swap(e->cur, e->prev);
             e->valid = true;
             e->pendingSwap = false;
         }
@@ -620,7 +623,7 @@ std::string RenderGraph::planText() const {
         s << fmt::format("  {:28} {:10} {:>5}x{:<5} {:>11}  ", r.name, formatName(r.format), r.width, r.height,
                          bytesText(r.bytes));
         if (r.kind == ResourceKind::History)
-            s << "history pair (2 textures)\n";
+            s << (r.inPlace ? "history, updated in place (1 texture)\n" : "history pair (2 textures)\n");
         else
             s << fmt::format("transient, passes {}..{}, offset {}\n", r.firstUse + 1,
                              r.lastUse >= int(p.order.size()) ? std::string("end") : std::to_string(r.lastUse + 1),

@@ -13,7 +13,7 @@ enum class FieldKind : uint8_t {
     Input,     ///< read; produced by another pass
     Output,    ///< written; may be consumed by other passes or marked as a graph output
     Internal,  ///< transient scratch, valid only during the pass's execute
-    History,   ///< persistent across frames, ping-ponged by the graph (prev / cur)
+    History,   ///< persistent across frames, ping-ponged by the graph (prev / cur), or one texture when inPlace
 };
 
 const char* fieldKindName(FieldKind k);
@@ -45,6 +45,9 @@ struct FieldDesc {
     uint32_t fixedWidth = 0, fixedHeight = 0;
     std::string doc;
     FieldRole role = FieldRole::None;  ///< the standard meaning it declares, if any
+    /// History only: the pass updates each texel in place from that texel's last value (it reads prev(x, y) before
+    /// it writes cur(x, y) and reads no other texel of the field), so one texture serves as both sides.
+    bool inPlace = false;
 
     /// Resolved size for a frame of frameWidth x frameHeight.
     void resolveSize(uint32_t frameWidth, uint32_t frameHeight, uint32_t& w, uint32_t& h) const;
@@ -65,6 +68,11 @@ public:
     FieldBuilder& doc(std::string text) { mField.doc = std::move(text); return *this; }
     FieldBuilder& role(FieldRole r) {
         mField.role = r;
+        return *this;
+    }
+    /// A history field updated texel by texel in place: one texture instead of a ping-pong pair (FieldDesc::inPlace).
+    FieldBuilder& inPlace(bool v = true) {
+        mField.inPlace = v;
         return *this;
     }
 

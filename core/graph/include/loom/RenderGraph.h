@@ -61,6 +61,7 @@ struct ResourceInfo {
     int firstUse = 0;        ///< execution position of the writer
     int lastUse = 0;         ///< last execution position that reads it (order size = after the frame)
     size_t offset = 0;       ///< transient: offset into the shared arena
+    bool inPlace = false;    ///< history updated in place: one texture, not a pair
 };
 
 /// A copy the graph makes each frame because a field crosses devices: into a pass placed on another device than
