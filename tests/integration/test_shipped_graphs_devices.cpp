@@ -1,7 +1,8 @@
 // Every shipped graph renders with --device emulated: passes with a device version run there (their fields in the
 // emulated device's memory), the others on the CPU, and the graph copies what crosses. The outputs do not depend on
 // the thread count (bit for bit) and equal the CPU's: bit for bit where the same functors run, within a small
-// tolerance where the CPU runs a Highway twin of a functor (docs/KERNELS.md).
+// tolerance where the CPU runs a Highway twin of a functor (docs/KERNELS.md), and in all but a few seam pixels where
+// the G-buffer is GBufferRT (Embree on the CPU, the BVH on a device).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -12,8 +13,11 @@
 #include <fstream>
 #include <string>
 
+#include <glm/glm.hpp>
+
 #include "TestUtil.h"
 #include "loom/ImageIO.h"
+#include "loom/Kernel.h"
 
 using namespace loom;
 namespace fs = std::filesystem;
@@ -36,6 +40,8 @@ TEST(ShippedGraphs, EveryGraphRendersOnEmulatedAsOnTheCpu) {
     for (const auto& entry : fs::directory_iterator(source + "/graphs")) {
         const std::string name = entry.path().stem().string();
         // The sequence graph reads the shipped Blender frames (64x48); the test pattern needs no scene.
+        // Graphs whose G-buffer is GBufferRT (their devices see seams differently: see below).
+        const bool rtGBuffer = bytesOf(entry.path()).find("\"GBufferRT\"") != std::string::npos;
         std::string args = "render --graph " + test::shellQuoted(entry.path().string()) + " --frames 3 -q";
         if (name == "DenoiseSequence")
             args += " --size 64x48 --set " +
@@ -59,15 +65,40 @@ TEST(ShippedGraphs, EveryGraphRendersOnEmulatedAsOnTheCpu) {
             const Texture a = readImage(f.path()), b = readImage(e1);
             ASSERT_EQ(a.format(), b.format()) << f.path().filename();
             const bool eightBit = a.format() == Format::RGBA8Unorm || a.format() == Format::RGBA8Srgb;
-            double largest = 0.0;
-            for (uint32_t y = 0; y < a.height(); ++y)
-                for (uint32_t x = 0; x < a.width(); ++x)
-                    for (uint32_t c = 0; c < 4; ++c) {
-                        const double u = a.texel(x, y, c), v = b.texel(x, y, c);
-                        largest = std::max(largest, std::fabs(u - v) / (eightBit ? 1.0 : std::max(1.0, std::fabs(u))));
-                    }
             // 8-bit: two steps of 255 at most; float: 1e-3 relative at most (the twins' stated bounds are tighter).
-            EXPECT_LE(largest, eightBit ? 2.0 / 255.0 : 1e-3) << name << " " << f.path().filename();
+            const double tolerance = eightBit ? 2.0 / 255.0 : 1e-3;
+            const bool vbuffer = a.format() == Format::RGBA32U && f.path().filename().string().find("vbuffer") !=
+                                                                      std::string::npos;
+            double largest = 0.0;
+            size_t beyond = 0;  // pixels with a channel beyond the tolerance
+            for (uint32_t y = 0; y < a.height(); ++y)
+                for (uint32_t x = 0; x < a.width(); ++x) {
+                    double pixel = 0.0;
+                    for (uint32_t c = 0; c < 4; ++c) {
+                        double u = a.texel(x, y, c), v = b.texel(x, y, c);
+                        if (vbuffer) {  // ids exactly, barycentrics as the floats their bits hold
+                            const uint32_t p = a.view<glm::uvec4>().at(x, y)[c], q = b.view<glm::uvec4>().at(x, y)[c];
+                            u = c < 2 ? double(p) : double(bitsToFloat(p));
+                            v = c < 2 ? double(q) : double(bitsToFloat(q));
+                        }
+                        pixel = std::max(pixel, std::fabs(u - v) / (eightBit ? 1.0 : std::max(1.0, std::fabs(u))));
+                    }
+                    largest = std::max(largest, pixel);
+                    beyond += pixel > tolerance ? 1 : 0;
+                }
+            if (rtGBuffer) {
+                // GBufferRT traces Embree's packets on the CPU and the BVH on a device (test_gbuffer_rt_devices.cpp):
+                // the same triangles with t and barycentrics a rounding apart, except where a pixel's ray runs along
+                // the seam of two instances (a room's walls meeting): either wall is right there, and the pixel's
+                // ids, normal and path-traced colour follow the one it sees (SVGF then spreads that colour over its
+                // footprint, TAA over frames). So a few pixels may differ beyond the tolerance: at most 2 % of them
+                // (measured at 48x32 on cornell_dynamic: 4 seam pixels in the first frame, 17 pixels of the denoised
+                // image; every other pixel of the G-buffer within 7e-6).
+                EXPECT_LE(beyond, a.width() * a.height() / 50) << name << " " << f.path().filename() << ": " << beyond
+                                                               << " pixels differ, the largest by " << largest;
+            } else {
+                EXPECT_LE(largest, tolerance) << name << " " << f.path().filename();
+            }
             ++outputs;
         }
         EXPECT_GT(outputs, 0u) << name;
