@@ -1,5 +1,6 @@
 // The path tracer's CUDA backend: device copies of what PixelKernel.h reads, one launch of renderPixel per frame,
-// and the outputs copied back into the graph's host textures. No decision about a pixel is made here.
+// and (placed on the CPU) the outputs copied back into the graph's host textures, or (placed on cuda) written into
+// the pass's device fields. No decision about a pixel is made here.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -203,6 +204,10 @@ struct CudaBackend::Impl {
         return d;
     }
 
+    /// `k` with device copies of its scene, BVH and lights: the meshes, materials, images and bottom-level BVHs
+    /// uploaded when `sceneKey` differs from the last frame's, the rest every frame.
+    FrameKernel prepare(const FrameKernel& k, uint64_t sceneKey);
+
     template <class T>
     PixelOut<T> output(DeviceBuffer& b, const PixelOut<T>& host, uint32_t w, uint32_t h) {
         if (!host.data) return {};
@@ -225,8 +230,26 @@ CudaBackend::~CudaBackend() {
     cudaStreamDestroy(m.copies);
 }
 
-void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
-    Impl& m = *mImpl;
+bool CudaBackend::compiled() {
+    return true;
+}
+
+namespace {
+
+/// Block (bx, by)'s temporal gradient (replayGradient), its rays summed into sums[0] per warp.
+__global__ void replayGradients(FrameKernel k, GradientReplay g, uint32_t blocksX, uint32_t blocksY,
+                                unsigned long long* sums) {
+    const uint32_t bx = blockIdx.x * blockDim.x + threadIdx.x, by = blockIdx.y * blockDim.y + threadIdx.y;
+    uint32_t rays = 0;
+    if (bx < blocksX && by < blocksY) rays = replayGradient(k, g, bx, by);
+    for (int offset = 16; offset > 0; offset /= 2) rays += __shfl_down_sync(0xffffffffu, rays, offset);
+    if ((threadIdx.y * blockDim.x + threadIdx.x) % 32 == 0) atomicAdd(&sums[0], (unsigned long long)rays);
+}
+
+}  // namespace
+
+FrameKernel CudaBackend::Impl::prepare(const FrameKernel& k, uint64_t sceneKey) {
+    Impl& m = *this;
     const BvhArrays& arrays = k.bvh.bvh;
     if (m.sceneKey != sceneKey) {
         m.sceneKey = ~uint64_t(0);  // until the upload completes
@@ -242,6 +265,40 @@ void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
     d.bvh.bvh.topInstances = uploadSpan(m.topInstances, arrays.topInstances);
     d.bvh.bvh.instances = uploadSpan(m.bvhInstances, arrays.instances);
     d.lights = m.uploadLights(k.lights, k.scene.instanceCount);
+    return d;
+}
+
+CudaBackend::Counts CudaBackend::render(const FrameKernel& k, const GradientReplay* replay, uint64_t sceneKey) {
+    Impl& m = *mImpl;
+    FrameKernel d = m.prepare(k, sceneKey);
+    const uint32_t w = k.width, h = k.height;
+    d.counts = {static_cast<glm::uvec2*>(m.counts.reserve(size_t(w) * h * sizeof(glm::uvec2))), w};
+    auto* sums = static_cast<unsigned long long*>(m.sums.reserve(2 * sizeof(unsigned long long)));
+    check(cudaMemsetAsync(sums, 0, 2 * sizeof(unsigned long long)), "cudaMemsetAsync");
+    m.createStreams();
+    // Everything on the legacy default stream, after the uploads above: the graph's next pass on the device reads
+    // the fields once this returns.
+    const dim3 block(16, 8);
+    check(cudaEventRecord(m.kernelStart, 0), "cudaEventRecord");
+    renderFrame<<<dim3((w + block.x - 1) / block.x, (h + block.y - 1) / block.y), block>>>(d, 0, h, sums);
+    check(cudaGetLastError(), "the renderPixel launch");
+    if (replay) {
+        const uint32_t blocksX = (w + 2) / 3, blocksY = (h + 2) / 3;
+        replayGradients<<<dim3((blocksX + block.x - 1) / block.x, (blocksY + block.y - 1) / block.y), block>>>(
+            d, *replay, blocksX, blocksY, sums);
+        check(cudaGetLastError(), "the gradients' launch");
+    }
+    check(cudaEventRecord(m.kernelEnd, 0), "cudaEventRecord");
+    unsigned long long host[2] = {0, 0};
+    check(cudaMemcpy(host, sums, sizeof(host), cudaMemcpyDeviceToHost), "the renderPixel kernel");
+    float kernelMs = 0.f;
+    check(cudaEventElapsedTime(&kernelMs, m.kernelStart, m.kernelEnd), "cudaEventElapsedTime");
+    return {host[0], host[1], double(kernelMs)};
+}
+
+void CudaBackend::launch(const FrameKernel& k, uint64_t sceneKey) {
+    Impl& m = *mImpl;
+    FrameKernel d = m.prepare(k, sceneKey);
     const uint32_t w = k.width, h = k.height;
     if (k.vbuffer) {
         // Through page-locked staging (rows copied in parallel): a copy from pageable memory runs at a third of

@@ -1,7 +1,8 @@
 #pragma once
 // The path tracer's CUDA backend: the launch glue around PixelKernel.h. It copies the scene (meshes, materials,
-// images), the BVH and the lights into device memory, runs renderPixel for every pixel (one thread each), and
-// copies the outputs into the graph's textures, which live in host memory (that copy counts in the pass's time).
+// images), the BVH and the lights into device memory and runs renderPixel for every pixel (one thread each). Placed on
+// the CPU with `device: cuda`, it copies the outputs into the graph's host textures (launch, finish; that copy
+// counts in the pass's time); placed on cuda by the graph, it writes the pass's device fields (render).
 // Per-pixel counters and primary hits stay on the device: their sums and the few hits the temporal gradients keep
 // are all that comes back.
 // Everything that decides a pixel's value is in PixelKernel.h, which the tests run on the host; what is here is
@@ -41,6 +42,16 @@ public:
     /// pinned staging memory, rows in parallel). With `gradientHits` (one per 3x3 block, row-major), also each
     /// block's primary hit at gradientPixel(bx, by, gradientFrame).
     Counts finish(const FrameKernel& k, glm::uvec4* gradientHits, uint64_t gradientFrame);
+
+    /// A frame placed on the cuda device by the graph: k's outputs, vbuffer and gradient history are views of the
+    /// pass's fields in device memory, written there and never copied back (scene, BVH and lights are uploaded as
+    /// for launch). With `replay`, the temporal gradients too (replayGradient over the 3x3 blocks, after the
+    /// frame). Waits for both; the counts include the gradients' rays. Throws loom::Error (Runtime) naming the
+    /// CUDA call that failed.
+    Counts render(const FrameKernel& k, const GradientReplay* replay, uint64_t sceneKey);
+
+    /// Whether this build has the backend (CudaBackend.cu compiled by nvcc), so the pass can run on cuda.
+    static bool compiled();
 
 private:
     struct Impl;

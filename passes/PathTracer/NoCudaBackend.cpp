@@ -5,7 +5,8 @@
 namespace loom::pt {
 
 namespace {
-const char* const kNoBackend = "this build has no CUDA backend (build with the CUDA toolkit installed, or LOOM_CUDA=ON)";
+const char* const kNoBackend =
+    "this build has no CUDA backend (build with the CUDA toolkit installed, or LOOM_CUDA=ON)";
 }  // namespace
 
 struct CudaBackend::Impl {};
@@ -19,6 +20,14 @@ void CudaBackend::launch(const FrameKernel&, uint64_t) {
 
 CudaBackend::Counts CudaBackend::finish(const FrameKernel&, glm::uvec4*, uint64_t) {
     throw Error({ErrorKind::Runtime, "", "PathTracer.device", kNoBackend, "", ""});
+}
+
+CudaBackend::Counts CudaBackend::render(const FrameKernel&, const GradientReplay*, uint64_t) {
+    throw Error({ErrorKind::Runtime, "", "PathTracer.device", kNoBackend, "", ""});
+}
+
+bool CudaBackend::compiled() {
+    return false;
 }
 
 }  // namespace loom::pt

@@ -16,9 +16,10 @@
 #include "loom/CameraKernels.h"
 #include "loom/CameraRays.h"
 #include "loom/Channels.h"
-#include "loom/EmbreeRays.h"
 #include "loom/Device.h"
+#include "loom/EmbreeRays.h"
 #include "loom/Error.h"
+#include "loom/Launch.h"
 #include "loom/Parallel.h"
 #include "loom/RayScene.h"
 #include "loom/Scene.h"
@@ -290,8 +291,18 @@ void PathTracer::declareParams(ParamList& p) {
             "with probability alpha, as in the G-buffers); false: every material opaque");
 }
 
+bool PathTracer::runsOn(DeviceKind device) const {
+    // The CUDA backend's kernels run on any device: on emulated over the CPU threads, on cuda where the build has
+    // the backend (nvcc).
+    return device != DeviceKind::Cuda || pt::CudaBackend::compiled();
+}
+
 void PathTracer::compile(const CompileInfo&) {
+    // Where the graph places the pass decides where frames run (execute, ctx.device()). `device` chooses the
+    // backend only when the pass is placed on the CPU: auto and cpu are Embree there, cuda and emulated the CUDA
+    // backend's kernels (on the GPU, copied back into the host fields; or on the CPU threads).
     switch (mDevice) {
+        case Device::Auto:
         case Device::Cpu:
             mActive = Backend::Cpu;
             return;
@@ -299,24 +310,18 @@ void PathTracer::compile(const CompileInfo&) {
             mActive = Backend::Emulated;
             return;
         case Device::Cuda:
-        case Device::Auto:
             break;
     }
     const CudaStatus& cuda = cudaStatus();
-    if (mDevice == Device::Cuda && !cuda.usable)
+    if (!cuda.usable)
         throwBadInput("PathTracer.device", "device 'cuda' was asked for, and " + cuda.description,
                       "a usable NVIDIA GPU with its driver, in a build with the CUDA backend",
-                      "set device to auto (CUDA where usable, else the CPU) or cpu");
-    mActive = cuda.usable ? Backend::Cuda : Backend::Cpu;
-    if (mActive == Backend::Cuda && !mCuda) mCuda = std::make_unique<pt::CudaBackend>();
+                      "set device to auto (where the graph places the pass: `--device`) or cpu");
+    mActive = Backend::Cuda;
+    if (!mCuda) mCuda = std::make_unique<pt::CudaBackend>();
     // Said once per process, not once per pass or frame.
     static std::atomic<bool> reported{false};
-    if (!reported.exchange(true)) {
-        if (cuda.usable)
-            spdlog::info("PathTracer: running on the CUDA device {}", cuda.description);
-        else
-            spdlog::info("PathTracer: {}; running on the CPU", cuda.description);
-    }
+    if (!reported.exchange(true)) spdlog::info("PathTracer: running on the CUDA device {}", cuda.description);
 }
 
 PathTracer::PathTracer() = default;
@@ -669,6 +674,23 @@ uint64_t gradients(PassContext& ctx, const BatchContext& batch, const Camera& ca
     return traceGradients(ctx, batch, camera, spp, frame, gradientTex->view<glm::vec2>());
 }
 
+/// A field's pixels for this frame's kernels: the host view placed on the CPU, else the device view (the pass's
+/// fields then live in its device's memory, which only kernels launched there touch).
+template <class T>
+ImageView<T> fieldView(Texture& t, bool onDevice) {
+    return onDevice ? t.deviceView<T>() : t.view<T>();
+}
+template <class T>
+ImageView<const T> fieldView(const Texture& t, bool onDevice) {
+    return onDevice ? t.deviceView<T>() : t.view<T>();
+}
+
+/// An image view as the CUDA backend's kernels write it (pitch in elements; rows of textures are whole elements).
+template <class T>
+pt::PixelOut<T> pixelOut(ImageView<T> v) {
+    return {v.data, uint32_t(v.rowPitch / sizeof(T))};
+}
+
 /// The end of a frame on any backend: its stats.
 void finishFrame(PassContext& ctx, uint32_t spp, uint64_t rays, uint64_t dropped,
                  const std::vector<pt::EmissiveTri>& tris, std::chrono::steady_clock::time_point start) {
@@ -721,11 +743,14 @@ void PathTracer::execute(PassContext& ctx) {
     const uint32_t spp = uint32_t(mSamplesPerPixel);
     // Seed s draws the random numbers of frames s * 2^32 + index: an index past 2^32 would repeat seed s + 1's.
     if (ctx.frameIndex() > 0xFFFFFFFFull)
-        throw Error(Error::Info{ErrorKind::Runtime, {}, ctx.passName(),
+        throw Error(Error::Info{ErrorKind::Runtime,
+                                {},
+                                ctx.passName(),
                                 fmt::format("frame index {} is past 2^32 - 1, where seed {}'s random numbers would "
                                             "repeat those of seed {}",
                                             ctx.frameIndex(), mSeed, mSeed + 1),
-                                "frame indices below 2^32", "start again from a lower frame index"});
+                                "frame indices below 2^32",
+                                "start again from a lower frame index"});
     const uint64_t frame = ctx.frameIndex() + (uint64_t(mSeed) << 32);
     const pt::LightsView lights = mLights;
     // Vertices are shaded several paths at a time in SIMD lanes where the settings allow (the default).
@@ -734,11 +759,14 @@ void PathTracer::execute(PassContext& ctx) {
     mSimdUsed = simd;
     const uint32_t lanes = pt::shadeLanes();
 
+    // Placed on a device (emulated, cuda), the fields are that device's memory: the kernels' views of it.
+    const bool onDevice = ctx.device() != DeviceKind::Cpu;
     const Texture* vbTex = ctx.input(kVBuffer);
-    const ImageView<const glm::uvec4> vbuffer = vbTex ? vbTex->view<glm::uvec4>() : ImageView<const glm::uvec4>{};
+    const ImageView<const glm::uvec4> vbuffer =
+        vbTex ? fieldView<glm::uvec4>(*vbTex, onDevice) : ImageView<const glm::uvec4>{};
     auto view4 = [&](const char* name) {
         Texture* t = ctx.output(name);
-        return t ? t->view<glm::vec4>() : ImageView<glm::vec4>{};
+        return t ? fieldView<glm::vec4>(*t, onDevice) : ImageView<glm::vec4>{};
     };
     const ImageView<glm::vec4> color = view4(kColor), albedo = view4(kAlbedo), specAlbedo = view4(kSpecAlbedo),
                                emission = view4(kEmission), direct = view4(kDirect), indirect = view4(kIndirect);
@@ -747,13 +775,14 @@ void PathTracer::execute(PassContext& ctx) {
     // Temporal gradients: this frame keeps one sample per block (hit, luminance) for the next one.
     Texture* gradientTex = ctx.output(kGradient);
     const ImageView<glm::uvec4> gradientHits =
-        gradientTex ? ctx.historyCur(kGradientHits).view<glm::uvec4>() : ImageView<glm::uvec4>{};
+        gradientTex ? fieldView<glm::uvec4>(ctx.historyCur(kGradientHits), onDevice) : ImageView<glm::uvec4>{};
     const ImageView<float> gradientLum =
-        gradientTex ? ctx.historyCur(kGradientLuminance).view<float>() : ImageView<float>{};
+        gradientTex ? fieldView<float>(ctx.historyCur(kGradientLuminance), onDevice) : ImageView<float>{};
     const bool split = direct.data || indirect.data;
 
-    if (mActive != Backend::Cpu) {
-        // The CUDA backend's kernels (PixelKernel.h): on the GPU, or on the CPU threads (emulated).
+    if (onDevice || mActive != Backend::Cpu) {
+        // The CUDA backend's kernels (PixelKernel.h): on the device the graph placed the pass on, else (placed on
+        // the CPU) where `device` asks for them.
         const Bvh& bvh = sceneBvh(*scene);
         pt::FrameKernel k;
         k.bvh = bvh.view(view);
@@ -774,21 +803,75 @@ void PathTracer::execute(PassContext& ctx) {
             k.vbuffer = vbuffer.data;
             k.vbufferPitch = uint32_t(vbuffer.rowPitch / sizeof(glm::uvec4));
         }
-        const auto out = [](ImageView<glm::vec4> v) {
-            return pt::PixelOut<glm::vec4>{v.data, uint32_t(v.rowPitch / sizeof(glm::vec4))};
-        };
-        k.color = out(color);
-        k.direct = out(direct);
-        k.indirect = out(indirect);
-        k.albedo = out(albedo);
-        k.specAlbedo = out(specAlbedo);
-        k.emission = out(emission);
+        k.color = pixelOut(color);
+        k.direct = pixelOut(direct);
+        k.indirect = pixelOut(indirect);
+        k.albedo = pixelOut(albedo);
+        k.specAlbedo = pixelOut(specAlbedo);
+        k.emission = pixelOut(emission);
         const uint32_t blocksX = (w + kGradientBlock - 1) / kGradientBlock;
         const uint32_t blocksY = (h + kGradientBlock - 1) / kGradientBlock;
-        // Each block's primary hit at its gradientPixel, for the next frame's gradients.
-        std::vector<glm::uvec4> blockHits(gradientTex ? size_t(blocksX) * blocksY : 0);
         uint64_t rays = 0, dropped = 0, gradientRays = 0;
-        if (mActive == Backend::Cuda) {
+        if (onDevice || mActive == Backend::Emulated) {
+            // Every output, the gradients and their history written by the kernels into the fields' memory, where
+            // the graph placed them (nothing is copied here). Placed on cuda: the backend's launches on the GPU;
+            // else the same kernels on the CPU threads.
+            if (gradientTex) {
+                k.gradientHit = pixelOut(gradientHits);
+                k.gradientLum = pixelOut(gradientLum);
+                k.gradientIndex = ctx.frameIndex();
+            }
+            const bool replay = gradientTex && !boxFilter && ctx.historyValid() && ctx.frameIndex() > 0;
+            // Without last frame's samples (or with box-filtered ones, which are not replayed exactly): zeros.
+            if (gradientTex && !replay) gradientTex->clear();
+            pt::GradientReplay g;
+            if (replay) {
+                const auto prevHits = fieldView<glm::uvec4>(ctx.historyPrev(kGradientHits), onDevice);
+                const auto prevLum = fieldView<float>(ctx.historyPrev(kGradientLuminance), onDevice);
+                g.prevHits = prevHits.data;
+                g.prevHitsPitch = uint32_t(prevHits.rowPitch / sizeof(glm::uvec4));
+                g.prevLum = prevLum.data;
+                g.prevLumPitch = uint32_t(prevLum.rowPitch / sizeof(float));
+                g.out = pixelOut(fieldView<glm::vec2>(*gradientTex, onDevice));
+                // Last frame's camera rays, exactly: its pose and jitter.
+                Camera prev = camera;
+                prev.world = camera.prevWorld;
+                prev.jitter = camera.prevJitter;
+                prev.aspect = float(w) / float(h);
+                g.prevCam = makeCameraData(prev, w, h);
+                g.prevFrame = frame - 1;
+                g.prevIndex = ctx.frameIndex() - 1;
+                ctx.stats().set("gradientSamples", double(uint64_t(blocksX) * blocksY));
+            }
+            if (ctx.device() == DeviceKind::Cuda) {
+                if (!mCuda) mCuda = std::make_unique<pt::CudaBackend>();
+                const pt::CudaBackend::Counts c = mCuda->render(k, replay ? &g : nullptr, mBvhBuilds);
+                rays = c.rays;
+                dropped = c.dropped;
+                ctx.stats().set("ms.cudaKernel", c.kernelMs);
+            } else {
+                std::vector<glm::uvec2> counts(size_t(w) * h);
+                k.counts = {counts.data(), w};
+                launch2D(DeviceKind::Emulated, w, h, [&](uint32_t x, uint32_t y) { pt::renderPixel(k, x, y); });
+                for (const glm::uvec2& c : counts) {
+                    rays += c.x;
+                    dropped += c.y;
+                }
+                if (replay) {
+                    std::vector<uint32_t> blockRays(size_t(blocksX) * blocksY);
+                    launch2D(DeviceKind::Emulated, blocksX, blocksY, [&](uint32_t bx, uint32_t by) {
+                        blockRays[size_t(by) * blocksX + bx] = pt::replayGradient(k, g, bx, by);
+                    });
+                    for (uint32_t r : blockRays) rays += r;
+                }
+            }
+            finishFrame(ctx, spp, rays, dropped, mTris, start);
+            return;
+        }
+        // Placed on the CPU with device cuda: the GPU renders into its own memory and the outputs are copied into
+        // the host fields; the gradients replay last frame's samples on the CPU meanwhile.
+        std::vector<glm::uvec4> blockHits(gradientTex ? size_t(blocksX) * blocksY : 0);
+        {
             const auto t0 = std::chrono::steady_clock::now();
             mCuda->launch(k, mBvhBuilds);
             const auto t1 = std::chrono::steady_clock::now();
@@ -806,27 +889,6 @@ void PathTracer::execute(PassContext& ctx) {
             ctx.stats().set("ms.cpuGradients", ms(t1, t2));
             ctx.stats().set("ms.cudaFinish", ms(t2, t3));
             ctx.stats().set("ms.cudaKernel", c.kernelMs);
-        } else {
-            std::vector<glm::uvec4> primaryHits(gradientTex ? size_t(w) * h : 0);
-            if (gradientTex) k.primaryHit = {primaryHits.data(), w};
-            std::vector<glm::uvec2> counts(size_t(w) * h);
-            k.counts = {counts.data(), w};
-            parallelFor2D(w, h, [&](const Tile& tile) {
-                for (uint32_t y = tile.y0; y < tile.y1; ++y)
-                    for (uint32_t x = tile.x0; x < tile.x1; ++x) pt::renderPixel(k, x, y);
-            });
-            for (const glm::uvec2& c : counts) {
-                rays += c.x;
-                dropped += c.y;
-            }
-            if (gradientTex) {
-                for (uint32_t by = 0; by < blocksY; ++by)
-                    for (uint32_t bx = 0; bx < blocksX; ++bx) {
-                        const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
-                        blockHits[size_t(by) * blocksX + bx] = primaryHits[size_t(q.y) * w + q.x];
-                    }
-                gradientRays = gradients(ctx, batch, camera, spp, frame, gradientTex, boxFilter);
-            }
         }
         if (gradientTex) {
             // Each block's sample of this frame, for the next frame's gradients (as the CPU path keeps them).
@@ -843,7 +905,6 @@ void PathTracer::execute(PassContext& ctx) {
         finishFrame(ctx, spp, rays, dropped, mTris, start);
         return;
     }
-
     // Per-tile counters, summed in tile order afterwards (deterministic).
     const uint32_t tilesX = (w + kDefaultTileSize - 1) / kDefaultTileSize;
     const uint32_t tilesY = (h + kDefaultTileSize - 1) / kDefaultTileSize;

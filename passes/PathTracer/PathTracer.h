@@ -30,6 +30,7 @@ public:
     PathTracer();
     ~PathTracer() override;
     std::vector<std::string> skippedWork() const override;
+    bool runsOn(DeviceKind device) const override;
 
     enum class Device { Auto, Cpu, Cuda, Emulated };
     enum class CullMode { None, Back };
@@ -45,7 +46,8 @@ private:
     /// The BVH of `scene` with its instances where they are now (built on the first call for a scene or geometry).
     const Bvh& sceneBvh(const Scene& scene);
 
-    /// Where frames run, decided at compile from `device`.
+    /// Where frames run when the graph places the pass on the CPU, decided at compile from `device` (placed on a
+    /// device, the CUDA backend's kernels run there, whatever `device` says).
     enum class Backend { Cpu, Cuda, Emulated };
     Backend mActive = Backend::Cpu;
     std::unique_ptr<pt::CudaBackend> mCuda;

@@ -98,6 +98,11 @@ struct FrameKernel {
     PixelOut<glm::vec4> color, direct, indirect, albedo, specAlbedo, emission;
     PixelOut<glm::uvec4> primaryHit;  ///< the primary hit as a vbuffer holds it (for temporal gradients)
     PixelOut<glm::uvec2> counts;      ///< (rays traced, samples dropped)
+    /// History of the temporal gradients, written only at each 3x3 block's gradientPixel of frame gradientIndex:
+    /// the primary hit (as primaryHit) and the colour's luminance. Null to skip.
+    PixelOut<glm::uvec4> gradientHit;
+    PixelOut<float> gradientLum;
+    uint64_t gradientIndex = 0;  ///< the frame index gradientPixel is drawn for (not shifted by the seed)
 };
 
 /// The pixel of 3x3 block (bx, by) whose sample frame `frameIndex` keeps for the next frame's temporal gradient: one
@@ -163,6 +168,58 @@ LOOM_HD inline void renderPixel(const FrameKernel& k, uint32_t x, uint32_t y) {
                        glm::uvec4(primary.hit() ? primary.instance : kInvalidId, primary.primitive,
                                   floatBits(primary.u), floatBits(primary.v)));
     k.counts.store(x, y, glm::uvec2(rays, dropped));
+    if (k.gradientHit.data && gradientPixel(x / 3u, y / 3u, k.gradientIndex, k.width, k.height) == glm::uvec2(x, y)) {
+        k.gradientHit.store(x, y,
+                            glm::uvec4(primary.hit() ? primary.instance : kInvalidId, primary.primitive,
+                                       floatBits(primary.u), floatBits(primary.v)));
+        k.gradientLum.store(x, y, luminance(acc.color()));
+    }
+}
+
+/// Last frame's gradient samples replayed this frame (the temporal gradients of A-SVGF): what one launch over the
+/// 3x3 blocks reads and writes. Views of the pass's history and output, in the memory of the device it runs on.
+struct GradientReplay {
+    const glm::uvec4* prevHits = nullptr;  ///< last frame's FrameKernel::gradientHit
+    uint32_t prevHitsPitch = 0;
+    const float* prevLum = nullptr;  ///< last frame's FrameKernel::gradientLum
+    uint32_t prevLumPitch = 0;
+    PixelOut<glm::vec2> out;  ///< the gradient output: (luminance now, luminance then), replicated over the block
+    CameraData prevCam;       ///< last frame's camera (pose and jitter)
+    uint64_t prevFrame = 0;   ///< last frame's random-number frame (FrameKernel::frame - 1)
+    uint64_t prevIndex = 0;   ///< last frame's index (its gradientPixel)
+};
+
+/// Block (bx, by)'s temporal gradient: last frame's sample of the block re-shaded now, at the same surface point
+/// (its hit follows animated instances) along last frame's camera ray with last frame's random numbers, through the
+/// same paths renderPixel traces, next to its luminance then. Where nothing changed both are the same bits. (0, 0)
+/// where last frame's sample missed. Returns the rays traced.
+LOOM_HD inline uint32_t replayGradient(const FrameKernel& k, const GradientReplay& g, uint32_t bx, uint32_t by) {
+    const uint32_t w = k.width, h = k.height;
+    const glm::uvec2 q = gradientPixel(bx, by, g.prevIndex, w, h);
+    const glm::uvec4 e = g.prevHits[size_t(q.y) * g.prevHitsPitch + q.x];
+    uint32_t rays = 0;
+    glm::vec2 value(0.f);
+    if (e.x < k.scene.instanceCount && e.y < k.scene.meshes[k.scene.instances[e.x].mesh].triangleCount) {
+        RayHit hit;
+        hit.instance = e.x;
+        hit.primitive = e.y;
+        hit.u = bitsToFloat(e.z);
+        hit.v = bitsToFloat(e.w);
+        const glm::vec3 dir = glm::normalize(pixelRayDir(g.prevCam, q.x, q.y));
+        const BvhTracer tracer{&k.bvh, k.secondaryRules, k.keyed};
+        PixelSum acc;
+        for (uint32_t s = 0; s < k.spp; ++s) {
+            PathRng rng(q.y * w + q.x, g.prevFrame, s);
+            const PathResult r = tracePath(tracer, k.scene, k.lights, k.set, g.prevCam.origin, dir, hit, rng);
+            rays += r.rays;
+            acc.add(r);
+        }
+        value = glm::vec2(luminance(acc.color()), g.prevLum[size_t(q.y) * g.prevLumPitch + q.x]);
+    }
+    const uint32_t x1 = (bx + 1) * 3u < w ? (bx + 1) * 3u : w, y1 = (by + 1) * 3u < h ? (by + 1) * 3u : h;
+    for (uint32_t y = by * 3u; y < y1; ++y)
+        for (uint32_t x = bx * 3u; x < x1; ++x) g.out.store(x, y, value);
+    return rays;
 }
 
 }  // namespace loom::pt
