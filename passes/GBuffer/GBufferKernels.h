@@ -2,15 +2,14 @@
 // Per-pixel G-buffer evaluation from a primary hit (plain functions over
 // plain data, so they compile for CUDA as well).
 #include <cstdint>
-
 #include <glm/glm.hpp>
 
 #include "loom/BvhTraversal.h"
 #include "loom/CameraKernels.h"
 #include "loom/Kernel.h"
-#include "loom/Texture.h"
 #include "loom/SceneView.h"
 #include "loom/SurfaceKernels.h"
+#include "loom/Texture.h"
 
 namespace loom::gbuffer {
 
@@ -61,8 +60,8 @@ LOOM_HD inline glm::vec3 interpolatedNormal(const SceneView& scene, uint32_t ins
     const InstanceView& inst = scene.instances[instance];
     const MeshView& mesh = scene.meshes[inst.mesh];
     const uint32_t* idx = mesh.indices + 3 * prim;
-    const glm::vec3 n = (1.f - uv.x - uv.y) * mesh.normals[idx[0]] + uv.x * mesh.normals[idx[1]] +
-                        uv.y * mesh.normals[idx[2]];
+    const glm::vec3 n =
+        (1.f - uv.x - uv.y) * mesh.normals[idx[0]] + uv.x * mesh.normals[idx[1]] + uv.y * mesh.normals[idx[2]];
     glm::vec3 w = glm::normalize(inst.normalMatrix * n);
     return glm::dot(w, side) < 0.f ? -w : w;
 }
@@ -90,7 +89,8 @@ LOOM_HD inline GBufferSample hitSample(const SceneView& scene, const CameraData&
     const glm::vec3 qx = rayPlane(cam.origin, cameraRayDir(cam, px + 1.f, py), s.posW, s.faceNormalW);
     const glm::vec3 qy = rayPlane(cam.origin, cameraRayDir(cam, px, py + 1.f), s.posW, s.faceNormalW);
     const glm::vec3 dpdx = qx - s.posW, dpdy = qy - s.posW;
-    g.linearZ = glm::vec2(depth, std::fmax(std::fabs(glm::dot(dpdx, cam.forward)), std::fabs(glm::dot(dpdy, cam.forward))));
+    g.linearZ =
+        glm::vec2(depth, std::fmax(std::fabs(glm::dot(dpdx, cam.forward)), std::fabs(glm::dot(dpdy, cam.forward))));
 
     // Normal derivatives: interpolate the vertex normals at the neighbours'
     // plane points (in object space, through the inverse instance transform).
@@ -103,7 +103,8 @@ LOOM_HD inline GBufferSample hitSample(const SceneView& scene, const CameraData&
     const glm::vec3 nx = interpolatedNormal(scene, instance, prim, barycentrics(qx, a, b, c), s.faceNormalW);
     const glm::vec3 ny = interpolatedNormal(scene, instance, prim, barycentrics(qy, a, b, c), s.faceNormalW);
     const glm::vec3 n0 = interpolatedNormal(scene, instance, prim, glm::vec2(u, v), s.faceNormalW);
-    g.pnFwidth = glm::vec2(glm::length(glm::abs(dpdx) + glm::abs(dpdy)), glm::length(glm::abs(nx - n0) + glm::abs(ny - n0)));
+    g.pnFwidth =
+        glm::vec2(glm::length(glm::abs(dpdx) + glm::abs(dpdy)), glm::length(glm::abs(nx - n0) + glm::abs(ny - n0)));
 
     g.mvec = surfaceMotion(cam, s.posW, s.prevPosW);
     g.albedo = glm::vec4(diffuseAlbedo(s), 1.f);

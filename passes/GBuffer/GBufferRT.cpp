@@ -15,7 +15,9 @@ namespace loom {
 
 using namespace gbuffer;
 
-void GBufferRT::reflect(Reflection& r, const CompileInfo&) const { reflectChannels(r); }
+void GBufferRT::reflect(Reflection& r, const CompileInfo&) const {
+    reflectChannels(r);
+}
 
 void GBufferRT::declareParams(ParamList& p) {
     const gbuffer::Visibility defaults;
@@ -60,12 +62,11 @@ ImageView<T> viewOf(const PassContext& ctx, const char* name) {
 }
 
 GBufferViews outputViews(const PassContext& ctx) {
-    return GBufferViews{viewOf<glm::vec4>(ctx, kPosW),       viewOf<glm::vec4>(ctx, kNormW),
-                        viewOf<glm::vec4>(ctx, kFaceNormalW), viewOf<glm::vec4>(ctx, kAlbedo),
-                        viewOf<glm::vec4>(ctx, kSpecAlbedo),  viewOf<glm::vec4>(ctx, kEmission),
-                        viewOf<glm::vec2>(ctx, kLinearZ),     viewOf<glm::vec2>(ctx, kPnFwidth),
-                        viewOf<glm::vec2>(ctx, kMvec),        viewOf<glm::uvec4>(ctx, kVBuffer),
-                        viewOf<uint32_t>(ctx, kMeshId)};
+    return GBufferViews{
+        viewOf<glm::vec4>(ctx, kPosW),     viewOf<glm::vec4>(ctx, kNormW),      viewOf<glm::vec4>(ctx, kFaceNormalW),
+        viewOf<glm::vec4>(ctx, kAlbedo),   viewOf<glm::vec4>(ctx, kSpecAlbedo), viewOf<glm::vec4>(ctx, kEmission),
+        viewOf<glm::vec2>(ctx, kLinearZ),  viewOf<glm::vec2>(ctx, kPnFwidth),   viewOf<glm::vec2>(ctx, kMvec),
+        viewOf<glm::uvec4>(ctx, kVBuffer), viewOf<uint32_t>(ctx, kMeshId)};
 }
 
 }  // namespace
@@ -101,8 +102,8 @@ void GBufferRT::execute(PassContext& ctx) {
         parallelFor2D(w, h, [&](const Tile& t) {
             traceCameraRays(rays, cam, t, rules, frame, [&](uint32_t x, uint32_t y, glm::vec3 dir, const RayHit& hit) {
                 storeSample(o, x, y,
-                      hit.hit() ? hitSample<Moving>(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
-                                : missSample(cam, dir));
+                            hit.hit() ? hitSample<Moving>(view, cam, x, y, hit.instance, hit.primitive, hit.u, hit.v)
+                                      : missSample(cam, dir));
             });
         });
     };

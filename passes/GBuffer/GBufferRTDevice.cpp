@@ -23,8 +23,8 @@ struct DeviceScene::Impl {
     uint64_t key = ~uint64_t(0);
 #if defined(__CUDACC__)
     std::vector<std::shared_ptr<std::byte>> perScene, perFrame;  ///< device memory, kept while it is in use
-    SceneView scene;    ///< device pointers to the meshes and images (materials, instances: per frame)
-    BvhArrays bottom;   ///< device spans of the bottom-level arrays
+    SceneView scene;   ///< device pointers to the meshes and images (materials, instances: per frame)
+    BvhArrays bottom;  ///< device spans of the bottom-level arrays
 
     /// A device copy of `count` elements at `host` (nullptr for none), kept in `keep`.
     template <class T>

@@ -16,11 +16,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/glm.hpp>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "TestUtil.h"
 #include "loom/Graph.h"
@@ -32,9 +31,9 @@ using namespace loom;
 
 namespace {
 
-const char* const kFloatChannels[] = {"posW",     "normW",  "faceNormalW", "linearZ",  "pnFwidth",
-                                      "mvec",     "albedo", "specAlbedo",  "emission"};
-const char* const kChannels[] = {"posW",   "normW",      "faceNormalW", "linearZ",  "pnFwidth", "mvec",
+const char* const kFloatChannels[] = {"posW", "normW",  "faceNormalW", "linearZ", "pnFwidth",
+                                      "mvec", "albedo", "specAlbedo",  "emission"};
+const char* const kChannels[] = {"posW",   "normW",      "faceNormalW", "linearZ", "pnFwidth", "mvec",
                                  "albedo", "specAlbedo", "emission",    "vbuffer", "meshId"};
 constexpr uint32_t kW = 48, kH = 32;
 
@@ -145,7 +144,8 @@ void checkScene(const std::string& name) {
         const std::string where = name + " frame " + std::to_string(f);
         for (const char* c : kChannels) {
             ASSERT_TRUE(field(*emulated1, c).onHost()) << c << ": fieldTexture gives the host copy";
-            EXPECT_TRUE(field(*emulated1, c).samePixels(field(*emulated2, c))) << where << " " << c << ": 1 and 2 threads";
+            EXPECT_TRUE(field(*emulated1, c).samePixels(field(*emulated2, c)))
+                << where << " " << c << ": 1 and 2 threads";
         }
         const Comparison c = compareFrame(*cpu, *emulated1, glm::length(scene->bounds().extent()), where);
         total.hits += c.hits;
@@ -171,9 +171,13 @@ void checkScene(const std::string& name) {
 
 }  // namespace
 
-TEST(GBufferRTDevices, EmulatedMatchesCpuOnTheDynamicCornellBox) { checkScene("cornell_dynamic.gltf"); }
+TEST(GBufferRTDevices, EmulatedMatchesCpuOnTheDynamicCornellBox) {
+    checkScene("cornell_dynamic.gltf");
+}
 
-TEST(GBufferRTDevices, EmulatedMatchesCpuOnTexturedAlphaTestedMaterials) { checkScene("materials.gltf"); }
+TEST(GBufferRTDevices, EmulatedMatchesCpuOnTexturedAlphaTestedMaterials) {
+    checkScene("materials.gltf");
+}
 
 // The pass declares the emulated device (and cuda where its device file is compiled by nvcc): the graph places it
 // there and keeps its fields in device memory.

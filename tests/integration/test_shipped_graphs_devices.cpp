@@ -11,9 +11,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <string>
-
 #include <glm/glm.hpp>
+#include <string>
 
 #include "TestUtil.h"
 #include "loom/ImageIO.h"
@@ -67,8 +66,8 @@ TEST(ShippedGraphs, EveryGraphRendersOnEmulatedAsOnTheCpu) {
             const bool eightBit = a.format() == Format::RGBA8Unorm || a.format() == Format::RGBA8Srgb;
             // 8-bit: two steps of 255 at most; float: 1e-3 relative at most (the twins' stated bounds are tighter).
             const double tolerance = eightBit ? 2.0 / 255.0 : 1e-3;
-            const bool vbuffer = a.format() == Format::RGBA32U && f.path().filename().string().find("vbuffer") !=
-                                                                      std::string::npos;
+            const bool vbuffer =
+                a.format() == Format::RGBA32U && f.path().filename().string().find("vbuffer") != std::string::npos;
             double largest = 0.0;
             size_t beyond = 0;  // pixels with a channel beyond the tolerance
             for (uint32_t y = 0; y < a.height(); ++y)
