@@ -4,12 +4,7 @@
 
 namespace loom::accumulate {
 
-bool deviceRuns(DeviceKind device) {
-#if defined(__CUDACC__)
-    if (device == DeviceKind::Cuda) return true;
-#endif
-    return device == DeviceKind::Emulated;
-}
+bool deviceRuns(DeviceKind device) { return device != DeviceKind::Cpu && launchesReach(device); }
 
 /// One frame's update of every pixel; with samples added, the count of those skipped (not finite). Each pixel is
 /// updated exactly once, by the reduction's value when it counts (the state is updated in place, so it cannot be

@@ -113,22 +113,11 @@ void GBufferRT::execute(PassContext& ctx) {
         run.template operator()<false>();
 }
 
-const Bvh& GBufferRT::sceneBvh(const Scene& scene) {
-    if (!mBvh || mBvhScene != &scene || mBvhMeshVersion != scene.meshVersion()) {
-        mBvh = std::make_unique<Bvh>(scene);
-        mBvhScene = &scene;
-        mBvhMeshVersion = scene.meshVersion();
-        ++mBvhBuilds;
-    } else {
-        mBvh->updateInstances(scene);  // moving instances rebuild the top level only
-    }
-    return *mBvh;
-}
 
 void GBufferRT::executeOnDevice(PassContext& ctx, const Scene& scene, const device::TraceParams& params,
                                 const GBufferViews& out) {
-    const BvhView host = sceneBvh(scene).view(scene.view());
-    device::trace(ctx.device(), mDeviceScene->view(ctx.device(), host, mBvhBuilds), params, out);
+    const BvhView host = mBvh.update(scene).view(scene.view());
+    device::trace(ctx.device(), mDeviceScene->view(ctx.device(), host, mBvh.builds()), params, out);
 }
 
 }  // namespace loom

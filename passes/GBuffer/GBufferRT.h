@@ -8,11 +8,11 @@
 
 #include "GBufferCommon.h"
 #include "GBufferRTDevice.h"
+#include "loom/Bvh.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
 
-class Bvh;
 class Scene;
 
 class GBufferRT final : public RenderPass {
@@ -34,14 +34,10 @@ private:
     std::shared_ptr<const Scene> mScene;  // for skippedWork
 
     // Off the CPU: the scene's BVH, rebuilt when the scene or its meshes change (else only its top level), and its
-    // arrays where the device reads them (uploaded again when mBvhBuilds changes).
-    const Bvh& sceneBvh(const Scene& scene);
+    // arrays where the device reads them (uploaded again when mBvh.builds() changes).
     void executeOnDevice(PassContext& ctx, const Scene& scene, const gbuffer::device::TraceParams& params,
                          const gbuffer::GBufferViews& out);
-    std::unique_ptr<Bvh> mBvh;
-    const Scene* mBvhScene = nullptr;
-    uint64_t mBvhMeshVersion = 0;
-    uint64_t mBvhBuilds = 0;
+    SceneBvh mBvh;
     std::unique_ptr<gbuffer::device::DeviceScene> mDeviceScene;
 };
 

@@ -11,13 +11,7 @@
 
 namespace loom::gbuffer::device {
 
-bool launchesOnCuda() {
-#if defined(__CUDACC__)
-    return true;
-#else
-    return false;
-#endif
-}
+bool launchesOnCuda() { return launchesReach(DeviceKind::Cuda); }
 
 struct DeviceScene::Impl {
     uint64_t key = ~uint64_t(0);

@@ -327,18 +327,6 @@ void PathTracer::compile(const CompileInfo&) {
 PathTracer::PathTracer() = default;
 PathTracer::~PathTracer() = default;
 
-const Bvh& PathTracer::sceneBvh(const Scene& scene) {
-    // Moving instances rebuild only the top level (and the CUDA backend re-uploads only that, keyed on mBvhBuilds).
-    if (!mBvh || mBvhScene != &scene || mBvhMeshVersion != scene.meshVersion()) {
-        mBvh = std::make_unique<Bvh>(scene);
-        mBvhScene = &scene;
-        mBvhMeshVersion = scene.meshVersion();
-        ++mBvhBuilds;
-    } else {
-        mBvh->updateInstances(scene);
-    }
-    return *mBvh;
-}
 
 void PathTracer::setScene(const std::shared_ptr<const Scene>& scene) {
     mScene = scene;
@@ -783,7 +771,7 @@ void PathTracer::execute(PassContext& ctx) {
     if (onDevice || mActive != Backend::Cpu) {
         // The CUDA backend's kernels (PixelKernel.h): on the device the graph placed the pass on, else (placed on
         // the CPU) where `device` asks for them.
-        const Bvh& bvh = sceneBvh(*scene);
+        const Bvh& bvh = mBvh.update(*scene);
         pt::FrameKernel k;
         k.bvh = bvh.view(view);
         k.scene = view;
@@ -845,7 +833,7 @@ void PathTracer::execute(PassContext& ctx) {
             }
             if (ctx.device() == DeviceKind::Cuda) {
                 if (!mCuda) mCuda = std::make_unique<pt::CudaBackend>();
-                const pt::CudaBackend::Counts c = mCuda->render(k, replay ? &g : nullptr, mBvhBuilds);
+                const pt::CudaBackend::Counts c = mCuda->render(k, replay ? &g : nullptr, mBvh.builds());
                 rays = c.rays;
                 dropped = c.dropped;
                 ctx.stats().set("ms.cudaKernel", c.kernelMs);
@@ -873,7 +861,7 @@ void PathTracer::execute(PassContext& ctx) {
         std::vector<glm::uvec4> blockHits(gradientTex ? size_t(blocksX) * blocksY : 0);
         {
             const auto t0 = std::chrono::steady_clock::now();
-            mCuda->launch(k, mBvhBuilds);
+            mCuda->launch(k, mBvh.builds());
             const auto t1 = std::chrono::steady_clock::now();
             // The gradients replay the last frame's samples, which this frame's do not touch: the CPU traces them
             // while the GPU renders.

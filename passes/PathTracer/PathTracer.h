@@ -11,11 +11,11 @@
 
 #include "Lights.h"
 #include "PathTracerKernels.h"
+#include "loom/Bvh.h"
 #include "loom/RenderPass.h"
 
 namespace loom {
 
-class Bvh;
 namespace pt {
 class CudaBackend;
 }
@@ -44,17 +44,13 @@ private:
     /// The pt::KernelFeature bits of the kernel the current light list needs (kAllFeatures unless specialize).
     uint32_t kernelFeatures() const;
     /// The BVH of `scene` with its instances where they are now (built on the first call for a scene or geometry).
-    const Bvh& sceneBvh(const Scene& scene);
 
     /// Where frames run when the graph places the pass on the CPU, decided at compile from `device` (placed on a
     /// device, the CUDA backend's kernels run there, whatever `device` says).
     enum class Backend { Cpu, Cuda, Emulated };
     Backend mActive = Backend::Cpu;
     std::unique_ptr<pt::CudaBackend> mCuda;
-    std::unique_ptr<Bvh> mBvh;
-    const void* mBvhScene = nullptr;
-    uint64_t mBvhMeshVersion = 0;
-    uint64_t mBvhBuilds = 0;  ///< BVHs built so far: with the scene's address, the CUDA backend's upload key
+    SceneBvh mBvh;  ///< moving instances rebuild only its top level (the CUDA backend re-uploads only that)
 
     // Parameters.
     /// maxBounces, rrStartBounce, lightSampling, lambertOnly, energyCompensation, indirectClamp: the kernel's struct

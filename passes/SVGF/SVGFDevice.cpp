@@ -39,13 +39,7 @@ LOOM_HD inline bool tileKeepsInput(ImageView<const glm::vec4> src, ImageView<con
 
 }  // namespace
 
-bool launchesOnCuda() {
-#if defined(__CUDACC__)
-    return true;
-#else
-    return false;
-#endif
-}
+bool launchesOnCuda() { return launchesReach(DeviceKind::Cuda); }
 
 void passThrough(DeviceKind device, ImageView<const glm::vec4> color, ImageView<glm::vec4> dst) {
     // remodulate() passes a miss pixel's colour through: non-finite channels as 0, alpha 1 where not finite.

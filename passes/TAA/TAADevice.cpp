@@ -4,12 +4,7 @@
 
 namespace loom::taa {
 
-bool deviceRuns(DeviceKind device) {
-#if defined(__CUDACC__)
-    if (device == DeviceKind::Cuda) return true;
-#endif
-    return device == DeviceKind::Emulated;
-}
+bool deviceRuns(DeviceKind device) { return device != DeviceKind::Cpu && launchesReach(device); }
 
 template <class T>
 ClampedImage<T> clampedOnDevice(const Texture& t) {

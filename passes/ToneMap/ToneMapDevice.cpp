@@ -4,12 +4,7 @@
 
 namespace loom::tonemap {
 
-bool deviceRuns(DeviceKind device) {
-#if defined(__CUDACC__)
-    if (device == DeviceKind::Cuda) return true;
-#endif
-    return device == DeviceKind::Emulated;
-}
+bool deviceRuns(DeviceKind device) { return device != DeviceKind::Cpu && launchesReach(device); }
 
 FrameSums sumFrame(DeviceKind device, const Texture& src, uint32_t rowStep) {
     const auto in = src.deviceView<glm::vec4>();

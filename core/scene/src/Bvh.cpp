@@ -250,4 +250,16 @@ BvhArrays Bvh::arrays() const {
     return a;
 }
 
+const Bvh& SceneBvh::update(const Scene& scene) {
+    if (!mBvh || mScene != &scene || mMeshVersion != scene.meshVersion()) {
+        mBvh = std::make_unique<Bvh>(scene);
+        mScene = &scene;
+        mMeshVersion = scene.meshVersion();
+        ++mBuilds;
+    } else {
+        mBvh->updateInstances(scene);  // moving instances rebuild the top level only
+    }
+    return *mBvh;
+}
+
 }  // namespace loom

@@ -52,6 +52,17 @@ inline void checkCuda(cudaError_t e, const char* what) {
 
 }  // namespace detail
 
+/// Whether the launches of the source file that asks reach `device`: cpu and emulated always, cuda where nvcc
+/// compiled the file (CMake's loom_device_sources). Internal linkage: each file answers for how it was compiled.
+static inline bool launchesReach(DeviceKind device) {
+#if defined(__CUDACC__)
+    (void)device;
+    return true;
+#else
+    return device != DeviceKind::Cuda;
+#endif
+}
+
 /// Runs f(x, y) once for every pixel of width x height on `device`. f writes only its own pixel (so the result is
 /// the same for any thread count and on every device) and is a LOOM_HD functor over plain values and ImageViews.
 template <class F>

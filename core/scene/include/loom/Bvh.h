@@ -16,6 +16,7 @@
 // fixed stack (kBvhStackSize) never overflows. Single-threaded and free of any order that depends on addresses:
 // the same scene gives the same bytes.
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "loom/BvhTraversal.h"
@@ -48,6 +49,22 @@ private:
     std::vector<BvhNode> mTopNodes;
     std::vector<uint32_t> mTopInstances;
     std::vector<BvhInstance> mInstances;
+};
+
+/// A scene's BVH kept across frames by a pass that traces it: built again when the scene or its meshes change
+/// (Scene::meshVersion), else only its top level updated for moving instances.
+class SceneBvh {
+public:
+    const Bvh& update(const Scene& scene);
+    /// Full builds so far: with the scene's address, what a copy on a device is keyed on (the bottom level changes
+    /// only with a build).
+    uint64_t builds() const { return mBuilds; }
+
+private:
+    std::unique_ptr<Bvh> mBvh;
+    const Scene* mScene = nullptr;
+    uint64_t mMeshVersion = 0;
+    uint64_t mBuilds = 0;
 };
 
 }  // namespace loom
