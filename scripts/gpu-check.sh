@@ -3,8 +3,10 @@
 # tests (the frame on the device against the CPU path tracer's, the kernels run on the host, the BVH against
 # Embree), then measures path-tracing throughput on the data Cornell box at 1280x720, 1 spp, path lengths 1, 3 and
 # 8 on the GPU and on the CPU (and the Embree tutorial path tracer where Debian's embree-tools is installed), and the
-# default graph's path tracer at 1280x720 on the GPU. Prints one table. About 5 minutes on a 16-core machine with
-# one GPU (most of it the build).
+# default graph's path tracer at 1280x720 on the GPU; then the graph on the device: the passes placed on cuda against
+# emulated (ShippedGraphs.GpuGraphsOnCudaMatchEmulated), `loom check --device cuda` of the GPU graph, and its frame
+# time end to end and per pass at 1280x720 and 1920x1080. Prints the tables. About 6 minutes on a 16-core machine
+# with one GPU (most of it the build).
 # Usage: scripts/gpu-check.sh [build dir, default build/cuda]
 #        scripts/gpu-check.sh --prebuilt DIR   skip the build: DIR holds bin/ and plugins/ of a build made with
 #                                               LOOM_CUDA=ON elsewhere (for a GPU machine without the dependencies)
@@ -25,7 +27,8 @@ fi
 
 # The tests that touch the backend. CudaDevice.* is skipped (not failed) without a usable device: say so loudly.
 status=0
-"$build/bin/loom_tests" --gtest_filter='CudaDevice.*:CudaKernelsOnHost.*:Bvh.*:AlphaMode.Bvh*' 2>&1 |
+"$build/bin/loom_tests" \
+  --gtest_filter='CudaDevice.*:CudaKernelsOnHost.*:Bvh.*:AlphaMode.Bvh*:ShippedGraphs.GpuGraphsOnCudaMatchEmulated' 2>&1 |
   tee "$out/tests.log" | grep -E '^\[ +(OK|FAILED|SKIPPED|PASSED) |^\[ .* frame |Failure|Expected|Which is|actual' ||
   true
 grep -q "^\[  PASSED  \]" "$out/tests.log" && ! grep -q "^\[  FAILED  \]" "$out/tests.log" || status=1
@@ -48,7 +51,16 @@ build_loom="$build/bin/loom"
   --frames 40 --set PathTracer.device=cuda --out "$out/default" --quiet --stats "$out/default.json" \
   > "$out/default.log" 2>&1 || echo "the default graph on the GPU failed: see $out/default.log"
 
-python3 - "$out/loom.json" "$anchor" "$out/default.json" <<'PY'
+# The GPU graph (every pass placed on cuda, G-buffer from GBufferRT): its plan, and 40 frames at two sizes.
+"$build_loom" check graphs/PathTracerSVGF_GPU.json --device cuda --size 1280x720 > "$out/gpu_plan.txt" 2>&1 || true
+sed -n '/^Devices:/,/^Memory/p' "$out/gpu_plan.txt"
+for size in 1280x720 1920x1080; do
+  "$build_loom" render --graph graphs/PathTracerSVGF_GPU.json --scene data/scenes/cornell_dynamic.gltf --size "$size" \
+    --frames 40 --device cuda --out "$out/gpu_$size" --quiet --stats "$out/gpu_$size.json" > "$out/gpu_$size.log" 2>&1 ||
+    echo "the GPU graph at $size failed: see $out/gpu_$size.log"
+done
+
+python3 - "$out/loom.json" "$anchor" "$out/default.json" "$out/gpu_1280x720.json" "$out/gpu_1920x1080.json" <<'PY'
 import csv, json, os, statistics, sys
 loom = {}
 if os.path.exists(sys.argv[1]):
@@ -78,6 +90,20 @@ if os.path.exists(sys.argv[3]):
     if ms:
         print(f"\nDefault graph (PathTracerSVGF, cornell_dynamic, 1280x720, 1 spp, 3 bounces) on the GPU: "
               f"PathTracer {statistics.median(ms):.2f} ms/frame (median of {len(ms)}; goal: under 5 ms)")
+rows = []
+for path, size, goal in ((sys.argv[4], "1280x720", 5.0), (sys.argv[5], "1920x1080", 10.0)):
+    if not os.path.exists(path):
+        continue
+    frames = json.load(open(path))["frames"][10:]
+    if not frames:
+        continue
+    passes = sorted(frames[0]["passes"])
+    total = statistics.median(sum(f["passes"][p]["ms"] for p in f["passes"]) for f in frames)
+    per = ", ".join(f"{p} {statistics.median(f['passes'][p]['ms'] for f in frames):.2f}" for p in passes)
+    rows.append(f"| {size} | {total:.2f} ms (goal {goal:g}) | {per} |")
+if rows:
+    print("\n| PathTracerSVGF_GPU on cuda | all passes, median of 30 | per pass (ms) |\n|---|---|---|")
+    print("\n".join(rows))
 PY
 echo "(logs and raw results in $out)"
 exit "$status"
