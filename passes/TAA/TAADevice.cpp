@@ -24,23 +24,19 @@ Counts resolveOnDevice(DeviceKind device, const TaaParams& params, bool historyV
     const auto out = colorOut.deviceView<glm::vec4>();
     const auto history = historyCur.deviceView<glm::vec4>();
     const TaaParams p = params;
-    launch2D(device, out.width, out.height, [=] LOOM_HD(uint32_t x, uint32_t y) {
-        uint32_t flags = 0;
-        const glm::vec4 c = resolvePixel(in, p, x, y, flags);
-        out.at(x, y) = outputColor(in.compress, c, in.color.at(int(x), int(y)));
-        history.at(x, y) = c;
-    });
-    // The counts, from the flags of the same kernel (the resolve again: no per-pixel scratch is kept for them).
+    // One visit a pixel: the reduction's value resolves it, writes it and returns its flags as counts.
     return reduceRows(
         device, out.width, out.height, Counts{},
         [=] LOOM_HD(uint32_t x, uint32_t y) {
             uint32_t flags = 0;
-            (void)resolvePixel(in, p, x, y, flags);
-            Counts c;
-            c.nonFinite = (flags & kNonFiniteInput) != 0;
-            c.noHistory = (flags & kNoHistory) != 0;
-            c.clipped = (flags & kClipped) != 0;
-            return c;
+            const glm::vec4 c = resolvePixel(in, p, x, y, flags);
+            out.at(x, y) = outputColor(in.compress, c, in.color.at(int(x), int(y)));
+            history.at(x, y) = c;
+            Counts n;
+            n.nonFinite = (flags & kNonFiniteInput) != 0;
+            n.noHistory = (flags & kNoHistory) != 0;
+            n.clipped = (flags & kClipped) != 0;
+            return n;
         },
         [] LOOM_HD(const Counts& a, const Counts& b) {
             Counts c;

@@ -87,7 +87,9 @@ void launch2D(DeviceKind device, uint32_t width, uint32_t height, const F& f) {
 
 /// The sum (by `combine`, starting from `zero`) of value(x, y) over width x height, reduced row by row: each row
 /// left to right, then the rows top to bottom. The order is fixed, so the result is the same for any thread count
-/// and on every device. T is a plain value type; value and combine are LOOM_HD functors.
+/// and on every device. T is a plain value type; value and combine are LOOM_HD functors. value is called exactly
+/// once a pixel, so it may also write that pixel's outputs: a kernel that counts what it did (skipped samples,
+/// clipped history) is one reduceRows, not a launch2D and a second pass.
 template <class T, class Value, class Combine>
 T reduceRows(DeviceKind device, uint32_t width, uint32_t height, T zero, const Value& value, const Combine& combine) {
     const auto rowSum = [=] LOOM_HD(uint32_t y) {
