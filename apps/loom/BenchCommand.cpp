@@ -1393,9 +1393,7 @@ void addBenchCommand(CLI::App& app) {
                     "run each graph with this pass once per value: Pass.param=v1,v2,... (repeatable; one sweep at "
                     "a time, not their product)");
     cmd->add_option("--set", o->set, "set a parameter on every graph: Pass.param=value (repeatable)");
-    cmd->add_option("--device", o->device,
-                    "where the benchmarked graphs' passes run unless a graph names a device for them: auto, cpu, "
-                    "cuda or emulated (references are rendered as their graphs say)");
+    addDeviceOption(cmd, o->device, "; for the benchmarked graphs (references are rendered as their graphs say)");
     cmd->add_option("--measure", o->measure,
                     "field to measure in every graph (default: the input of ToneMap.src, else the first output)");
     cmd->add_option("--reference-sequence", o->referenceSequence,

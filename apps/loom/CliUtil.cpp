@@ -65,6 +65,13 @@ PluginRegistry makeRegistry() {
     return PluginRegistry(PluginRegistry::defaultDirs());
 }
 
+void addDeviceOption(CLI::App* cmd, std::string& device, const std::string& note) {
+    cmd->add_option("--device", device,
+                    "where passes run unless the graph names a device for them: auto (CUDA where a GPU is usable), "
+                    "cpu, cuda or emulated (the GPU path on CPU threads)" +
+                        note);
+}
+
 void ensureWritableDir(const std::string& dir, const std::string& option) {
     namespace fs = std::filesystem;
     std::error_code ec;

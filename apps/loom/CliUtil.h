@@ -41,6 +41,10 @@ bool writtenInto(const std::filesystem::path& file, const std::string& outDir,
 /// onlyKnownPasses, assignments to passes the graph does not have are skipped (one --set list for several graphs).
 void applySet(RenderGraph& graph, const std::vector<std::string>& set, bool onlyKnownPasses = false);
 
+/// The --device option of the commands that compile graphs: where passes run unless the graph names a device for
+/// them (CompileOptions::device; checked when the graph compiles). `note` ends the help text.
+void addDeviceOption(CLI::App* cmd, std::string& device, const std::string& note = "");
+
 void addRenderCommand(CLI::App& app);
 void addCheckCommand(CLI::App& app);
 void addPassesCommand(CLI::App& app);

@@ -180,9 +180,7 @@ void addCheckCommand(CLI::App& app) {
     cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT used for the memory plan")->capture_default_str();
     cmd->add_option("--dot", o->dot, "write the compiled graph as Graphviz to this file ('-' for stdout)");
     cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
-    cmd->add_option("--device", o->device,
-                    "where passes run unless the graph names a device for them: auto, cpu, cuda or emulated (a plan "
-                    "for cuda needs no GPU)");
+    addDeviceOption(cmd, o->device, "; a plan for cuda needs no GPU");
     addSceneOptions(cmd, o->scene);
     cmd->callback([o] { runCheck(*o); });
 }

@@ -314,9 +314,7 @@ void addRenderCommand(CLI::App& app) {
                   "hold one frame: run --frames iterations of frame --start-frame at its scene time and camera "
                   "(fresh random numbers each; an accumulating graph converges that frame) and write the outputs "
                   "once, after the last, under that frame's number");
-    cmd->add_option("--device", o->device,
-                    "where passes run unless the graph names a device for them: auto (CUDA where a GPU is usable), "
-                    "cpu, cuda or emulated (the GPU path on CPU threads, for tests)");
+    addDeviceOption(cmd, o->device);
     cmd->add_flag("--dry-run", o->dryRun,
                   "check everything (graph, scene, parameters, size, frame and seed limits, warm-up) and stop before "
                   "the first frame: nothing is rendered or written (exit 0, or 2 naming what is wrong)");

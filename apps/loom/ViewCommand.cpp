@@ -394,8 +394,7 @@ void addViewCommand(CLI::App& app) {
     cmd->add_option("--field", o->field, "field shown first, Pass.field (default: the first output)");
     cmd->add_option("--exposure", o->exposure, "exposure of float fields on display, in EV")->capture_default_str();
     cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
-    cmd->add_option("--device", o->device,
-                    "where passes run unless the graph names a device for them: auto, cpu, cuda or emulated");
+    addDeviceOption(cmd, o->device);
     cmd->add_option("--frames,-n", o->frames, "stop after this many frames (0: when the window closes)")
         ->capture_default_str();
     cmd->add_option("--script", o->script, "timed commands, lines 'FRAME VERB [ARG]' (docs/VIEWER.md)");
