@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <glm/vec2.hpp>
 #include <glm/vec4.hpp>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -71,13 +72,35 @@ public:
     std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)> fn;
 };
 
-/// A registry over the build's plugin folder with FunctionSource registered (its own registry, so tests that
+/// A test pass that emits "color" and "mvec" (uvPrev - uvCur) from functions of (frame, x, y) (zero without them):
+/// TAA's inputs. Registered as "MotionSource" by registryWithFunctionSource().
+class MotionSource final : public RenderPass {
+public:
+    void reflect(Reflection& r, const CompileInfo&) const override {
+        r.output("color", Format::RGBA32F);
+        r.output("mvec", Format::RG32F);
+    }
+    void execute(PassContext& ctx) override {
+        auto c = ctx.output("color")->view<glm::vec4>();
+        auto m = ctx.output("mvec")->view<glm::vec2>();
+        for (uint32_t y = 0; y < c.height; ++y)
+            for (uint32_t x = 0; x < c.width; ++x) {
+                c.at(x, y) = color ? color(ctx.frameIndex(), x, y) : glm::vec4(0.f);
+                m.at(x, y) = motion ? motion(ctx.frameIndex(), x, y) : glm::vec2(0.f);
+            }
+    }
+    std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)> color;
+    std::function<glm::vec2(uint64_t frame, uint32_t x, uint32_t y)> motion;
+};
+
+/// A registry over the build's plugin folder with FunctionSource and MotionSource registered (its own registry, so tests that
 /// add a type do not change the shared one).
 inline PluginRegistry& registryWithFunctionSource() {
     static PluginRegistry r({LOOM_TEST_PLUGIN_DIR}, false);
     static const bool registered = [] {
         r.registerPass("FunctionSource", "frame-dependent test input",
                        [] { return std::make_unique<FunctionSource>(); });
+        r.registerPass("MotionSource", "frame-dependent colour and motion", [] { return std::make_unique<MotionSource>(); });
         return true;
     }();
     (void)registered;

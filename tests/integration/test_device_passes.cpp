@@ -27,37 +27,20 @@ using namespace loom;
 
 namespace {
 
-/// Emits "color" and "mvec" (uvPrev - uvCur) as functions of (frame, x, y): TAA's inputs.
-class MotionSource final : public RenderPass {
-public:
-    void reflect(Reflection& r, const CompileInfo&) const override {
-        r.output("color", Format::RGBA32F);
-        r.output("mvec", Format::RG32F);
-    }
-    void execute(PassContext& ctx) override {
-        auto c = ctx.output("color")->view<glm::vec4>();
-        auto m = ctx.output("mvec")->view<glm::vec2>();
-        const uint64_t f = ctx.frameIndex();
-        for (uint32_t y = 0; y < c.height; ++y)
-            for (uint32_t x = 0; x < c.width; ++x) {
-                // A bright block moving right over noise, with a non-finite pixel now and then.
-                const bool block = (x + 3 * f) % 23 < 6 && y % 17 < 9;
-                const float n = test::hash01(f, x, y);
-                c.at(x, y) = block ? glm::vec4(20.f * n, 15.f, 10.f, 1.f) : glm::vec4(n, 0.5f * n, 0.25f, 1.f);
-                if ((x * 7 + y * 3 + f) % 97 == 0) c.at(x, y).x = std::numeric_limits<float>::quiet_NaN();
-                m.at(x, y) = glm::vec2(block ? -3.f / float(c.width) : 0.25f / float(c.width), 0.1f / c.height);
-            }
-    }
-};
+PluginRegistry& registry() { return test::registryWithFunctionSource(); }
 
-PluginRegistry& registry() {
-    PluginRegistry& r = test::registryWithFunctionSource();
-    static const bool registered = [&] {
-        r.registerPass("MotionSource", "test input", [] { return std::make_unique<MotionSource>(); });
-        return true;
-    }();
-    (void)registered;
-    return r;
+/// TAA's inputs for the tests here: a bright block moving right over noise, with a non-finite pixel now and then.
+void setMotionInputs(test::MotionSource& source, uint32_t width, uint32_t height) {
+    const auto block = [](uint64_t f, uint32_t x, uint32_t y) { return (x + 3 * f) % 23 < 6 && y % 17 < 9; };
+    source.color = [=](uint64_t f, uint32_t x, uint32_t y) {
+        const float n = test::hash01(f, x, y);
+        glm::vec4 c = block(f, x, y) ? glm::vec4(20.f * n, 15.f, 10.f, 1.f) : glm::vec4(n, 0.5f * n, 0.25f, 1.f);
+        if ((x * 7 + y * 3 + f) % 97 == 0) c.x = std::numeric_limits<float>::quiet_NaN();
+        return c;
+    };
+    source.motion = [=](uint64_t f, uint32_t x, uint32_t y) {
+        return glm::vec2(block(f, x, y) ? -3.f / float(width) : 0.25f / float(width), 0.1f / float(height));
+    };
 }
 
 /// A small graph of `json` on `device`, every field observed (so fieldTexture gives each one, history included).
@@ -69,6 +52,7 @@ std::unique_ptr<RenderGraph> graphOn(const nlohmann::json& json, const std::stri
     o.device = device;
     o.observe = {"*"};
     g->compile(o);
+    if (auto* motion = dynamic_cast<test::MotionSource*>(g->pass("Src"))) setMotionInputs(*motion, w, h);
     if (auto* src = dynamic_cast<test::FunctionSource*>(g->pass("Src")))
         src->fn = [](uint64_t f, uint32_t x, uint32_t y) {
             const float n = test::hash01(f, x, y);

@@ -32,38 +32,9 @@ using namespace loom;
 
 namespace {
 
-using ColorFn = std::function<glm::vec4(uint64_t frame, uint32_t x, uint32_t y)>;
-using MotionFn = std::function<glm::vec2(uint64_t frame, uint32_t x, uint32_t y)>;
+using test::MotionSource;
 
-/// Emits "color" and "mvec" from functions of (frame, x, y).
-class MotionSource final : public RenderPass {
-public:
-    void reflect(Reflection& r, const CompileInfo&) const override {
-        r.output("color", Format::RGBA32F);
-        r.output("mvec", Format::RG32F);
-    }
-    void execute(PassContext& ctx) override {
-        auto c = ctx.output("color")->view<glm::vec4>();
-        auto m = ctx.output("mvec")->view<glm::vec2>();
-        for (uint32_t y = 0; y < c.height; ++y)
-            for (uint32_t x = 0; x < c.width; ++x) {
-                c.at(x, y) = color ? color(ctx.frameIndex(), x, y) : glm::vec4(0.f);
-                m.at(x, y) = motion ? motion(ctx.frameIndex(), x, y) : glm::vec2(0.f);
-            }
-    }
-    ColorFn color;
-    MotionFn motion;
-};
-
-PluginRegistry& registry() {
-    static PluginRegistry reg({LOOM_TEST_PLUGIN_DIR}, false);
-    static const bool registered = [] {
-        reg.registerPass("MotionSource", "test input", [] { return std::make_unique<MotionSource>(); });
-        return true;
-    }();
-    (void)registered;
-    return reg;
-}
+PluginRegistry& registry() { return test::registryWithFunctionSource(); }
 
 /// MotionSource -> TAA (mvec wired by name), one frame at a time.
 struct Harness {
