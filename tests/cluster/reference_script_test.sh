@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# scripts/slurm/reference.sh without a cluster. Stub sbatch, squeue and scancel, first on PATH, record their
+# scripts/slurm/reference.sh without a cluster. Stand-ins for sbatch, squeue and scancel, first on PATH, record their
 # arguments; sbatch runs each job at once, here, in order: an array's tasks (--array lists of ranges,
 # SLURM_ARRAY_TASK_ID, SLURM_JOB_ID) in the job's --chdir with its --output log, and a dependent job (afterok) only
 # when every task of the job it depends on succeeded.
@@ -21,13 +21,13 @@ passed=0 failed=0
 pass() { passed=$((passed + 1)); echo "ok: $*"; }
 fail() { failed=$((failed + 1)); echo "FAIL: $*"; }
 
-# The stubs. STUB is their state: sbatch.log (one line per call, each argument %q-quoted), job ids, failed jobs.
-mkdir "$t/bin" "$t/stub" "$t/cwd"
-export STUB="$t/stub"
+# The stand-ins. SLURM_STATE is their state: sbatch.log (one line per call, each argument %q-quoted), job ids, failed jobs.
+mkdir "$t/bin" "$t/slurm-state" "$t/cwd"
+export SLURM_STATE="$t/slurm-state"
 cat > "$t/bin/sbatch" << 'EOF'
 #!/usr/bin/env bash
 set -uo pipefail
-{ printf '%q ' "$@"; echo; } >> "$STUB/sbatch.log"
+{ printf '%q ' "$@"; echo; } >> "$SLURM_STATE/sbatch.log"
 array="" chdir="$PWD" output="slurm-%j.out" dependency=""
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -40,12 +40,12 @@ while [ $# -gt 0 ]; do
     *) break ;;
   esac
 done
-[ $# -ge 1 ] && [ -x "$1" ] || { echo "stub sbatch: no executable batch script" >&2; exit 1; }
+[ $# -ge 1 ] && [ -x "$1" ] || { echo "fake sbatch: no executable batch script" >&2; exit 1; }
 script="$1"
 next() {
   local n
-  n=$(($(cat "$STUB/ids" 2> /dev/null || echo 100) + 1))
-  echo "$n" > "$STUB/ids"
+  n=$(($(cat "$SLURM_STATE/ids" 2> /dev/null || echo 100) + 1))
+  echo "$n" > "$SLURM_STATE/ids"
   echo "$n"
 }
 job="$(next)"
@@ -55,8 +55,8 @@ logFile() {  # ARRAY_INDEX JOB_ID
   [[ "$p" == /* ]] || p="$chdir/$p"
   printf %s "$p"
 }
-if [ -n "$dependency" ] && [ -e "$STUB/failed.${dependency#afterok:}" ]; then
-  touch "$STUB/cancelled.$job"  # --kill-on-invalid-dep=yes
+if [ -n "$dependency" ] && [ -e "$SLURM_STATE/failed.${dependency#afterok:}" ]; then
+  touch "$SLURM_STATE/cancelled.$job"  # --kill-on-invalid-dep=yes
 elif [ -n "$array" ]; then
   IFS=, read -r -a items <<< "$array"
   for item in "${items[@]}"; do
@@ -65,27 +65,27 @@ elif [ -n "$array" ]; then
     elif [[ "$item" =~ ^[0-9]+$ ]]; then
       a=$item b=$item
     else
-      echo "stub sbatch: array item '$item' not understood" >&2
+      echo "fake sbatch: array item '$item' not understood" >&2
       exit 1
     fi
     for ((i = a; i <= b; ++i)); do
       id="$(next)"
       (cd "$chdir" && SLURM_ARRAY_JOB_ID=$job SLURM_ARRAY_TASK_ID=$i SLURM_JOB_ID=$id exec "$script") \
-        > "$(logFile "$i" "$id")" 2>&1 || touch "$STUB/failed.$job"
+        > "$(logFile "$i" "$id")" 2>&1 || touch "$SLURM_STATE/failed.$job"
     done
   done
 else
-  (cd "$chdir" && SLURM_JOB_ID=$job exec "$script") > "$(logFile "" "$job")" 2>&1 || touch "$STUB/failed.$job"
+  (cd "$chdir" && SLURM_JOB_ID=$job exec "$script") > "$(logFile "" "$job")" 2>&1 || touch "$SLURM_STATE/failed.$job"
 fi
-echo "$job;stub"
+echo "$job;local"
 EOF
 for c in squeue scancel; do
-  printf '#!/usr/bin/env bash\n{ printf "%%q " "$@"; echo; } >> "$STUB/%s.log"\n' "$c" > "$t/bin/$c"
+  printf '#!/usr/bin/env bash\n{ printf "%%q " "$@"; echo; } >> "$SLURM_STATE/%s.log"\n' "$c" > "$t/bin/$c"
 done
 chmod +x "$t/bin/"*
 export PATH="$t/bin:$PATH"
 export LOOM_THREADS=1
-calls() { if [ -f "$STUB/sbatch.log" ]; then wc -l < "$STUB/sbatch.log"; else echo 0; fi; }
+calls() { if [ -f "$SLURM_STATE/sbatch.log" ]; then wc -l < "$SLURM_STATE/sbatch.log"; else echo 0; fi; }
 
 # The frame a merged reference holds: its EXR header's loomHeldFrame (a string attribute).
 heldFrame() {
@@ -130,11 +130,11 @@ else
   fail "the rerun: $again (sbatch calls $before -> $(calls))"
 fi
 rm -rf "$out/shards/0011" "$out/shards/0012/shard_001" "$out/frames/0011" "$out/frames/0012"
-if again="$("${run[@]}" 2>&1)" && grep -qF -- "--array $(printf %q 2-3,5) " "$STUB/sbatch.log" &&
+if again="$("${run[@]}" 2>&1)" && grep -qF -- "--array $(printf %q 2-3,5) " "$SLURM_STATE/sbatch.log" &&
   [[ "$again" == *"3 of 6 shard task"* ]] && [ "$(heldFrames "$out" 0011 0012)" = "11 12" ]; then
   pass "deleted shards are submitted again alone (--array 2-3,5) and their frames merged"
 else
-  fail "resuming deleted shards: $again; $(tail -2 "$STUB/sbatch.log")"
+  fail "resuming deleted shards: $again; $(tail -2 "$SLURM_STATE/sbatch.log")"
 fi
 
 # --- Bad arguments: exit 2, the message, and nothing submitted or created.
@@ -261,7 +261,7 @@ logs=("$out/slurm/logs/"*.log)
 [ ${#logs[@]} -eq 3 ] || problems+="${#logs[@]} job logs in --out, not 3; "
 [ "$(calls)" -eq $((before + 2)) ] || problems+="$(($(calls) - before)) sbatch calls, not 2; "
 for w in "${sbatchWords[@]}"; do
-  [ "$(tail -2 "$STUB/sbatch.log" | grep -cF -- " $(printf %q "$w") ")" -eq 2 ] ||
+  [ "$(tail -2 "$SLURM_STATE/sbatch.log" | grep -cF -- " $(printf %q "$w") ")" -eq 2 ] ||
     problems+="sbatch did not get '$w' as one word in both jobs; "
 done
 noPwned || problems+="a value was run as a command: $(find "$t" "$src" -maxdepth 4 -name 'PWNED*' | head -3); "
