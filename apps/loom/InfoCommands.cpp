@@ -73,6 +73,7 @@ std::string sizeText(const FieldDesc& f) {
         case SizeMode::Frame: return "frame";
         case SizeMode::Scale: return fmt::format("{}x{} of frame", f.scaleX, f.scaleY);
         case SizeMode::Fixed: return fmt::format("{}x{}", f.fixedWidth, f.fixedHeight);
+        case SizeMode::Blocks: return fmt::format("one per {}x{} block of frame", f.blockWidth, f.blockHeight);
     }
     return "";
 }

@@ -218,9 +218,13 @@ void PathTracer::reflect(Reflection& r, const CompileInfo& info) const {
             "box. Equal where the shading did not change");
     if (!info.wired || info.isOutputConsumed(kGradient)) {
         r.history(kGradientHits, Format::RGBA32U)
-            .doc("primary hit (instance, primitive, u and v bits) of each 3x3 block's gradient sample (gradient only)");
+            .perBlock(kGradientBlock, kGradientBlock)
+            .doc(
+                "primary hit (instance, primitive, u and v bits) of each 3x3 block's gradient sample, one texel a "
+                "block (gradient only)");
         r.history(kGradientLuminance, Format::R32F)
-            .doc("colour luminance of each 3x3 block's gradient sample (gradient only)");
+            .perBlock(kGradientBlock, kGradientBlock)
+            .doc("colour luminance of each 3x3 block's gradient sample, one texel a block (gradient only)");
     }
 }
 
@@ -601,7 +605,7 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
             for (uint32_t by = tile.y0; by < tile.y1; ++by)
                 for (uint32_t bx = tile.x0; bx < tile.x1; ++bx) {
                     const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex() - 1, w, h);
-                    const glm::uvec4 e = prevHits.at(q.x, q.y);
+                    const glm::uvec4 e = prevHits.at(bx, by);
                     const bool valid =
                         e.x < view.instanceCount && e.y < view.meshes[view.instances[e.x].mesh].triangleCount;
                     if (!valid) {
@@ -637,7 +641,7 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
                     if (++seen < spp) continue;
                     const GradientSample& g = samples[current++];
                     fillBlock(out, g.block,
-                              glm::vec2(gradientLuminance(acc.color()), prevLum.at(g.pixel.x, g.pixel.y)));
+                              glm::vec2(gradientLuminance(acc.color()), prevLum.at(g.block.x, g.block.y)));
                     acc = PixelSum{};
                     seen = 0;
                 }
@@ -884,8 +888,8 @@ void PathTracer::execute(PassContext& ctx) {
                 for (uint32_t by = t.y0; by < t.y1; ++by)
                     for (uint32_t bx = t.x0; bx < t.x1; ++bx) {
                         const glm::uvec2 q = gradientPixel(bx, by, ctx.frameIndex(), w, h);
-                        gradientHits.at(q.x, q.y) = blockHits[size_t(by) * blocksX + bx];
-                        gradientLum.at(q.x, q.y) = gradientLuminance(glm::vec3(color.at(q.x, q.y)));
+                        gradientHits.at(bx, by) = blockHits[size_t(by) * blocksX + bx];
+                        gradientLum.at(bx, by) = gradientLuminance(glm::vec3(color.at(q.x, q.y)));
                     }
             });
         }
@@ -955,9 +959,9 @@ void PathTracer::execute(PassContext& ctx) {
             if (gradientHits.data &&
                 gradientPixel(x / kGradientBlock, y / kGradientBlock, ctx.frameIndex(), w, h) == glm::uvec2(x, y)) {
                 const RayHit& p = ts.primary[i];
-                gradientHits.at(x, y) =
+                gradientHits.at(x / kGradientBlock, y / kGradientBlock) =
                     glm::uvec4(p.hit() ? p.instance : kInvalidId, p.primitive, floatBits(p.u), floatBits(p.v));
-                gradientLum.at(x, y) = gradientLuminance(acc.color());
+                gradientLum.at(x / kGradientBlock, y / kGradientBlock) = gradientLuminance(acc.color());
             }
             acc = PixelSum{};
         };

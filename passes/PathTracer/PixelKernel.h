@@ -98,8 +98,8 @@ struct FrameKernel {
     PixelOut<glm::vec4> color, direct, indirect, albedo, specAlbedo, emission;
     PixelOut<glm::uvec4> primaryHit;  ///< the primary hit as a vbuffer holds it (for temporal gradients)
     PixelOut<glm::uvec2> counts;      ///< (rays traced, samples dropped)
-    /// History of the temporal gradients, written only at each 3x3 block's gradientPixel of frame gradientIndex:
-    /// the primary hit (as primaryHit) and the colour's luminance. Null to skip.
+    /// History of the temporal gradients, one texel per 3x3 block (bx, by), written by the block's gradientPixel of
+    /// frame gradientIndex: its primary hit (as primaryHit) and its colour's luminance. Null to skip.
     PixelOut<glm::uvec4> gradientHit;
     PixelOut<float> gradientLum;
     uint64_t gradientIndex = 0;  ///< the frame index gradientPixel is drawn for (not shifted by the seed)
@@ -169,10 +169,10 @@ LOOM_HD inline void renderPixel(const FrameKernel& k, uint32_t x, uint32_t y) {
                                   floatBits(primary.u), floatBits(primary.v)));
     k.counts.store(x, y, glm::uvec2(rays, dropped));
     if (k.gradientHit.data && gradientPixel(x / 3u, y / 3u, k.gradientIndex, k.width, k.height) == glm::uvec2(x, y)) {
-        k.gradientHit.store(x, y,
+        k.gradientHit.store(x / 3u, y / 3u,
                             glm::uvec4(primary.hit() ? primary.instance : kInvalidId, primary.primitive,
                                        floatBits(primary.u), floatBits(primary.v)));
-        k.gradientLum.store(x, y, luminance(acc.color()));
+        k.gradientLum.store(x / 3u, y / 3u, luminance(acc.color()));
     }
 }
 
@@ -196,7 +196,7 @@ struct GradientReplay {
 LOOM_HD inline uint32_t replayGradient(const FrameKernel& k, const GradientReplay& g, uint32_t bx, uint32_t by) {
     const uint32_t w = k.width, h = k.height;
     const glm::uvec2 q = gradientPixel(bx, by, g.prevIndex, w, h);
-    const glm::uvec4 e = g.prevHits[size_t(q.y) * g.prevHitsPitch + q.x];
+    const glm::uvec4 e = g.prevHits[size_t(by) * g.prevHitsPitch + bx];
     uint32_t rays = 0;
     glm::vec2 value(0.f);
     if (e.x < k.scene.instanceCount && e.y < k.scene.meshes[k.scene.instances[e.x].mesh].triangleCount) {
@@ -214,7 +214,7 @@ LOOM_HD inline uint32_t replayGradient(const FrameKernel& k, const GradientRepla
             rays += r.rays;
             acc.add(r);
         }
-        value = glm::vec2(luminance(acc.color()), g.prevLum[size_t(q.y) * g.prevLumPitch + q.x]);
+        value = glm::vec2(luminance(acc.color()), g.prevLum[size_t(by) * g.prevLumPitch + bx]);
     }
     const uint32_t x1 = (bx + 1) * 3u < w ? (bx + 1) * 3u : w, y1 = (by + 1) * 3u < h ? (by + 1) * 3u : h;
     for (uint32_t y = by * 3u; y < y1; ++y)

@@ -468,3 +468,30 @@ TEST(GraphPlanner, InPlaceHistoryIsOneTexture) {
     Error e = expectError([&] { (void)plan({{"A", {"out:x", "int-in-place:scratch"}}}, {}, {"A.x"}); });
     EXPECT_TRUE(contains(e.what(), "inPlace on history fields only")) << e.what();
 }
+
+// A field of one texel per block covers every pixel of the frame, a partial block at the right and bottom edges
+// included: ceil(size / block), never 0.
+TEST(Reflection, PerBlockFieldsCoverEveryPixel) {
+    Reflection r;
+    r.history("blocks", Format::RGBA32U).perBlock(3, 3);
+    r.output("tiles", Format::R32U).perBlock(8, 4);
+    uint32_t w = 0, h = 0;
+    const FieldDesc& blocks = r.fields()[0];
+    const FieldDesc& tiles = r.fields()[1];
+    for (uint32_t size : {1u, 2u, 3u, 4u, 8u, 9u, 10u, 719u, 720u, 1280u, 1281u}) {
+        blocks.resolveSize(size, size + 1, w, h);
+        EXPECT_EQ(w, (size + 2) / 3) << size;
+        EXPECT_EQ(h, (size + 3) / 3) << size;
+        EXPECT_GE(w * 3, size);
+        EXPECT_LT((w - 1) * 3, size);
+        tiles.resolveSize(size, size, w, h);
+        EXPECT_EQ(w, (size + 7) / 8) << size;
+        EXPECT_EQ(h, (size + 3) / 4) << size;
+    }
+    // A block of 0 is taken as 1: the frame size.
+    Reflection zero;
+    zero.output("same", Format::R32F).perBlock(0, 0);
+    zero.fields()[0].resolveSize(17, 5, w, h);
+    EXPECT_EQ(w, 17u);
+    EXPECT_EQ(h, 5u);
+}

@@ -33,6 +33,10 @@ void FieldDesc::resolveSize(uint32_t frameWidth, uint32_t frameHeight, uint32_t&
             h = std::max<uint32_t>(1, uint32_t(std::lround(frameHeight * double(scaleY))));
             break;
         case SizeMode::Fixed: w = fixedWidth; h = fixedHeight; break;
+        case SizeMode::Blocks:
+            w = std::max<uint32_t>(1, uint32_t((uint64_t(frameWidth) + blockWidth - 1) / blockWidth));
+            h = std::max<uint32_t>(1, uint32_t((uint64_t(frameHeight) + blockHeight - 1) / blockHeight));
+            break;
     }
 }
 

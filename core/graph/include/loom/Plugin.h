@@ -14,7 +14,7 @@
 /// Bumped whenever RenderPass, PassContext or the registrar change layout (4: ParamDecl::role; 5: FieldDesc::role;
 /// 6: RenderPass::skippedWork; 7: PassContext::inputParamsChanged; 8: CompileInfo::readOutputs; 9: devices:
 /// RenderPass::runsOn, PassContext::device, Texture residence; 10: FieldDesc::inPlace).
-#define LOOM_PLUGIN_ABI_VERSION 10
+#define LOOM_PLUGIN_ABI_VERSION 11
 
 #if defined(_WIN32)
 #define LOOM_PLUGIN_EXPORT extern "C" __declspec(dllexport)

@@ -1,6 +1,7 @@
 #pragma once
 // What a pass declares about its fields: inputs, outputs, transient scratch
 // and history, with formats and sizes.
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@ enum class SizeMode : uint8_t {
     Frame,  ///< the frame size (default)
     Scale,  ///< the frame size times (scaleX, scaleY), rounded, at least 1
     Fixed,  ///< (fixedWidth, fixedHeight)
+    Blocks, ///< one texel per blockWidth x blockHeight block of the frame: the frame size divided, rounded up
 };
 
 /// A standard meaning a field can declare, so a tool that drives graphs it does not know (`loom bench`) asks for
@@ -43,6 +45,7 @@ struct FieldDesc {
     SizeMode sizeMode = SizeMode::Frame;
     float scaleX = 1.f, scaleY = 1.f;
     uint32_t fixedWidth = 0, fixedHeight = 0;
+    uint32_t blockWidth = 1, blockHeight = 1;
     std::string doc;
     FieldRole role = FieldRole::None;  ///< the standard meaning it declares, if any
     /// History only: the pass updates each texel in place from that texel's last value (it reads prev(x, y) before
@@ -61,6 +64,12 @@ public:
     FieldBuilder& optional(bool v = true) { mField.optional = v; return *this; }
     FieldBuilder& scaled(float sx, float sy) {
         mField.sizeMode = SizeMode::Scale; mField.scaleX = sx; mField.scaleY = sy; return *this;
+    }
+    /// One texel per bw x bh block of the frame (a block's sample, a tile's bits): ceil(width / bw) x
+    /// ceil(height / bh).
+    FieldBuilder& perBlock(uint32_t bw, uint32_t bh) {
+        mField.sizeMode = SizeMode::Blocks; mField.blockWidth = std::max(1u, bw); mField.blockHeight = std::max(1u, bh);
+        return *this;
     }
     FieldBuilder& fixedSize(uint32_t w, uint32_t h) {
         mField.sizeMode = SizeMode::Fixed; mField.fixedWidth = w; mField.fixedHeight = h; return *this;
