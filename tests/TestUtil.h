@@ -129,6 +129,22 @@ inline bool sameBits(const Texture& a, const Texture& b) {
     return true;
 }
 
+/// Expects each field of `a` named "<prefix>..." (the graph's transfer copies aside) to hold the same bits in `b`,
+/// the same graph run elsewhere (another device, thread count); returns how many fields it compared.
+inline size_t expectSameFields(const RenderGraph& a, const RenderGraph& b, const std::string& prefix,
+                               const std::string& what) {
+    size_t fields = 0;
+    for (const ResourceInfo& r : a.plan().resources) {
+        if (r.name.rfind(prefix, 0) != 0 || r.name.find(' ') != std::string::npos) continue;
+        const Texture* x = a.fieldTexture(r.name);
+        const Texture* y = b.fieldTexture(r.name);
+        EXPECT_TRUE(x && y) << r.name << " " << what;
+        if (x && y) EXPECT_TRUE(sameBits(*x, *y)) << r.name << " " << what;
+        ++fields;
+    }
+    return fields;
+}
+
 /// A deterministic pseudo-random value in [0, 1) from three integers (e.g. frame, x, y).
 inline float hash01(uint64_t a, uint32_t b, uint32_t c) {
     uint64_t v = a * 0x9E3779B97F4A7C15ull ^ (uint64_t(b) << 32 | c);

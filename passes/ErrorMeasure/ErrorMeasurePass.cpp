@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
+#include "ErrorMeasureDevice.h"
+#include "ErrorMeasureKernels.h"
 #include "loom/Error.h"
 #include "loom/Metrics.h"
 #include "loom/Parallel.h"
@@ -115,20 +118,65 @@ void ErrorMeasurePass::resetHistory() {
     mCounts.fill(0);
 }
 
+bool ErrorMeasurePass::runsOn(DeviceKind device) const {
+    return device == DeviceKind::Cpu || errormeasure::deviceRuns(device);
+}
+
+MetricValue ErrorMeasurePass::measureOnDevice(DeviceKind device, Metric m, const Texture& src, const Texture& ref,
+                                              Texture* error) {
+    using namespace errormeasure;
+    switch (m) {
+        case Metric::RelMSE: {
+            const MetricSums s = relMseOnDevice(device, src, ref, error);
+            return {cappedMetricMean(s), s.nonFinite};
+        }
+        case Metric::Smape: {
+            const MetricSums s = smapeOnDevice(device, src, ref, error);
+            return {metricMean(s), s.nonFinite};
+        }
+        case Metric::Psnr: {
+            if (mToneMapTable.empty() || mToneMapTable.residence() != device)
+                mToneMapTable = uploadToneMapTable(device);
+            const MetricSums s = psnrOnDevice(device, mToneMapTable, src, ref, error);
+            return {psnrOfSums(s), s.nonFinite};
+        }
+        case Metric::Ssim:
+        case Metric::Flip:
+            break;
+    }
+    // SSIM and FLIP run their CPU code (separable filters over tone-mapped planes) on host copies of src and the
+    // reference, downloaded once a frame; their error image goes back with one upload.
+    if (!mHostCopiesFresh) {
+        for (auto [host, image] : {std::pair{&mHostSrc, &src}, std::pair{&mHostRef, &ref}}) {
+            if (host->width() != image->width() || host->height() != image->height())
+                *host = Texture(image->width(), image->height(), Format::RGBA32F);
+            copyTexture(*host, *image);
+        }
+        mHostCopiesFresh = true;
+    }
+    if (error && (mHostError.width() != error->width() || mHostError.height() != error->height()))
+        mHostError = Texture(error->width(), error->height(), Format::R32F);
+    ImageView<float> errorView = error ? mHostError.view<float>() : ImageView<float>{};
+    const MetricValue v = measure(m, std::as_const(mHostSrc).view<glm::vec4>(),
+                                  std::as_const(mHostRef).view<glm::vec4>(), error ? &errorView : nullptr);
+    if (error) copyTexture(*error, mHostError);
+    return v;
+}
+
 void ErrorMeasurePass::execute(PassContext& ctx) {
+    const DeviceKind device = ctx.device();
+    const bool onDevice = device != DeviceKind::Cpu;
     const Texture& srcTex = *ctx.input(kSrc);
     const Texture& refTex = *ctx.input(kReference);
     // dst is src, except that a non-finite channel becomes 0: the metrics count such pixels (nonFinite), and no
     // output of Loom carries NaN or Inf on to the next pass.
-    {
+    if (onDevice) {
+        errormeasure::zeroNonFiniteOnDevice(device, srcTex, *ctx.output(kDst));
+    } else {
         const auto in = srcTex.view<glm::vec4>();
         const auto out = ctx.output(kDst)->view<glm::vec4>();
-        parallelForPixels(in.width, in.height, [&](uint32_t x, uint32_t y) {
-            glm::vec4 v = in.at(x, y);
-            for (int c = 0; c < 4; ++c)
-                if (!std::isfinite(v[c])) v[c] = 0.f;
-            out.at(x, y) = v;
-        });
+        parallelForPixels(in.width, in.height,
+                          [&](uint32_t x, uint32_t y) { out.at(x, y) = errormeasure::zeroNonFinite(in.at(x, y)); });
     }
     Texture* errorTex = ctx.output(kError);
 
@@ -136,9 +184,8 @@ void ErrorMeasurePass::execute(PassContext& ctx) {
     if (!mParsed || mParsedMetrics != mMetrics) parseMetrics(ctx.passName() + ".metrics");
 
     const bool historyValid = ctx.historyValid();
-    const auto src = srcTex.view<glm::vec4>();
-    const auto ref = refTex.view<glm::vec4>();
     Stats& stats = ctx.stats();
+    mHostCopiesFresh = false;
 
     if (mEnabled) {
         if (!historyValid) resetHistory();
@@ -154,17 +201,28 @@ void ErrorMeasurePass::execute(PassContext& ctx) {
 
         uint64_t nonFinite = 0;
         ImageView<float> errorView;
-        if (errorTex) errorView = errorTex->view<float>();
+        if (errorTex && !onDevice) errorView = errorTex->view<float>();
         for (int m = 0; m < kMetricCount; ++m) {
             const bool wantImage = errorTex && Metric(m) == mErrorImage;
             if (!mSelected[size_t(m)] && !wantImage) continue;
-            const MetricValue v = measure(Metric(m), src, ref, wantImage ? &errorView : nullptr);
+            const MetricValue v =
+                onDevice ? measureOnDevice(device, Metric(m), srcTex, refTex, wantImage ? errorTex : nullptr)
+                         : measure(Metric(m), srcTex.view<glm::vec4>(), refTex.view<glm::vec4>(),
+                                   wantImage ? &errorView : nullptr);
             nonFinite = std::max(nonFinite, v.nonFinite);
             if (mSelected[size_t(m)]) record(m, kMetricNames[m], v.value);
         }
         if (historyValid) {
-            const MetricValue t = temporalError(src, ctx.historyPrev(kPrevSrc).view<glm::vec4>(), ref,
-                                                ctx.historyPrev(kPrevReference).view<glm::vec4>());
+            const Texture& prevSrc = ctx.historyPrev(kPrevSrc);
+            const Texture& prevRef = ctx.historyPrev(kPrevReference);
+            MetricValue t;
+            if (onDevice) {
+                const MetricSums s = errormeasure::temporalOnDevice(device, srcTex, prevSrc, refTex, prevRef);
+                t = {cappedMetricMean(s), s.nonFinite};
+            } else {
+                t = temporalError(srcTex.view<glm::vec4>(), prevSrc.view<glm::vec4>(), refTex.view<glm::vec4>(),
+                                  prevRef.view<glm::vec4>());
+            }
             record(kMetricCount, kStatTemporal, t.value);
         }
         stats.set(kStatNonFinite, double(nonFinite));
@@ -175,12 +233,20 @@ void ErrorMeasurePass::execute(PassContext& ctx) {
         }
         stats.set(kStatMeanFrames, double(mFramesSeen > uint64_t(mWarmupFrames) ? mFramesSeen - mWarmupFrames : 0));
     } else if (errorTex) {
-        errorTex->clear();
+        if (onDevice)
+            errormeasure::clearOnDevice(device, *errorTex);
+        else
+            errorTex->clear();
     }
 
     // History is kept while disabled too, so the temporal error is right when enabled again.
-    ctx.historyCur(kPrevSrc).copyFrom(srcTex);
-    ctx.historyCur(kPrevReference).copyFrom(refTex);
+    if (onDevice) {
+        errormeasure::copyOnDevice(device, srcTex, ctx.historyCur(kPrevSrc));
+        errormeasure::copyOnDevice(device, refTex, ctx.historyCur(kPrevReference));
+    } else {
+        ctx.historyCur(kPrevSrc).copyFrom(srcTex);
+        ctx.historyCur(kPrevReference).copyFrom(refTex);
+    }
 }
 
 }  // namespace loom

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <map>
 
+#include "ImageSequenceDevice.h"
 #include "loom/Channels.h"
 #include "loom/Error.h"
 #include "loom/ExrFile.h"
@@ -462,6 +463,10 @@ void ImageSequencePass::prefetch(int64_t number, const Settings& s, const std::a
     mPending = std::move(p);
 }
 
+bool ImageSequencePass::runsOn(DeviceKind device) const {
+    return device == DeviceKind::Cpu || sequence::deviceRuns(device);
+}
+
 void ImageSequencePass::execute(PassContext& ctx) {
     const Settings s = settings();
     std::array<bool, kOutputCount> wanted{};
@@ -505,12 +510,17 @@ void ImageSequencePass::execute(PassContext& ctx) {
                 "cameras turned)",
                 ctx.passName());
     }
+    const bool onDevice = ctx.device() != DeviceKind::Cpu;
     for (int o = 0; o < kOutputCount; ++o) {
         const size_t i = size_t(o);
         Texture* out = ctx.output(kOutputs[i].name);
         if (!out) continue;
+        // On a device, the frame is read and converted on the host as on the CPU, and each output goes up once.
         if (!frame.channels[i].empty()) {
-            out->copyFrom(frame.channels[i]);
+            if (onDevice)
+                copyTexture(*out, frame.channels[i]);
+            else
+                out->copyFrom(frame.channels[i]);
             continue;
         }
         const OutputInfo& info = kOutputs[i];
@@ -550,11 +560,19 @@ void ImageSequencePass::execute(PassContext& ctx) {
                 "demodulation (textures get blurred)",
                 ctx.passName(), info.name, info.fill);
         }
-        const uint32_t components = formatInfo(out->format()).channels;
-        for (uint32_t y = 0; y < out->height(); ++y) {
-            std::byte* row = out->row(y);
-            for (uint32_t k = 0; k < out->width() * components; ++k) {
-                if (isFloatFormat(out->format())) {
+        Texture* filled = out;
+        if (onDevice) {
+            Texture& staging = mStaging[i];
+            if (staging.width() != out->width() || staging.height() != out->height() ||
+                staging.format() != out->format())
+                staging = Texture(out->width(), out->height(), out->format());
+            filled = &staging;
+        }
+        const uint32_t components = formatInfo(filled->format()).channels;
+        for (uint32_t y = 0; y < filled->height(); ++y) {
+            std::byte* row = filled->row(y);
+            for (uint32_t k = 0; k < filled->width() * components; ++k) {
+                if (isFloatFormat(filled->format())) {
                     const float v = fill;
                     std::memcpy(row + 4 * k, &v, 4);
                 } else {
@@ -563,6 +581,7 @@ void ImageSequencePass::execute(PassContext& ctx) {
                 }
             }
         }
+        if (onDevice) copyTexture(*out, *filled);
     }
     ctx.stats().set("nonFinite", double(frame.nonFinite));
     ctx.stats().set("outOfRange", double(frame.outOfRange));

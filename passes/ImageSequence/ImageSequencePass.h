@@ -18,6 +18,10 @@
 //
 // Frame k of the graph reads file number firstFrame + k. The files of the next frame are read on a background
 // thread while the graph runs the current one, so the pass itself copies memory.
+//
+// On the emulated and cuda devices (docs/KERNELS.md) the frame is read and converted on the host all the same (a
+// channel the sequence lacks is filled into a host staging texture the pass keeps), and each output is uploaded
+// once a frame (copyTexture): the values are the CPU's bit for bit.
 #include <array>
 #include <future>
 #include <memory>
@@ -84,6 +88,7 @@ public:
     void declareParams(ParamList& p) override;
     void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
+    bool runsOn(DeviceKind device) const override;
 
     /// The sources of every channel: the preset's, then the channel parameters.
     Settings settings() const;
@@ -115,6 +120,7 @@ private:
     Settings mResolvedFor;
     std::array<bool, kOutputCount> mConsumed{};  ///< read by a pass and not observed
     std::array<bool, kOutputCount> mFillWarned{};
+    std::array<Texture, kOutputCount> mStaging;  ///< on a device: the host side of a filled output
     bool mLogged = false;
     bool mNonFiniteWarned = false;
     bool mOutOfRangeWarned = false;

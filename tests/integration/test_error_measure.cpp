@@ -7,7 +7,9 @@
 #include <cstring>
 #include <functional>
 #include <glm/glm.hpp>
+#include <limits>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -279,4 +281,69 @@ TEST(ErrorMeasure, DisabledPassesSrcThroughAndReportsNothing) {
     h.run();
     EXPECT_TRUE(h.hasStat("temporal"));
     EXPECT_GT(h.stat("flip"), 0.0);
+}
+
+namespace {
+
+/// Src and Ref (FunctionSource, on the CPU) into Measure on `device`, every field observed.
+std::unique_ptr<RenderGraph> measureOn(const std::string& device, const nlohmann::json& params,
+                                       const std::vector<std::string>& outputs) {
+    auto graph = std::make_unique<RenderGraph>(Harness::describe(params, outputs), test::registryWithFunctionSource());
+    CompileOptions options;
+    options.width = 45;
+    options.height = 29;
+    options.device = device;
+    options.observe = {"Measure.*"};
+    graph->compile(options);
+    // Noise that grows with the frame, NaN and Inf here and there (in src and in the reference).
+    dynamic_cast<test::FunctionSource*>(graph->pass("Src"))->fn = [](uint64_t f, uint32_t x, uint32_t y) {
+        glm::vec4 c = 2.f * image(x, y) + glm::vec4(0.1f * float(f + 1) * hash01(f + 7, x, y));
+        if ((x + 5 * y + f) % 41 == 0) c.y = std::numeric_limits<float>::infinity();
+        if ((3 * x + y) % 53 == 0) c.w = std::numeric_limits<float>::quiet_NaN();
+        return c;
+    };
+    dynamic_cast<test::FunctionSource*>(graph->pass("Ref"))->fn = [](uint64_t f, uint32_t x, uint32_t y) {
+        glm::vec4 c = 2.f * image(x, y);
+        if (f == 1 && x == 7 && y == 3) c.x = std::numeric_limits<float>::quiet_NaN();
+        return c;
+    };
+    return graph;
+}
+
+}  // namespace
+
+// On the emulated device dst, the history, the error image and every stat equal the CPU's bit for bit, at 1 and 2
+// threads: RelMSE, SMAPE, PSNR and the temporal error run the CPU's per-pixel functions in the CPU's row order
+// (loom/MetricKernels.h); SSIM and FLIP run the CPU's code on host copies. The pass runs on emulated, its own
+// fields live there, and the graph copies only its CPU-placed sources in and the observed fields out.
+TEST(ErrorMeasure, OnEmulatedEqualsCpuBitForBit) {
+    const std::vector<nlohmann::json> cases = {
+        nlohmann::json{{"errorImage", "relMSE"}, {"warmupFrames", 1}},
+        nlohmann::json{{"errorImage", "smape"}, {"metrics", "relMSE"}},
+        nlohmann::json{{"errorImage", "psnr"}, {"metrics", "psnr,smape"}},
+        nlohmann::json{{"errorImage", "ssim"}, {"metrics", "ssim,flip"}},
+        nlohmann::json{{"errorImage", "flip"}},
+        nlohmann::json{{"errorImage", "flip"}, {"metrics", ""}, {"enabled", false}},
+    };
+    for (const nlohmann::json& params : cases) {
+        for (unsigned threads : {1u, 2u}) {
+            SCOPED_TRACE(params.dump() + " threads " + std::to_string(threads));
+            ThreadLimit limit(threads);
+            auto cpu = measureOn("cpu", params, {"Measure.dst", "Measure.error"});
+            auto emulated = measureOn("emulated", params, {"Measure.dst", "Measure.error"});
+            for (const PlacedPass& p : emulated->plan().placement)
+                EXPECT_EQ(p.device, p.name == "Measure" ? DeviceKind::Emulated : DeviceKind::Cpu) << p.name;
+            for (const TransferInfo& t : emulated->plan().transfers) {
+                if (!t.after) EXPECT_EQ(t.reason, "for Measure") << t.field;
+            }
+            for (uint64_t f = 0; f < 4; ++f) {
+                const FrameInfo frame{f, f / 30.0, nullptr, nullptr};
+                cpu->execute(frame);
+                emulated->execute(frame);
+                const size_t fields = test::expectSameFields(*cpu, *emulated, "Measure.", "frame " + std::to_string(f));
+                EXPECT_GE(fields, 4u) << "dst, error and the two history fields";
+                EXPECT_EQ(cpu->lastStats(), emulated->lastStats()) << "frame " << f;
+            }
+        }
+    }
 }

@@ -15,6 +15,7 @@
 #include "TestUtil.h"
 #include "loom/Error.h"
 #include "loom/ImageIO.h"
+#include "loom/Parallel.h"
 #include "loom/RenderGraph.h"
 
 using namespace loom;
@@ -290,4 +291,46 @@ TEST_F(ImageSequence, DumpingARequiredChannelDoesNotHideThatItIsMissing) {
     const Texture color = readImage(mDir / "out" / "Frames.color.0000.exr");
     for (uint32_t y = 0; y < uint32_t(kH); ++y)
         for (uint32_t x = 0; x < uint32_t(kW); ++x) EXPECT_EQ(color.texel(x, y, 0), 0.f);
+}
+
+// On the emulated device the frames are read and converted on the host and each output goes up once: every channel
+// equals the CPU's bit for bit, at 1 and 2 threads, and so do the stats, for a full sequence and for one whose albedo
+// is filled (the pass's host staging texture). The pass runs on emulated, so nothing it writes is copied into the
+// passes after it (SVGF, ToneMap, on emulated too); only the observed channels come back to the host.
+TEST_F(ImageSequence, OnEmulatedEqualsCpuBitForBit) {
+    const std::string full = writeBlenderSequence(3);
+    auto ch = blenderFrame(kW, kH, 1);
+    for (const char* c : {"R", "G", "B"}) ch.erase(std::string("ViewLayer.Denoising Albedo.") + c);
+    test::writeExrChannels(mDir / "noalbedo_0001.exr", kW, kH, ch);
+    test::writeExrChannels(mDir / "noalbedo_0002.exr", kW, kH, ch);
+    for (const std::string& pattern : {full, (mDir / "noalbedo_####.exr").string()}) {
+        nlohmann::json g = readJson(kSequenceGraph);
+        g["passes"][0]["params"]["path"] = pattern;
+        for (unsigned threads : {1u, 2u}) {
+            SCOPED_TRACE(pattern + " threads " + std::to_string(threads));
+            ThreadLimit limit(threads);
+            CompileOptions o;
+            o.observe = {"Frames.*"};
+            auto cpu = test::compiledGraph(g, nullptr, kW, kH, o);
+            o.device = "emulated";
+            auto emulated = test::compiledGraph(g, nullptr, kW, kH, o);
+            for (const PlacedPass& p : emulated->plan().placement) {
+                if (p.name == "Frames") EXPECT_EQ(p.device, DeviceKind::Emulated);
+            }
+            size_t uploads = 0;
+            for (const TransferInfo& t : emulated->plan().transfers) {
+                EXPECT_FALSE(!t.after && t.field.rfind("Frames.", 0) == 0) << t.field << " " << t.reason;
+                uploads += t.after ? 0 : 1;
+            }
+            EXPECT_EQ(uploads, 0u);
+            for (uint64_t f = 0; f < 2; ++f) {
+                const FrameInfo frame{f, double(f) / 24.0, nullptr, nullptr};
+                cpu->execute(frame);
+                emulated->execute(frame);
+                const size_t fields = test::expectSameFields(*cpu, *emulated, "Frames.", "frame " + std::to_string(f));
+                EXPECT_GE(fields, 6u);
+                EXPECT_EQ(cpu->lastStats().at("Frames"), emulated->lastStats().at("Frames")) << "frame " << f;
+            }
+        }
+    }
 }

@@ -10,6 +10,7 @@
 
 #include "TestUtil.h"
 #include "loom/KernelMath.h"
+#include "loom/MetricKernels.h"
 #include "loom/Metrics.h"
 #include "loom/Parallel.h"
 
@@ -375,4 +376,64 @@ TEST(Metrics, TinyAndThinImagesStayFiniteAndExact) {
         EXPECT_TRUE(std::isfinite(s) && s <= 1.0) << w << "x" << h;
         EXPECT_TRUE(std::isfinite(psnr(test, ref).value)) << w << "x" << h;
     }
+}
+
+// The scalar tone map of loom/MetricKernels.h (what PSNR's kernels call, on the CPU and on a device) gives the bits
+// of the vector path ldrToneMap: every float of [2^-12, 1] at a stride, the edges, and values outside [0, 1].
+TEST(MetricKernels, ScalarToneMapMatchesTheVectorPath) {
+    const float* table = ldrToneMapTable();
+    std::vector<float> values = {0.f, -0.f, 1.f, 2.f, -1.f, 1e30f, 1e-30f, 0.001953125f, 0.0031308f, 0.5f};
+    for (uint32_t b = floatBits(1.f / 4096.f); b <= floatBits(1.f); b += 97) values.push_back(bitsToFloat(b));
+    for (float v : values) ASSERT_EQ(floatBits(ldrToneMapWith(table, v)), floatBits(ldrToneMap(v))) << v;
+}
+
+// RelMSE, SMAPE, PSNR and the temporal error summed on the emulated device (device views of device memory, as
+// ErrorMeasure does) equal the CPU functions bit for bit, error images included, at 1 and 2 threads; the CPU
+// functions, which read host views, refuse device memory.
+TEST(MetricKernels, EmulatedSumsEqualTheCpuMetricsBitForBit) {
+    const uint32_t w = 150, h = 67;
+    Texture ref = makeImage(w, h, [](uint32_t x, uint32_t y) { return 3.f * scene(x % 96, y % 80); });
+    Texture test = withNoise(ref, 0.3f, 5);
+    auto tv = test.view<glm::vec4>();
+    tv.at(3, 4).y = std::numeric_limits<float>::quiet_NaN();
+    tv.at(140, 60).x = std::numeric_limits<float>::infinity();
+    const Texture prev = withNoise(ref, 0.2f, 9);
+    const auto upload = [](const Texture& host, Format f) {
+        Texture t = Texture::onDevice(DeviceKind::Emulated, host.width(), host.height(), f);
+        copyTexture(t, host);
+        return t;
+    };
+    const Texture dTest = upload(test, Format::RGBA32F), dRef = upload(ref, Format::RGBA32F),
+                  dPrev = upload(prev, Format::RGBA32F);
+    const Texture hostTable = Texture::wrap(reinterpret_cast<std::byte*>(const_cast<float*>(ldrToneMapTable())),
+                                            kOetfTableSize, 1, Format::R32F);
+    const Texture dTable = upload(hostTable, Format::R32F);
+    const auto t = dTest.deviceView<glm::vec4>(), r = dRef.deviceView<glm::vec4>(), p = dPrev.deviceView<glm::vec4>();
+    for (unsigned threads : {1u, 2u}) {
+        SCOPED_TRACE(threads);
+        ThreadLimit limit(threads);
+        Texture cpuMap(w, h, Format::R32F), deviceMap = Texture::onDevice(DeviceKind::Emulated, w, h, Format::R32F);
+        Texture downloaded(w, h, Format::R32F);
+        const auto expectSame = [&](MetricValue cpu, MetricSums device, double value, const char* what) {
+            SCOPED_TRACE(what);
+            EXPECT_EQ(bits(cpu.value), bits(value));
+            EXPECT_EQ(cpu.nonFinite, device.nonFinite);
+            copyTexture(downloaded, deviceMap);
+            EXPECT_TRUE(downloaded.samePixels(cpuMap));
+        };
+        expectSame(relMSE(test, ref, &cpuMap), relMseSums(DeviceKind::Emulated, t, r, deviceMap.deviceView<float>()),
+                   cappedMetricMean(relMseSums(DeviceKind::Emulated, t, r, {})), "relMSE");
+        expectSame(smape(test, ref, &cpuMap), smapeSums(DeviceKind::Emulated, t, r, deviceMap.deviceView<float>()),
+                   metricMean(smapeSums(DeviceKind::Emulated, t, r, {})), "smape");
+        const float* table = dTable.deviceView<float>().data;
+        expectSame(psnr(test, ref, &cpuMap), psnrSums(DeviceKind::Emulated, table, t, r, deviceMap.deviceView<float>()),
+                   psnrOfSums(psnrSums(DeviceKind::Emulated, table, t, r, {})), "psnr");
+        const MetricValue cpuTemporal = temporalError(test, prev, ref, prev);
+        const MetricSums deviceTemporal = temporalSums(DeviceKind::Emulated, t, p, r, p);
+        EXPECT_EQ(bits(cpuTemporal.value), bits(cappedMetricMean(deviceTemporal)));
+        EXPECT_EQ(cpuTemporal.nonFinite, deviceTemporal.nonFinite);
+        EXPECT_EQ(cpuTemporal.nonFinite, 2u);
+    }
+    EXPECT_THROW(relMSE(dTest, dRef), Error);
+    EXPECT_THROW(psnr(dTest, ref), Error);
 }

@@ -1,10 +1,12 @@
 // Image error metrics (conventions in Metrics.h and docs/METRICS.md).
 //
-// Structure: every metric runs over loom::parallelFor2D tiles. Scalar metrics return one partial
-// sum per tile (double), combined afterwards in tile order, so the value does not depend on the
-// thread count. The filtered metrics (SSIM, FLIP) work on planar float copies of the tone-mapped
-// inputs and run each tile's separable filters in tile-local scratch: a horizontal pass over the
-// tile's rows plus the vertical halo, then a vertical pass fused with the per-pixel formula.
+// Structure: RelMSE, SMAPE, PSNR and the temporal error are the per-pixel terms of loom/MetricKernels.h summed by
+// reduceRows on the CPU (each row left to right, then the rows top to bottom): the functions and the order ErrorMeasure
+// uses on a device, so the two agree bit for bit. The other metrics run over loom::parallelFor2D tiles and return one
+// partial sum per tile (double), combined afterwards in tile order. Neither depends on the thread count. The filtered
+// metrics (SSIM, FLIP) work on planar float copies of the tone-mapped inputs and run each tile's separable filters in
+// tile-local scratch: a horizontal pass over the tile's rows plus the vertical halo, then a vertical pass fused with the
+// per-pixel formula.
 #include "loom/Metrics.h"
 
 #include <algorithm>
@@ -18,6 +20,7 @@
 #include "hwy/highway.h"
 #include "loom/Error.h"
 #include "loom/KernelMath.h"
+#include "loom/MetricKernels.h"
 #include "loom/Parallel.h"
 
 namespace loom {
@@ -118,17 +121,13 @@ double meanOf(const Sums& s, double perPixel) {
 // top 8 mantissa bits (9 octaves down to 2^-9, below which the OETF is linear), linearly
 // interpolated: the error of the interpolation is below 4e-7 (h^2/8 times the curvature).
 
-constexpr int kOetfOctaves = 9;
-constexpr int kOetfMantissaBits = 8;
-constexpr int kOetfPerOctave = 1 << kOetfMantissaBits;
-
 double srgbOetfExact(double x) {
     return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
 }
 
 struct OetfTable {
     // + 2: x = 1 reads index 9 * 256 and the one after it.
-    alignas(64) std::array<float, kOetfOctaves * kOetfPerOctave + 2> v{};
+    alignas(64) std::array<float, kOetfTableSize> v{};
     OetfTable() {
         for (int i = 0; i <= kOetfOctaves * kOetfPerOctave; ++i) {
             const int octave = i / kOetfPerOctave, m = i % kOetfPerOctave;
@@ -175,33 +174,6 @@ void toneMapRow(float* values, int n) {
 inline float toneMapFinite(float x) {
     toneMapRow(&x, 1);
     return x;
-}
-
-/// Applies the non-finite rule to one channel pair of [0, 1] values (test t, reference r), given
-/// whether each was finite. Returns true when either was not.
-inline bool worstCase(float& t, float& r, bool tFinite, bool rFinite) {
-    if (tFinite && rFinite) return false;
-    if (!tFinite && !rFinite) {
-        r = 0.0f;
-        t = 1.0f;
-    } else if (!tFinite) {
-        t = r < 0.5f ? 1.0f : 0.0f;
-    } else {
-        r = t < 0.5f ? 1.0f : 0.0f;
-    }
-    return true;
-}
-
-/// Tone-mapped R, G, B of a pixel pair with the non-finite rule; returns true for a non-finite pixel.
-inline bool toneMapPair(const glm::vec4& test, const glm::vec4& ref, float t[3], float r[3]) {
-    bool bad = false;
-    for (int c = 0; c < 3; ++c) {
-        const bool tf = std::isfinite(test[c]), rf = std::isfinite(ref[c]);
-        t[c] = tf ? toneMapFinite(test[c]) : 0.0f;
-        r[c] = rf ? toneMapFinite(ref[c]) : 0.0f;
-        bad |= worstCase(t[c], r[c], tf, rf);
-    }
-    return bad;
 }
 
 /// Planar copies of the tone-mapped R, G, B of both images (test planes 0..2, reference 3..5),
@@ -256,7 +228,7 @@ void makeLdrPlanes(const MetricImage& test, const MetricImage& ref, bool linear,
                 if (finite3(tr[x]) && finite3(rr[x])) continue;
                 const size_t i = rowBase + x;
                 float t[3], r[3];
-                toneMapPair(tr[x], rr[x], t, r);
+                ldrPair(kOetf.v.data(), tr[x], rr[x], t, r);
                 if (linear)  // finite channels keep their exact linear value; replaced ones are 0 or 1 in both
                     for (int c = 0; c < 3; ++c) {
                         if (std::isfinite(tr[x][c])) t[c] = std::clamp(tr[x][c], 0.0f, 1.0f);
@@ -347,45 +319,11 @@ inline void convolveColumn(const float* rows, size_t stride, const float* w, int
 // ---------------------------------------------------------------------------------------------
 // HDR metrics
 
-namespace {
-/// The sum over R, G, B of a pixel's RelMSE terms (x - y)^2 / (y^2 + eps).
-inline double relMsePixelSum(const glm::vec4& t, const glm::vec4& r) {
-    double px = 0.0;
-    for (int c = 0; c < 3; ++c) {
-        const double d = double(t[c]) - double(r[c]);
-        const double yv = r[c];
-        px += d * d / (yv * yv + kRelMseEpsilon);
-    }
-    return px;
-}
-}  // namespace
-
 MetricValue relMSE(MetricImage test, MetricImage ref, ImageView<float>* errorImage) {
     checkSameSize(test, ref, "relMSE");
     checkMap(errorImage, test, "relMSE");
-    const Sums s = reduceTiles(test.width, test.height, 64, [&](const Tile& tile) {
-        Sums part;
-        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
-            const glm::vec4* tr = test.row(y);
-            const glm::vec4* rr = ref.row(y);
-            float* mr = errorImage ? errorImage->row(y) : nullptr;
-            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
-                if (!finite3(tr[x]) || !finite3(rr[x])) {
-                    ++part.nonFinite;
-                    if (mr) mr[x] = 0.0f;
-                    continue;
-                }
-                const double px = relMsePixelSum(tr[x], rr[x]);
-                part.sum += px;
-                ++part.count;
-                if (mr) mr[x] = float(px / 3.0);
-            }
-        }
-        return part;
-    });
-    // A huge but finite term could still overflow to Inf: cap at the largest double.
-    const double v = std::min(meanOf(s, 3.0), std::numeric_limits<double>::max());
-    return {v, s.nonFinite};
+    const MetricSums s = relMseSums(DeviceKind::Cpu, test, ref, errorImage ? *errorImage : ImageView<float>{});
+    return {cappedMetricMean(s), s.nonFinite};
 }
 
 MetricValue trimmedRelMSE(MetricImage test, MetricImage ref, double dropFraction) {
@@ -445,37 +383,16 @@ MetricValue trimmedRelMSE(MetricImage test, MetricImage ref, double dropFraction
 MetricValue smape(MetricImage test, MetricImage ref, ImageView<float>* errorImage) {
     checkSameSize(test, ref, "smape");
     checkMap(errorImage, test, "smape");
-    const Sums s = reduceTiles(test.width, test.height, 64, [&](const Tile& tile) {
-        Sums part;
-        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
-            const glm::vec4* tr = test.row(y);
-            const glm::vec4* rr = ref.row(y);
-            float* mr = errorImage ? errorImage->row(y) : nullptr;
-            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
-                double px = 0.0;
-                bool bad = false;
-                for (int c = 0; c < 3; ++c) {
-                    const double a = tr[x][c], b = rr[x][c];
-                    if (!std::isfinite(a) || !std::isfinite(b)) {
-                        px += 1.0;
-                        bad = true;
-                        continue;
-                    }
-                    px += std::abs(a - b) / (std::abs(a) + std::abs(b) + kSmapeEpsilon);
-                }
-                part.sum += px;
-                ++part.count;
-                part.nonFinite += bad;
-                if (mr) mr[x] = float(px / 3.0);
-            }
-        }
-        return part;
-    });
-    return {meanOf(s, 3.0), s.nonFinite};
+    const MetricSums s = smapeSums(DeviceKind::Cpu, test, ref, errorImage ? *errorImage : ImageView<float>{});
+    return {metricMean(s), s.nonFinite};
 }
 
 // ---------------------------------------------------------------------------------------------
 // LDR metrics
+
+const float* ldrToneMapTable() {
+    return kOetf.v.data();
+}
 
 float ldrToneMap(float linear) {
     return std::isfinite(linear) ? toneMapFinite(linear) : 0.0f;
@@ -484,31 +401,9 @@ float ldrToneMap(float linear) {
 MetricValue psnr(MetricImage test, MetricImage ref, ImageView<float>* errorImage) {
     checkSameSize(test, ref, "psnr");
     checkMap(errorImage, test, "psnr");
-    LdrPlanes& planes = callerPlanes();
-    makeLdrPlanes(test, ref, false, planes);
-    const size_t W = test.width;
-    Sums s = reduceTiles(test.width, test.height, 64, [&](const Tile& tile) {
-        Sums part;
-        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
-            float* mr = errorImage ? errorImage->row(y) : nullptr;
-            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
-                const size_t i = size_t(y) * W + x;
-                double px = 0.0;
-                for (int c = 0; c < 3; ++c) {
-                    const double d = double(planes.plane[c][i]) - double(planes.plane[3 + c][i]);
-                    px += d * d;
-                }
-                part.sum += px;
-                ++part.count;
-                if (mr) mr[x] = float(px / 3.0);
-            }
-        }
-        return part;
-    });
-    s.nonFinite = planes.nonFiniteCount;
-    const double mse = meanOf(s, 3.0);
-    const double v = mse > 0.0 ? std::min(10.0 * std::log10(1.0 / mse), kPsnrCap) : kPsnrCap;
-    return {v, s.nonFinite};
+    const MetricSums s =
+        psnrSums(DeviceKind::Cpu, kOetf.v.data(), test, ref, errorImage ? *errorImage : ImageView<float>{});
+    return {psnrOfSums(s), s.nonFinite};
 }
 
 namespace {
@@ -1006,23 +901,8 @@ MetricValue temporalError(MetricImage test, MetricImage testPrev, MetricImage re
     checkSameSize(test, testPrev, "temporalError");
     checkSameSize(test, ref, "temporalError");
     checkSameSize(test, refPrev, "temporalError");
-    const Sums s = reduceTiles(test.width, test.height, 64, [&](const Tile& tile) {
-        Sums part;
-        for (uint32_t y = tile.y0; y < tile.y1; ++y) {
-            const glm::vec4 *a = test.row(y), *b = testPrev.row(y), *c = ref.row(y), *d = refPrev.row(y);
-            for (uint32_t x = tile.x0; x < tile.x1; ++x) {
-                if (!finite3(a[x]) || !finite3(b[x]) || !finite3(c[x]) || !finite3(d[x])) {
-                    ++part.nonFinite;
-                    continue;
-                }
-                for (int k = 0; k < 3; ++k)
-                    part.sum += std::abs((double(a[x][k]) - double(b[x][k])) - (double(c[x][k]) - double(d[x][k])));
-                ++part.count;
-            }
-        }
-        return part;
-    });
-    return {std::min(meanOf(s, 3.0), std::numeric_limits<double>::max()), s.nonFinite};
+    const MetricSums s = temporalSums(DeviceKind::Cpu, test, testPrev, ref, refPrev);
+    return {cappedMetricMean(s), s.nonFinite};
 }
 
 void FlickerAccumulator::add(MetricImage frame) {

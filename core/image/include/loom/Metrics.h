@@ -6,8 +6,10 @@
 // - Inputs are two images of the same size, RGBA32F (ImageView<const glm::vec4> or a Texture of
 //   format RGBA32F). Only R, G and B are read; alpha is ignored. `test` is the image under
 //   evaluation, `ref` the reference. A size or format mismatch throws loom::Error (bad input).
-// - Results are deterministic for any thread count: per-tile partial sums are kept in double and
-//   combined in a fixed tile order (loom::parallelFor2D tiles are fixed by the image size).
+// - Results are deterministic for any thread count: partial sums are kept in double and combined
+//   in a fixed order: RelMSE, SMAPE, PSNR and the temporal error row by row (reduceRows, the order
+//   of every device: loom/MetricKernels.h), the others in tile order (loom::parallelFor2D tiles
+//   are fixed by the image size).
 // - Non-finite values (NaN, +-Inf) never make a metric NaN or Inf. Every result carries
 //   `nonFinite`, the number of pixels where the test or the reference image has a non-finite RGB
 //   channel. Such a pixel is handled as follows (the rule is per metric and stated there):
