@@ -88,15 +88,16 @@ void ensureWritableDir(const std::string& dir, const std::string& option) {
 }
 
 CameraPath parseCameraPath(const std::string& text, const std::string& option) {
-    static const std::regex re(R"((static|orbit|dolly)(?::([-+0-9.eE]+))?(?::([-+0-9.eE]+))?)");
+    static const std::regex re(R"((static|orbit|dolly|strafe)(?::([-+0-9.eE]+))?(?::([-+0-9.eE]+))?)");
     std::smatch m;
     if (!std::regex_match(text, m, re))
         throwBadInput(option, "'" + text + "' is not a camera path",
-                      "static, orbit[:SPEED] or dolly[:SPEED[:AMOUNT]], e.g. orbit:0.5");
+                      "static, orbit[:SPEED], dolly[:SPEED[:AMOUNT]] or strafe[:SPEED[:AMOUNT]], e.g. orbit:0.5");
     CameraPath path;
-    path.kind = m[1] == "orbit"   ? CameraPathKind::Orbit
-                : m[1] == "dolly" ? CameraPathKind::Dolly
-                                  : CameraPathKind::Static;
+    path.kind = m[1] == "orbit"    ? CameraPathKind::Orbit
+                : m[1] == "dolly"  ? CameraPathKind::Dolly
+                : m[1] == "strafe" ? CameraPathKind::Strafe
+                                   : CameraPathKind::Static;
     // Speeds as --camera-speed allows them; a dolly's amount is a fraction of the camera's distance.
     auto number = [&](const std::string& s, const char* what, float limit) {
         const std::optional<float> v = parseFiniteFloat(s);
@@ -109,8 +110,9 @@ CameraPath parseCameraPath(const std::string& text, const std::string& option) {
     };
     if (m[2].matched) path.speed = number(m[2], "speed", 1000.f);
     if (m[3].matched) {
-        if (path.kind != CameraPathKind::Dolly)
-            throwBadInput(option, "only dolly takes an amount", "orbit[:SPEED] or dolly[:SPEED[:AMOUNT]]");
+        if (path.kind != CameraPathKind::Dolly && path.kind != CameraPathKind::Strafe)
+            throwBadInput(option, "only dolly and strafe take an amount",
+                          "orbit[:SPEED], dolly[:SPEED[:AMOUNT]] or strafe[:SPEED[:AMOUNT]]");
         path.amount = number(m[3], "amount", 100.f);
     }
     return path;

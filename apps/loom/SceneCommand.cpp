@@ -82,7 +82,7 @@ void addSceneCommand(CLI::App& app) {
     info->add_option("file", o->file, "scene file (.gltf or .glb)")->required();
     info->add_option("--camera-path", o->cameraPath,
                      "procedural camera motion for scenes without an animated camera: "
-                     "static, orbit[:SPEED rad/s] or dolly[:SPEED[:AMOUNT]]")
+                     "static, orbit[:SPEED rad/s], dolly[:SPEED[:AMOUNT]] or strafe[:SPEED[:AMOUNT]]")
         ->capture_default_str();
     info->add_option("--time", o->time, "time in seconds at which the camera and bounds are shown")
         ->capture_default_str();

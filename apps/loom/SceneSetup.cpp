@@ -25,9 +25,9 @@ void addSceneOptions(CLI::App* cmd, SceneOptions& o) {
     cmd->add_option("--scene,-s", o.scene, "glTF 2.0 scene (.gltf or .glb)");
     cmd->add_option("--camera-path", o.cameraPath,
                     "camera motion when the scene's camera is not animated: "
-                    "static, orbit or dolly")
+                    "static, orbit, dolly (along the view) or strafe (sideways)")
         ->capture_default_str();
-    cmd->add_option("--camera-speed", o.cameraSpeed, "orbit: radians per second; dolly: cycles per second")
+    cmd->add_option("--camera-speed", o.cameraSpeed, "orbit: radians per second; dolly, strafe: phase in radians per second")
         ->capture_default_str();
     cmd->add_option("--jitter", o.jitter, "sub-pixel camera jitter: none, halton or stratified")->capture_default_str();
     cmd->add_option("--jitter-count", o.jitterCount, "period of the jitter pattern")->capture_default_str();
@@ -58,9 +58,11 @@ std::shared_ptr<Scene> loadScene(const SceneOptions& o) {
         path.kind = CameraPathKind::Orbit;
     else if (o.cameraPath == "dolly")
         path.kind = CameraPathKind::Dolly;
+    else if (o.cameraPath == "strafe")
+        path.kind = CameraPathKind::Strafe;
     else
-        throwBadInput("--camera-path", "unknown camera path '" + o.cameraPath + "'", "static, orbit or dolly",
-                      didYouMean(o.cameraPath, {"static", "orbit", "dolly"}, "paths"));
+        throwBadInput("--camera-path", "unknown camera path '" + o.cameraPath + "'", "static, orbit, dolly or strafe",
+                      didYouMean(o.cameraPath, {"static", "orbit", "dolly", "strafe"}, "paths"));
     if (!std::isfinite(o.cameraSpeed) || std::fabs(o.cameraSpeed) > 1000.f)
         throwBadInput("--camera-speed", fmt::format("camera speed {} is out of range", o.cameraSpeed),
                       "a value in [-1000, 1000]");

@@ -36,9 +36,12 @@ inline constexpr float kMaxIllumination = 1e16f;
 inline constexpr float kMaxAlbedo = 1e6f;
 /// History shorter than this uses the spatial variance estimate (paper section 4.2).
 inline constexpr float kSpatialVarianceFrames = 4.f;
-/// Disocclusion tests (Falcor's isReprjValid, depth relative to the depth derivative): a previous tap is rejected
-/// when |z - zPrev| / (dz + kDepthEpsilon * z) > kDepthThreshold, dot(n, nPrev) < kNormalThreshold, or its mesh id
-/// differs. The depth epsilon is relative to z so the test does not depend on the scene's units.
+/// Disocclusion tests (after Falcor's isReprjValid, depth relative to the depth derivative): a previous tap is
+/// rejected when |zExpected - zPrev| / (dz + kDepthEpsilon * z) > kDepthThreshold, dot(n, nPrev) < kNormalThreshold,
+/// or its mesh id differs. zExpected is the depth the pixel's surface point had in last frame's camera
+/// (expectedPrevDepth), not this frame's depth: a camera moving towards a wall changes every depth by more than the
+/// tolerance of a surface facing it. The depth epsilon is relative to z so the test does not depend on the scene's
+/// units.
 inline constexpr float kDepthThreshold = 10.f;
 inline constexpr float kDepthEpsilon = 1e-3f;
 inline constexpr float kNormalThreshold = 0.9f;
@@ -78,7 +81,18 @@ struct TemporalParams {
     /// and the history is stored where last frame sampled, so a point that moved by mvec is found at
     /// x + mvec size + jitterDelta on last frame's grid (mvec is jitter-free).
     glm::vec2 jitterDelta{0.f};
+    /// The depth in last frame's camera of the point at view depth z behind pixel (x, y), for a static point:
+    /// prevDepth.x + z * ((prevDepth.y + prevDepth.z * x) + prevDepth.w * y) (expectedPrevDepthPlane). The default
+    /// is z itself (no camera).
+    glm::vec4 prevDepth{0.f, 1.f, 0.f, 0.f};
 };
+
+/// TemporalParams::prevDepth at pixel (x, y) for view depth z, in this order of operations (TemporalSimd.cpp does
+/// the same, so both round alike).
+LOOM_HD inline float expectedPrevDepth(const TemporalParams& p, uint32_t x, uint32_t y, float z) {
+    const float scale = (p.prevDepth.y + p.prevDepth.z * float(x)) + p.prevDepth.w * float(y);
+    return p.prevDepth.x + z * scale;
+}
 
 /// varianceFloor for colour blend factor alpha: the squared weights of an exponential average sum to
 /// alpha / (2 - alpha) in its steady state.
@@ -107,9 +121,10 @@ struct TemporalViews {
     ImageView<uint32_t> curMeshId;
 };
 
-/// The disocclusion test of one previous-frame tap (Falcor's isReprjValid).
-LOOM_HD inline bool reprojectionTapValid(const TemporalViews& v, int px, int py, float z, float dz, const glm::vec3& n,
-                                         uint32_t mesh) {
+/// The disocclusion test of one previous-frame tap (after Falcor's isReprjValid): zExpected is expectedPrevDepth of
+/// the pixel, z and dz its depth and depth derivative now.
+LOOM_HD inline bool reprojectionTapValid(const TemporalViews& v, int px, int py, float zExpected, float z, float dz,
+                                         const glm::vec3& n, uint32_t mesh) {
     if (px < 0 || py < 0 || px >= int(v.color.width) || py >= int(v.color.height)) return false;
     const uint32_t qx = uint32_t(px), qy = uint32_t(py);
     // History length 0: no history there (first frame, reset, or SVGF was disabled).
@@ -117,7 +132,7 @@ LOOM_HD inline bool reprojectionTapValid(const TemporalViews& v, int px, int py,
     const float zPrev = v.prevLinearZ.at(qx, qy).x;
     if (zPrev < 0.f) return false;
     if (v.meshId.data && v.prevMeshId.at(qx, qy) != mesh) return false;
-    if (fabsf(z - zPrev) > kDepthThreshold * (dz + kDepthEpsilon * z)) return false;
+    if (fabsf(zExpected - zPrev) > kDepthThreshold * (dz + kDepthEpsilon * z)) return false;
     if (glm::dot(n, glm::vec3(v.prevNormW.at(qx, qy))) < kNormalThreshold) return false;
     return true;
 }
@@ -168,10 +183,12 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, const TemporalParam
     const int x0 = int(fx0), y0 = int(fy0);
     const float fx = px - fx0, fy = py - fy0;
     const float bw[4] = {(1.f - fx) * (1.f - fy), fx * (1.f - fy), (1.f - fx) * fy, fx * fy};
+    const float zExpected = expectedPrevDepth(p, x, y, z);
     float sumW = 0.f;
     bool tapValid[4];
     for (int k = 0; k < 4; ++k) {
-        tapValid[k] = bw[k] > 0.f && reprojectionTapValid(v, x0 + (k & 1), y0 + (k >> 1), z, dz, n, mesh);
+        tapValid[k] =
+            bw[k] > 0.f && reprojectionTapValid(v, x0 + (k & 1), y0 + (k >> 1), zExpected, z, dz, n, mesh);
         if (tapValid[k]) sumW += bw[k];
     }
     if (sumW >= kMinBilinearWeight) {
@@ -183,7 +200,7 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, const TemporalParam
         sumW = 0.f;
         for (int j = -1; j <= 1; ++j)
             for (int i = -1; i <= 1; ++i)
-                if (reprojectionTapValid(v, cx + i, cy + j, z, dz, n, mesh)) {
+                if (reprojectionTapValid(v, cx + i, cy + j, zExpected, z, dz, n, mesh)) {
                     addTap(v, r, uint32_t(cx + i), uint32_t(cy + j), 1.f);
                     sumW += 1.f;
                 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <string>
 
 #include "SVGFDevice.h"
@@ -118,6 +119,26 @@ bool splitSignals(Connected connected) {
 template <class Connected>
 bool sharedPrevGuides(Connected connected) {
     return connected(kLinearZPrev) && connected(kNormWPrev) && (!connected(kMeshId) || connected(kMeshIdPrev));
+}
+
+/// TemporalParams::prevDepth of a pinhole camera for a frame of w x h. The sample of pixel (x, y) lies along
+/// d = forward + right nx tan(fov / 2) aspect + up ny tan(fov / 2), with nx = 2 (x + 0.5 + jitter.x) / w - 1 and
+/// ny = 1 - 2 (y + 0.5 + jitter.y) / h (cameraRayDir), so dot(d, forward) = 1 and the point at view depth z is
+/// origin + z d. Its depth in last frame's camera, dot(origin + z d - prevOrigin, prevForward), is affine in z,
+/// and z's factor affine in x and y.
+glm::vec4 expectedPrevDepthPlane(const Camera& c, uint32_t w, uint32_t h) {
+    const glm::dvec3 origin(c.position()), forward(c.forward()), right(c.right()), up(c.up());
+    const glm::dvec3 prevOrigin(c.prevWorld[3]);
+    const glm::dvec3 prevForward = -glm::normalize(glm::dvec3(c.prevWorld[2]));
+    const double t = std::tan(0.5 * double(c.fovY)), a = double(c.aspect);
+    const double rf = glm::dot(right, prevForward) * t * a, uf = glm::dot(up, prevForward) * t;
+    const double cx = 2.0 * rf / double(w), cy = -2.0 * uf / double(h);
+    const double c0 = glm::dot(forward, prevForward) + (2.0 * (0.5 + double(c.jitter.x)) / double(w) - 1.0) * rf +
+                      (1.0 - 2.0 * (0.5 + double(c.jitter.y)) / double(h)) * uf;
+    const glm::vec4 plane(float(glm::dot(origin - prevOrigin, prevForward)), float(c0), float(cx), float(cy));
+    // A camera matrix that is not finite keeps the plain test (the camera's own checks report it).
+    return isFinite(plane.x) && isFinite(plane.y) && isFinite(plane.z) && isFinite(plane.w) ? plane
+                                                                                          : TemporalParams{}.prevDepth;
 }
 
 }  // namespace
@@ -422,7 +443,10 @@ void SVGFPass::bindFrame(Frame& f) {
     TemporalParams& tp = f.tp;
     tp = mTemporalParams;  // alpha, momentsAlpha, maxHistory; the rest is this frame's
     tp.varianceFloor = mMeanVariance ? meanVarianceFloor(tp.alpha) : 1.f;
-    if (const Camera* camera = ctx.camera()) tp.jitterDelta = camera->jitter - camera->prevJitter;
+    if (const Camera* camera = ctx.camera()) {
+        tp.jitterDelta = camera->jitter - camera->prevJitter;
+        tp.prevDepth = expectedPrevDepthPlane(*camera, f.w, f.h);
+    }
     // The graph zeroes the prev side after a reset (length 0: no history); the check is only a shortcut.
     tp.temporal = mTemporal && ctx.historyValid();
     tp.split = f.split;

@@ -249,7 +249,12 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
         const V fx = hn::Sub(px, fx0), fy = hn::Sub(py, fy0);
         const V bw[4] = {hn::Mul(hn::Sub(one, fx), hn::Sub(one, fy)), hn::Mul(fx, hn::Sub(one, fy)),
                          hn::Mul(hn::Sub(one, fx), fy), hn::Mul(fx, fy)};
-        // reprojectionTapValid, with the reference's comparisons (NaN guides pass the tests it lets them pass).
+        // reprojectionTapValid, with the reference's comparisons (NaN guides pass the tests it lets them pass), against
+        // expectedPrevDepth in its order of operations.
+        const V zExpected = hn::Add(
+            hn::Set(d, p.prevDepth.x),
+            hn::Mul(z, hn::Add(hn::Add(hn::Set(d, p.prevDepth.y), hn::Mul(hn::Set(d, p.prevDepth.z), xf)),
+                               hn::Mul(hn::Set(d, p.prevDepth.w), yf))));
         const V depthTolerance =
             hn::Mul(hn::Set(d, kDepthThreshold), hn::Add(dz, hn::Mul(hn::Set(d, kDepthEpsilon), z)));
         M tapValid[4];
@@ -270,7 +275,7 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
                 loadTap<1>(d, f, k, v.prevMeshId, prevMesh);  // the ids' bits
                 m = hn::And(m, hn::RebindMask(d, hn::Eq(hn::BitCast(du, prevMesh[0]), mesh)));
             }
-            m = hn::AndNot(hn::Gt(hn::Abs(hn::Sub(z, zp[0])), depthTolerance), m);
+            m = hn::AndNot(hn::Gt(hn::Abs(hn::Sub(zExpected, zp[0])), depthTolerance), m);
             m = hn::AndNot(hn::Lt(dot, hn::Set(d, kNormalThreshold)), m);
             tapValid[k] = m;
             sumW = hn::Add(sumW, hn::IfThenElseZero(m, bw[k]));

@@ -939,7 +939,7 @@ TEST(SceneInCode, EmitsLightOnlyWhenSomethingDoes) {
     EXPECT_TRUE(s.emitsLight());
 }
 
-TEST_F(SceneFiles, OrbitAndDollyCameraPaths) {
+TEST_F(SceneFiles, OrbitDollyAndStrafeCameraPaths) {
     auto s = load(triangleScene());
     const glm::vec3 center = s->bounds().center();
     s->cameraPath = {CameraPathKind::Orbit, 0.5f, 0.25f};
@@ -959,6 +959,14 @@ TEST_F(SceneFiles, OrbitAndDollyCameraPaths) {
     EXPECT_NEAR(glm::length(s->camera.position() - center), 0.75f * d0, 1e-4f);
     s->update(3.f * kPi / 2.f);
     EXPECT_NEAR(glm::length(s->camera.position() - center), 1.25f * d0, 1e-4f);
+    // Strafe: along the camera's right axis (+X here) by amount * distance * sin(speed * t); the view direction and
+    // the depth of the centre's plane stay as they are.
+    s->cameraPath = {CameraPathKind::Strafe, 1.f, 0.25f};
+    s->update(kPi / 2.f);
+    expectNear(s->camera.position() - center, glm::vec3(0.25f * d0, 0, d0), 1e-4f);
+    expectNear(s->camera.forward(), glm::vec3(0, 0, -1));
+    s->update(3.f * kPi / 2.f);
+    expectNear(s->camera.position() - center, glm::vec3(-0.25f * d0, 0, d0), 1e-4f);
 }
 
 TEST_F(SceneFiles, AnimatedCameraIgnoresThePath) {

@@ -465,9 +465,12 @@ void Scene::update(double time) {
         } else {
             float distance = glm::length(glm::vec3(mCameraBase[3]) - center);
             if (!(distance > 0.f)) distance = mRestBounds.valid() ? glm::length(mRestBounds.extent()) : 1.f;
-            const glm::vec3 forward = -glm::normalize(glm::vec3(mCameraBase[2]));
+            // Dolly along the view direction, strafe along the camera's right axis.
+            const glm::vec3 axis = cameraPath.kind == CameraPathKind::Dolly
+                                       ? -glm::normalize(glm::vec3(mCameraBase[2]))
+                                       : glm::normalize(glm::vec3(mCameraBase[0]));
             const float offset = cameraPath.amount * distance * float(std::sin(phase));
-            camWorld = glm::translate(glm::mat4(1.f), forward * offset) * mCameraBase;
+            camWorld = glm::translate(glm::mat4(1.f), axis * offset) * mCameraBase;
         }
     }
     camera.prevWorld = mUpdated ? camera.world : camWorld;

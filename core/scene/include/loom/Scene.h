@@ -188,11 +188,13 @@ struct Environment {
 };
 
 /// A procedural camera motion for scenes whose camera is not animated.
-enum class CameraPathKind : uint8_t { Static, Orbit, Dolly };
+/// Orbit: around the scene's centre, about +Y. Dolly: to and fro along the view direction. Strafe: side to side
+/// along the camera's right axis (motion across the view, parallax without a change of depth).
+enum class CameraPathKind : uint8_t { Static, Orbit, Dolly, Strafe };
 struct CameraPath {
     CameraPathKind kind = CameraPathKind::Static;
-    float speed = 1.f;     ///< orbit: radians per second; dolly: fraction of the distance per second
-    float amount = 0.25f;  ///< dolly: amplitude as a fraction of the distance to the target
+    float speed = 1.f;     ///< orbit: radians per second; dolly, strafe: phase of the sine in radians per second
+    float amount = 0.25f;  ///< dolly, strafe: amplitude as a fraction of the distance to the target
 };
 
 /// What lights the scene from infinitely far away (Scene::environment).
