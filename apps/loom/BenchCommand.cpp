@@ -72,7 +72,7 @@ struct BenchOptions {
     SceneOptions scene;
     std::string device;  ///< --device: where the benchmarked graphs' passes run (references: the graphs' own)
     uint64_t frames = 32;
-    std::string size = "640x360";
+    std::string size;  ///< --size; without it (see given), the graphs' sources give the size (frameSize)
     std::vector<std::string> graphs;
     std::vector<std::string> sweeps;
     std::vector<std::string> set;
@@ -986,8 +986,7 @@ void runBench(BenchOptions o) {
     // SIGINT or SIGTERM: the frame under way finishes (its reference or brute-force image goes into the cache, where
     // the next run finds it), then the run ends without results: a partial run has no equal-error figures.
     const StopOnSignal stopOnSignal;
-    uint32_t width, height;
-    parseSize(o.size, "--size", width, height);
+    if (o.given.count("--size")) (void)frameSize(o.size, true, {}, "");  // a bad --size fails first
     const bool givenReference = !o.referenceSequence.empty();
     const bool hasScene = !o.scene.scene.empty();
     if (!hasScene && !givenReference)
@@ -1092,6 +1091,33 @@ void runBench(BenchOptions o) {
     PluginRegistry registry = makeRegistry();
     std::shared_ptr<Scene> scene = loadScene(o.scene);
 
+    // Every variant is built, configured and compiled once before anything is rendered, so a bad graph, --set or
+    // sweep value fails in seconds rather than after the reference.
+    auto configureVariant = [](const Variant& v) -> std::function<void(RenderGraph&)> {
+        if (!v.sweep) return {};
+        return [&v](RenderGraph& g) {
+            g.setParam(v.sweep->pass, v.sweep->param, parseParamValue(v.value), "--sweep " + v.sweep->text);
+        };
+    };
+    // Without --size, the frames the variants' source passes read give it (all alike), with --set and the sweep
+    // value applied as they will be.
+    uint32_t width, height;
+    {
+        std::vector<std::unique_ptr<RenderGraph>> sized;
+        std::vector<SizedGraph> asked;
+        if (!o.given.count("--size")) {
+            for (const Variant& v : vars) {
+                sized.push_back(std::make_unique<RenderGraph>(v.desc, registry));
+                applySet(*sized.back(), o.set);
+                if (const auto configure = configureVariant(v)) configure(*sized.back());
+                asked.push_back({sized.back().get(), v.desc.name + (v.sweep ? " " + v.label() : "")});
+            }
+        }
+        const glm::uvec2 size = frameSize(o.size, o.given.count("--size") > 0, asked, "640x360");
+        width = size.x;
+        height = size.y;
+    }
+
     bench::BenchInfo info;
     info.loomVersion = loom::version();
     if (hasScene) {
@@ -1127,14 +1153,6 @@ void runBench(BenchOptions o) {
     info.threads = o.threads;
     info.loadBefore = loadAverage();
 
-    // Every variant is built, configured and compiled once before anything is rendered, so a bad graph, --set or
-    // sweep value fails in seconds rather than after the reference.
-    auto configureVariant = [](const Variant& v) -> std::function<void(RenderGraph&)> {
-        if (!v.sweep) return {};
-        return [&v](RenderGraph& g) {
-            g.setParam(v.sweep->pass, v.sweep->param, parseParamValue(v.value), "--sweep " + v.sweep->text);
-        };
-    };
     // The path length of each variant's path tracer (after --set and its sweep value), for the matched reference.
     std::vector<std::pair<std::string, std::pair<int, int>>> bounces;  // variant label -> (maxBounces, rrStart)
     for (const Variant& v : vars) {
@@ -1387,7 +1405,7 @@ void addBenchCommand(CLI::App& app) {
         "against given reference frames (--reference-sequence; then --scene is optional)");
     addSceneOptions(cmd, o->scene);
     cmd->add_option("--frames,-n", o->frames, "frames in the sequence (warm-up included)")->capture_default_str();
-    cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT")->capture_default_str();
+    addSizeOption(cmd, o->size, "640x360");
     cmd->add_option("--graph,-g", o->graphs, "graph to benchmark: a file or a shipped graph's name (repeatable)");
     cmd->add_option("--sweep", o->sweeps,
                     "run each graph with this pass once per value: Pass.param=v1,v2,... (repeatable; one sweep at "
@@ -1445,6 +1463,7 @@ void addBenchCommand(CLI::App& app) {
         for (const char* name : kBruteForceOptions) note(name);
         for (const char* name : kRenderedReferenceOptions) note(name);
         note("--reference-first-frame");
+        note("--size");
         runBench(*o);
     });
 }

@@ -1,6 +1,7 @@
 #include "CliUtil.h"
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -21,6 +22,49 @@ void parseSize(const std::string& text, const std::string& option, uint32_t& wid
     height = uint32_t(std::stoul(m[2]));
     if (width == 0 || height == 0 || width > 16384 || height > 16384)
         throwBadInput(option, "size '" + text + "' is out of range", "each side between 1 and 16384");
+}
+
+void addSizeOption(CLI::App* cmd, std::string& size, const std::string& fallback, const std::string& use) {
+    cmd->add_option("--size", size,
+                    fmt::format("frame size WIDTHxHEIGHT{} (default: the size of the frames the graph's source "
+                                "passes read, ImageSequence's files; else {})",
+                                use, fallback));
+}
+
+glm::uvec2 frameSize(const std::string& size, bool given, const std::vector<SizedGraph>& graphs,
+                     const std::string& fallback) {
+    glm::uvec2 out;
+    if (given) {
+        parseSize(size, "--size", out.x, out.y);
+        return out;
+    }
+    std::optional<NaturalSize> found;
+    std::string foundLabel;
+    for (const SizedGraph& g : graphs) {
+        const std::optional<NaturalSize> n = g.graph->naturalSize();
+        if (!n) continue;
+        if (found && (found->width != n->width || found->height != n->height)) {
+            const auto name = [](const std::string& label, const std::string& pass) {
+                return label.empty() ? pass : fmt::format("{} of {}", pass, label);
+            };
+            throwBadInput("--size",
+                          fmt::format("without --size the frame size is that of the graphs' sources, and they "
+                                      "disagree: {} is {}x{}, {} is {}x{}",
+                                      name(foundLabel, found->pass), found->width, found->height,
+                                      name(g.label, n->pass), n->width, n->height),
+                          "sources of one size: the graphs render at one size", "point the sources at frames of one size");
+        }
+        if (!found) {
+            found = n;
+            foundLabel = g.label;
+        }
+    }
+    if (!found) {
+        parseSize(fallback, "--size", out.x, out.y);
+        return out;
+    }
+    spdlog::info("frame size {}x{}: the frames {} reads (no --size)", found->width, found->height, found->pass);
+    return {found->width, found->height};
 }
 
 std::optional<float> parseFiniteFloat(const std::string& text) {

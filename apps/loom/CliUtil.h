@@ -17,6 +17,20 @@ namespace loom::cli {
 
 /// "1280x720" -> width, height. Throws loom::Error naming the option.
 void parseSize(const std::string& text, const std::string& option, uint32_t& width, uint32_t& height);
+/// Adds --size to a command that renders a graph. Given, it is the frame size; left out, the size of the frames the
+/// graph's source passes read (RenderGraph::naturalSize), else `fallback`: frameSize() decides, after the
+/// parameters are set.
+void addSizeOption(CLI::App* cmd, std::string& size, const std::string& fallback, const std::string& use = "");
+/// One graph the size is asked of, and how to name it in a message ("" when there is only one).
+struct SizedGraph {
+    const RenderGraph* graph = nullptr;
+    std::string label;
+};
+/// The frame size to render at: `size` when `given` (parsed as --size), else the size the graphs' sources agree on
+/// (logged with the pass that gives it), else `fallback`. Throws loom::Error (BadInput) for a bad --size, for
+/// sources that cannot be read, and for sources of different sizes (naming both).
+glm::uvec2 frameSize(const std::string& size, bool given, const std::vector<SizedGraph>& graphs,
+                     const std::string& fallback);
 /// The options every command that runs frames shares: the animation clock's frame rate (0.001 to 10^6 frames a
 /// second) and the worker threads (at most kMaxThreads; 0: all cores). Throws loom::Error naming the option.
 inline constexpr unsigned kMaxThreads = 1024;

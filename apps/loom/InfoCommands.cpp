@@ -22,7 +22,8 @@ namespace {
 
 struct CheckOptions {
     std::string graph;
-    std::string size = "1280x720";
+    std::string size;        ///< --size; see sizeGiven
+    bool sizeGiven = false;  ///< without --size, the graph's sources give the size (frameSize)
     std::string dot;
     std::vector<std::string> set;
     std::string device;
@@ -32,8 +33,7 @@ struct CheckOptions {
 /// Compiles the graph (with the scene, when one is given) and prints its plan: what runs, what does not and why,
 /// and the memory.
 void runCheck(const CheckOptions& o) {
-    uint32_t width, height;
-    parseSize(o.size, "--size", width, height);
+    if (o.sizeGiven) (void)frameSize(o.size, true, {}, "");  // a bad --size fails first
     if (!o.dot.empty() && o.dot != "-")
         checkOutputFile(o.dot, "--dot", {o.graph, o.scene.scene, o.scene.env});  // a folder is bad input
     PluginRegistry registry = makeRegistry();
@@ -51,9 +51,10 @@ void runCheck(const CheckOptions& o) {
         graph.setScene(scene);
     }
     applySet(graph, o.set);
+    const glm::uvec2 size = frameSize(o.size, o.sizeGiven, {{&graph, ""}}, "1280x720");
     CompileOptions copts;
-    copts.width = width;
-    copts.height = height;
+    copts.width = size.x;
+    copts.height = size.y;
     copts.device = o.device;
     copts.planOnly = asksCuda && !cudaStatus().usable;
     graph.compile(copts);
@@ -178,12 +179,15 @@ void addCheckCommand(CLI::App& app) {
     auto o = std::make_shared<CheckOptions>();
     CLI::App* cmd = app.add_subcommand("check", "Validate a graph and print its compiled plan");
     cmd->add_option("graph", o->graph, "graph file (.json)")->required();
-    cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT used for the memory plan")->capture_default_str();
+    addSizeOption(cmd, o->size, "1280x720", " used for the memory plan");
     cmd->add_option("--dot", o->dot, "write the compiled graph as Graphviz to this file ('-' for stdout)");
     cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
     addDeviceOption(cmd, o->device, "; a plan for cuda needs no GPU");
     addSceneOptions(cmd, o->scene);
-    cmd->callback([o] { runCheck(*o); });
+    cmd->callback([o, cmd] {
+        o->sizeGiven = cmd->count("--size") > 0;
+        runCheck(*o);
+    });
 }
 
 void addPassesCommand(CLI::App& app) {

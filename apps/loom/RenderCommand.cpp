@@ -30,7 +30,8 @@ struct RenderOptions {
     std::string graph;
     uint64_t frames = 1;
     uint64_t startFrame = 0;
-    std::string size = "256x256";
+    std::string size;        ///< --size; see sizeGiven
+    bool sizeGiven = false;  ///< without --size, the graph's sources give the size (frameSize)
     std::string out = "out";
     std::vector<std::string> dump;
     std::string dumpFrames;
@@ -69,8 +70,7 @@ void progress(uint64_t done, uint64_t total, double msPerFrame, const char* what
 void runRender(const RenderOptions& o) {
     // SIGINT or SIGTERM: the frame under way finishes, then the outputs and --stats of the frames done are written.
     const StopOnSignal stopOnSignal;
-    uint32_t width, height;
-    parseSize(o.size, "--size", width, height);
+    if (o.sizeGiven) (void)frameSize(o.size, true, {}, "");  // a bad --size fails first
     if (o.frames == 0 || o.frames > 1000000)
         throwBadInput("--frames", fmt::format("frame count {} is out of range", o.frames), "1 to 1000000 frames");
     if (o.startFrame > 1000000000)
@@ -107,6 +107,8 @@ void runRender(const RenderOptions& o) {
     RenderGraph graph(loadGraph(o.graph), registry);
     if (scene) graph.setScene(scene);
     applySet(graph, o.set);
+    const glm::uvec2 size = frameSize(o.size, o.sizeGiven, {{&graph, ""}}, "256x256");
+    const uint32_t width = size.x, height = size.y;
     CompileOptions copts;
     copts.width = width;
     copts.height = height;
@@ -293,7 +295,7 @@ void addRenderCommand(CLI::App& app) {
     cmd->add_option("--graph,-g", o->graph, "graph file (.json)")->required();
     cmd->add_option("--frames,-n", o->frames, "number of frames")->capture_default_str();
     cmd->add_option("--start-frame", o->startFrame, "index of the first frame")->capture_default_str();
-    cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT")->capture_default_str();
+    addSizeOption(cmd, o->size, "256x256");
     cmd->add_option("--out,-o", o->out, "output folder")->capture_default_str();
     cmd->add_option("--dump", o->dump, "dump fields matching a glob, e.g. 'SVGF.*' (repeatable)");
     cmd->add_option("--dump-frames", o->dumpFrames, "frames to dump, e.g. 3,10-12 (default: all)");
@@ -320,7 +322,10 @@ void addRenderCommand(CLI::App& app) {
                   "the first frame: nothing is rendered or written (exit 0, or 2 naming what is wrong)");
     cmd->add_flag("--poison", o->poison, "fill transient memory with NaN when its lifetime starts (debug)");
     addSceneOptions(cmd, o->scene);
-    cmd->callback([o] { runRender(*o); });
+    cmd->callback([o, cmd] {
+        o->sizeGiven = cmd->count("--size") > 0;
+        runRender(*o);
+    });
 }
 
 }  // namespace loom::cli

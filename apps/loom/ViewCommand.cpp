@@ -390,7 +390,7 @@ void addViewCommand(CLI::App& app) {
     auto o = std::make_shared<ViewOptions>();
     CLI::App* cmd = app.add_subcommand("view", "Run a graph in a window: show any field, tune parameters live");
     cmd->add_option("--graph,-g", o->graph, "graph file (.json); reloaded when it changes")->required();
-    cmd->add_option("--size", o->size, "frame size WIDTHxHEIGHT")->capture_default_str();
+    addSizeOption(cmd, o->size, "640x360");
     cmd->add_option("--field", o->field, "field shown first, Pass.field (default: the first output)");
     cmd->add_option("--exposure", o->exposure, "exposure of float fields on display, in EV")->capture_default_str();
     cmd->add_option("--set", o->set, "set a parameter: Pass.param=value (repeatable)");
@@ -408,7 +408,10 @@ void addViewCommand(CLI::App& app) {
     cmd->add_flag("--open-passes", o->openPasses, "start with every pass's section of the panel open");
     cmd->add_flag("--headless", o->headless, "no window: run --frames frames (with --script, --record, --screenshot)");
     addSceneOptions(cmd, o->scene);
-    cmd->callback([o] { runView(*o); });
+    cmd->callback([o, cmd] {
+        o->sizeGiven = cmd->count("--size") > 0;
+        runView(*o);
+    });
 }
 
 }  // namespace loom::cli

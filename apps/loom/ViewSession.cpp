@@ -110,7 +110,8 @@ std::vector<ScriptCommand> parseViewScript(const std::string& path, const std::v
 
 ViewSession::ViewSession(const ViewOptions& options)
     : mOptions(options), mRegistry(makeRegistry()), mExposure(options.exposure) {
-    parseSize(options.size, "--size", mWidth, mHeight);
+    const bool sizeGiven = options.sizeGiven || !options.size.empty();
+    if (sizeGiven) (void)frameSize(options.size, true, {}, "");  // a bad --size fails first
     checkFpsAndThreads(options.fps, options.threads);
     mThreadLimit.emplace(options.threads);  // before anything runs on the workers
     if (options.frames > 1000000)
@@ -139,6 +140,9 @@ ViewSession::ViewSession(const ViewOptions& options)
     mGraphTime = modificationTime(options.graph);
     if (mScene) mGraph->setScene(mScene);
     applySet(*mGraph, options.set);
+    const glm::uvec2 size = frameSize(options.size, sizeGiven, {{mGraph.get(), ""}}, "640x360");
+    mWidth = size.x;
+    mHeight = size.y;
     // Compile once to learn the fields, then with the one on display observed.
     CompileOptions copts;
     copts.width = mWidth;

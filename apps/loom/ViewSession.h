@@ -21,7 +21,8 @@ namespace loom::cli {
 
 struct ViewOptions {
     std::string graph;
-    std::string size = "640x360";
+    std::string size;        ///< --size; empty and not sizeGiven: the graph's sources give the size (frameSize)
+    bool sizeGiven = false;  ///< --size was given (perhaps empty, which is refused)
     std::vector<std::string> set;
     std::string device;    ///< where passes run unless the graph names a device for them (--device)
     std::string field;     ///< field shown first ("Pass.field"); empty: the graph's first output

@@ -331,7 +331,7 @@ namespace {
                                    firstExr.width(), firstExr.height()));
     }
     frameError(file, what, "frames of the graph's size",
-               fmt::format("render at the sequence's size: --size {}x{}", exr.width(), exr.height()));
+               fmt::format("render at the sequence's size: --size {}x{}, or no --size", exr.width(), exr.height()));
 }
 
 }  // namespace
@@ -461,6 +461,33 @@ void ImageSequencePass::prefetch(int64_t number, const Settings& s, const std::a
         return readFrame(s, r, number, w, h, wanted);
     });
     mPending = std::move(p);
+}
+
+std::optional<glm::uvec2> ImageSequencePass::naturalSize() const {
+    const Settings s = settings();
+    const Resolved r = resolve(s, s.firstFrame);
+    for (int o = 0; o < kOutputCount; ++o) {
+        const size_t i = size_t(o);
+        if (r.pattern[i].empty()) continue;
+        const ExrFile exr(sequenceFramePath(r.pattern[i], s.firstFrame, where(kOutputs[i].name)));
+        return glm::uvec2(exr.width(), exr.height());
+    }
+    // Every source the sequence names is absent: the first frame's files are not there.
+    for (int o = 0; o < kOutputCount; ++o) {
+        const size_t i = size_t(o);
+        if (r.absentParam[i].empty()) continue;
+        const std::string& param = r.absentParam[i];
+        throwBadInput(where(param),
+                      fmt::format("the frame size is that of the sequence's first frame (file {}), and its file {}: "
+                                  "{}",
+                                  s.firstFrame, fileAbsence(r.absentFile[i]), r.absentFile[i]),
+                      mPreset == Preset::Loom && param == "path"
+                          ? std::string("the folder of `loom render --dump`'s files")
+                          : "a numbered file for each frame (#### or %04d stands for the frame number)",
+                      fmt::format("check {} ('{}') and firstFrame ({}, the file number of graph frame 0)", param,
+                                  param == "path" ? mPath : mSource[i], s.firstFrame));
+    }
+    return std::nullopt;  // every channel is "none"
 }
 
 bool ImageSequencePass::runsOn(DeviceKind device) const {

@@ -25,6 +25,7 @@
 #include <array>
 #include <future>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -89,6 +90,9 @@ public:
     void compile(const CompileInfo& info) override;
     void execute(PassContext& ctx) override;
     bool runsOn(DeviceKind device) const override;
+    /// The size of the first frame's file (firstFrame) of the first channel the sequence has, colour first: the
+    /// frame size when none is given. Throws loom::Error (BadInput) where none of the sources' files exist.
+    std::optional<glm::uvec2> naturalSize() const override;
 
     /// The sources of every channel: the preset's, then the channel parameters.
     Settings settings() const;

@@ -431,6 +431,37 @@ GraphDesc RenderGraph::desc() const {
     return d;
 }
 
+std::optional<NaturalSize> RenderGraph::naturalSize() const {
+    std::optional<NaturalSize> found;
+    for (const auto& n : mImpl->nodes) {
+        std::optional<glm::uvec2> size;
+        try {
+            size = n->pass->naturalSize();
+        } catch (const Error& e) {
+            // A pass names its parameters by its type; the graph knows it by its name.
+            Error::Info info = e.info();
+            const std::string& type = n->desc.type;
+            if (info.where.compare(0, type.size(), type) == 0 &&
+                (info.where.size() == type.size() || info.where[type.size()] == '.'))
+                info.where = n->desc.name + info.where.substr(type.size());
+            if (info.where.empty()) info.where = n->desc.name;
+            throw Error(info);
+        }
+        if (!size) continue;
+        if (size->x == 0 || size->y == 0 || size->x > 16384 || size->y > 16384)
+            throwBadInput(n->desc.name, fmt::format("its data is {}x{}", size->x, size->y),
+                          "a frame size from 1x1 to 16384x16384", "", mImpl->desc.file.string());
+        if (found && (found->width != size->x || found->height != size->y))
+            throwBadInput(n->desc.name,
+                          fmt::format("the sources disagree on the frame size: {} is {}x{}, {} is {}x{}", found->pass,
+                                      found->width, found->height, n->desc.name, size->x, size->y),
+                          "sources of one size", "point the sources at frames of one size",
+                          mImpl->desc.file.string());
+        if (!found) found = NaturalSize{size->x, size->y, n->desc.name};
+    }
+    return found;
+}
+
 void RenderGraph::compile(const CompileOptions& options) {
     Impl& m = *mImpl;
     const std::string file = m.desc.file.string();

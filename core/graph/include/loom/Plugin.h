@@ -13,8 +13,8 @@
 
 /// Bumped whenever RenderPass, PassContext or the registrar change layout (4: ParamDecl::role; 5: FieldDesc::role;
 /// 6: RenderPass::skippedWork; 7: PassContext::inputParamsChanged; 8: CompileInfo::readOutputs; 9: devices:
-/// RenderPass::runsOn, PassContext::device, Texture residence; 10: FieldDesc::inPlace).
-#define LOOM_PLUGIN_ABI_VERSION 11
+/// RenderPass::runsOn, PassContext::device, Texture residence; 10: FieldDesc::inPlace; 12: RenderPass::naturalSize).
+#define LOOM_PLUGIN_ABI_VERSION 12
 
 #if defined(_WIN32)
 #define LOOM_PLUGIN_EXPORT extern "C" __declspec(dllexport)

@@ -5,6 +5,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -140,6 +141,12 @@ struct PassTiming {
     uint64_t runs = 0;
 };
 
+/// A frame size the graph's data gives, and the pass whose data gives it.
+struct NaturalSize {
+    uint32_t width = 0, height = 0;
+    std::string pass;
+};
+
 class RenderGraph {
 public:
     /// Creates the passes of `desc` and applies their parameters. Throws
@@ -149,6 +156,10 @@ public:
     RenderGraph(const RenderGraph&) = delete;
     RenderGraph& operator=(const RenderGraph&) = delete;
 
+    /// The frame size the passes' own data gives (RenderPass::naturalSize, asked of every pass with its current
+    /// parameters), or none where no pass has one: what to render at when no size is given. Throws loom::Error
+    /// (BadInput) where two passes give different sizes (naming both), or where a pass cannot read its data.
+    std::optional<NaturalSize> naturalSize() const;
     /// Validates and plans the graph for a frame size. History whose field
     /// declaration (pass type, format, size) is unchanged survives; any other
     /// history starts invalid. Throws loom::Error for bad wiring, formats,

@@ -4,9 +4,12 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include <glm/vec2.hpp>
 
 #include "loom/Device.h"
 #include "loom/Params.h"
@@ -145,6 +148,11 @@ public:
     /// "emissive-triangle sampling: the scene has no emissive triangles"). `loom check` lists them; the graph
     /// never calls it while rendering. Called after setScene and compile.
     virtual std::vector<std::string> skippedWork() const { return {}; }
+    /// The frame size this pass's own data has, where it has one: a source that reads images (ImageSequence answers
+    /// with its first frame's size). Asked after the parameters are set and before compile; the commands render at
+    /// it when no --size is given (RenderGraph::naturalSize). Throws loom::Error (BadInput) where the data cannot
+    /// be read, naming the parameter by the pass type ("ImageSequence.path"): the graph puts the pass's name there.
+    virtual std::optional<glm::uvec2> naturalSize() const { return std::nullopt; }
     /// Whether the pass's kernels run on `device` (docs/KERNELS.md). The CPU only by default: the graph runs such a
     /// pass on the CPU wherever it is asked to run, and transfers what crosses devices.
     virtual bool runsOn(DeviceKind device) const { return device == DeviceKind::Cpu; }
