@@ -21,6 +21,9 @@ Scenes:
                         and a quarter intensity (KHR_animation_pointer)
   materials.gltf        textures, normal maps (with and without TANGENT),
                         roughness/metallic sweep, punctual lights, emissive
+  sky_sphere.gltf       one glossy sphere and a sun; the rest of the frame is environment
+  asset.gltf            a small worn-paint steel torus knot on a plinth under an environment:
+                        textured, normal-mapped, metallic (for denoiser quality claims)
 """
 import argparse
 import base64
@@ -84,6 +87,14 @@ def quat_rotate(q, v):
     u = (x, y, z)
     t = mul(cross(u, v), 2.0)
     return add(add(v, mul(t, w)), cross(u, t))
+
+
+def quat_mul(a, b):
+    """Hamilton product a * b (rotate by b, then by a)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
 
 
 def quat_from_basis(r, u, b):
@@ -851,12 +862,357 @@ def make_sky_sphere():
     return g
 
 
+# ----------------------------------------------------------------------------
+# asset.gltf: a small, detailed "real asset"-like object under an environment
+
+def _hash01(ix, iy, seed):
+    """Deterministic lattice hash in [0, 1)."""
+    h = (ix * 374761393 + iy * 668265263 + seed * 1442695041) & 0xFFFFFFFF
+    h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
+    h ^= h >> 16
+    return h / 4294967296.0
+
+
+def value_noise(x, y, period_x, period_y, seed):
+    """Smooth value noise on a lattice that repeats every period_x x period_y cells (x, y in cells)."""
+    ix, iy = math.floor(x), math.floor(y)
+    fx, fy = x - ix, y - iy
+    sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+    x0, x1 = ix % period_x, (ix + 1) % period_x
+    y0, y1 = iy % period_y, (iy + 1) % period_y
+    a, b = _hash01(x0, y0, seed), _hash01(x1, y0, seed)
+    c, d = _hash01(x0, y1, seed), _hash01(x1, y1, seed)
+    return (a + (b - a) * sx) + ((c + (d - c) * sx) - (a + (b - a) * sx)) * sy
+
+
+def tile_fbm(u, v, cells_u, cells_v, octaves, seed):
+    """Fractal sum of value noise over one texture tile (u, v in [0, 1)), tileable in both directions; in [0, 1)."""
+    total, amp, norm = 0.0, 1.0, 0.0
+    for o in range(octaves):
+        f = 1 << o
+        total += amp * value_noise(u * cells_u * f, v * cells_v * f, cells_u * f, cells_v * f, seed + 101 * o)
+        norm += amp
+        amp *= 0.5
+    return total / norm
+
+
+ASSET_TEX = 128                  # texels on a side of each asset texture (one square tile)
+ASSET_PAINT = (150, 30, 22)      # sRGB: red paint
+ASSET_PRIMER = (176, 168, 148)   # sRGB: the primer seen at the edges of paint chips
+ASSET_METAL = (212, 206, 196)    # sRGB: bare steel under the paint (linear about 0.66, 0.62, 0.55)
+ASSET_RIVET_RINGS = (6, ASSET_TEX - 7)  # texel columns of the two rings of rivets beside the seam at u = 0
+ASSET_RIVETS_AROUND = 8
+
+
+def asset_layers(size=ASSET_TEX):
+    """Worn paint over steel, as per-texel layers of one tileable square tile (x along u, y along v, row 0 = top).
+
+    Returns (kind, height, fine): kind 0 = paint, 1 = primer (chip edge), 2 = bare metal (chip, scratch or
+    rivet head); height in texels (paint raised over metal, rivet domes, scratch and seam grooves, shallow
+    dents); fine = a [0, 1) grain for colour and roughness variation."""
+    kind = [[0] * size for _ in range(size)]
+    height = [[0.0] * size for _ in range(size)]
+    fine = [[0.0] * size for _ in range(size)]
+    scratch = [[0.0] * size for _ in range(size)]
+    # Scratches: short straight strokes (deterministic), stamped with wrap-around; depth fades along the stroke.
+    for k in range(18):
+        x0, y0 = _hash01(k, 1, 77) * size, _hash01(k, 2, 77) * size
+        ang = (_hash01(k, 3, 77) - 0.5) * 1.2 + (math.pi / 2 if k % 4 == 0 else 0.0)
+        ln = 6 + _hash01(k, 4, 77) * 26
+        steps = int(ln * 2)
+        for s in range(steps + 1):
+            t = s / steps
+            px, py = x0 + math.cos(ang) * ln * t, y0 + math.sin(ang) * ln * t
+            depth = math.sin(math.pi * t) ** 0.5
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    cx, cy = math.floor(px) + dx, math.floor(py) + dy
+                    dist = math.hypot(cx + 0.5 - px, cy + 0.5 - py)
+                    w = max(0.0, 1.0 - dist / 1.1) * depth
+                    if w > scratch[cy % size][cx % size]:
+                        scratch[cy % size][cx % size] = w
+    cell = size / ASSET_RIVETS_AROUND
+    for y in range(size):
+        v = (y + 0.5) / size
+        for x in range(size):
+            u = (x + 0.5) / size
+            wear = tile_fbm(u, v, 6, 6, 5, 11)
+            dent = tile_fbm(u, v, 3, 3, 2, 29)
+            fine[y][x] = tile_fbm(u, v, 16, 64, 2, 43)  # brushed grain: streaks along u
+            h = 10.0 * dent
+            if wear > 0.545:
+                k = 2
+            elif wear > 0.52:
+                k, h = 1, h + 0.4
+            else:
+                k, h = 0, h + 0.8
+            sc = scratch[y][x]
+            if sc > 0.25:
+                k, h = 2, h - 0.9 * sc
+            # the seam between panels: a groove across the tile at u = 0
+            ds = min(x + 0.5, size - x - 0.5)
+            if ds < 1.5:
+                h -= 1.2 * (1.5 - ds) / 1.5
+            # rivets: domes of radius 2.6 texels in two rings beside the seam; their worn tops are bare metal
+            for rx in ASSET_RIVET_RINGS:
+                ry = (math.floor(y / cell) + 0.5) * cell
+                r2 = ((x + 0.5 - (rx + 0.5)) ** 2 + (y + 0.5 - ry) ** 2) / (2.6 * 2.6)
+                if r2 < 1:
+                    h = max(h, 0.8 + 2.2 * (1 - r2))
+                    if r2 < 0.45:
+                        k = 2
+            kind[y][x] = k
+            height[y][x] = h
+    return kind, height, fine
+
+
+def asset_base_color_rows(layers):
+    kind, _, fine = layers
+    rows = []
+    for krow, frow in zip(kind, fine):
+        row = bytearray()
+        for k, f in zip(krow, frow):
+            c = (ASSET_PAINT, ASSET_PRIMER, ASSET_METAL)[k]
+            g = (f - 0.5) * (28 if k == 0 else 36)  # paint mottling, metal brushing
+            row += bytes(max(0, min(255, round(ch + g))) for ch in c)
+        rows.append(bytes(row))
+    return rows
+
+
+def asset_metal_rough_rows(layers):
+    """Linear: R = 1 (unused occlusion), G = roughness, B = metallic. Bare metal is metallic 1 with roughness
+    0.12-0.3 along the brushing; paint (0.55-0.75) and primer (0.85) are dielectric."""
+    kind, _, fine = layers
+    rows = []
+    for krow, frow in zip(kind, fine):
+        row = bytearray()
+        for k, f in zip(krow, frow):
+            rough = (0.55 + 0.2 * f, 0.85, 0.12 + 0.18 * f)[k]
+            row += bytes((255, round(rough * 255), 255 if k == 2 else 0))
+        rows.append(bytes(row))
+    return rows
+
+
+def asset_normal_rows(layers, strength=0.55):
+    """Tangent-space normals (linear, OpenGL convention as in normal_map_rows) from the height field by central
+    differences with wrap-around: +X red along +u (image right), +Y green up the image (decreasing v)."""
+    _, h, _ = layers
+    n_ = len(h)
+    rows = []
+    for y in range(n_):
+        row = bytearray()
+        for x in range(n_):
+            dhdx = (h[y][(x + 1) % n_] - h[y][(x - 1) % n_]) * 0.5 * strength
+            dhdup = (h[(y - 1) % n_][x] - h[(y + 1) % n_][x]) * 0.5 * strength  # row y - 1 is up
+            n = normalize((-dhdx, -dhdup, 1.0))
+            row += bytes(max(0, min(255, round((c * 0.5 + 0.5) * 255))) for c in n)
+        rows.append(bytes(row))
+    return rows
+
+
+def torus_knot_point(t, p=2, q=3):
+    """The (p, q) torus knot in its own frame (the knot winds about +Y; x, z in [-3, 3], y in [-1, 1])."""
+    r = 2 + math.cos(q * t)
+    return (r * math.cos(p * t), math.sin(q * t), r * math.sin(p * t))
+
+
+def torus_knot(scale, tube, rings, sides, tiles_target=None):
+    """A tube of radius `tube` around the (2, 3) torus knot scaled by `scale`: rings + 1 rings of sides + 1
+    vertices (the first ring repeated at the end, the first vertex of each ring repeated at its end, for the UV
+    seams), spaced evenly along the curve. Frames are parallel-transported and the closing twist is spread
+    evenly, so the last ring lands on the first. u runs along the curve (a whole number of texture tiles, each
+    as long as the tube's circumference), v around it. TANGENT is the curve direction (increasing u), w = +1;
+    smooth normals. Returns (geometry, number of tiles along u)."""
+    dense = 8192
+    pts = [mul(torus_knot_point(2 * math.pi * i / dense), scale) for i in range(dense + 1)]
+    cum = [0.0]
+    for a, b in zip(pts, pts[1:]):
+        cum.append(cum[-1] + length(sub(b, a)))
+    total = cum[-1]
+    tiles = max(1, round(total / (2 * math.pi * tube)))
+
+    def t_at(s):  # curve parameter at arc length s (linear within the dense table)
+        lo, hi = 0, dense
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if cum[mid] <= s:
+                lo = mid
+            else:
+                hi = mid
+        f = (s - cum[lo]) / (cum[hi] - cum[lo])
+        return 2 * math.pi * (lo + f) / dense
+
+    centres, tangents = [], []
+    for i in range(rings):
+        t = t_at(total * i / rings)
+        eps = 1e-5
+        centres.append(mul(torus_knot_point(t), scale))
+        tangents.append(normalize(sub(torus_knot_point(t + eps), torus_knot_point(t - eps))))
+    # parallel transport of the first normal, then the closing twist spread over the loop
+    n1 = [normalize(sub((0.0, 1.0, 0.0), mul(tangents[0], tangents[0][1])))]
+    for i in range(1, rings + 1):
+        tt = tangents[i % rings]
+        prev = n1[-1]
+        n1.append(normalize(sub(prev, mul(tt, dot(prev, tt)))))
+    end, start = n1[rings], n1[0]
+    twist = math.atan2(dot(cross(start, end), tangents[0]), dot(start, end))
+    frames = []
+    for i in range(rings):
+        tt = tangents[i]
+        a = -twist * i / rings
+        b = cross(tt, n1[i])
+        fa = add(mul(n1[i], math.cos(a)), mul(b, math.sin(a)))
+        frames.append((fa, cross(tt, fa), tt))
+    P, N, UV, T, I = [], [], [], [], []
+    for i in range(rings + 1):
+        fa, fb, tt = frames[i % rings]
+        c = centres[i % rings]
+        for j in range(sides + 1):
+            th = 2 * math.pi * (j % sides) / sides
+            n = add(mul(fa, math.cos(th)), mul(fb, math.sin(th)))
+            N.append(n)
+            P.append(add(c, mul(n, tube)))
+            UV.append((tiles * i / rings, j / sides))
+            T.append(tt + (1.0,))
+    row = sides + 1
+    for i in range(rings):
+        for j in range(sides):
+            a, b, c, d = i * row + j, (i + 1) * row + j, (i + 1) * row + j + 1, i * row + j + 1
+            I += [a, c, b, a, d, c]
+    g = {"P": P, "N": N, "UV": UV, "T": T, "I": I}
+    # winding and the tangent frame: outward CCW faces; bitangent cross(N, T) * w points up the image (-v)
+    a, b, c = (P[I[k]] for k in range(3))
+    assert dot(cross(sub(b, a), sub(c, a)), N[I[0]]) > 0
+    assert dot(cross(N[0], T[0][:3]), sub(P[1], P[0])) < 0
+    return g, tiles
+
+
+def sub_rings(g, sides, first, last):
+    """Rings first..last (inclusive) of a tube geometry as a geometry of its own."""
+    row = sides + 1
+    lo, hi = first * row, (last + 1) * row
+    out = {k: g[k][lo:hi] for k in ("P", "N", "UV", "T")}
+    out["I"] = []
+    for t in range(0, len(g["I"]), 3):
+        tri = g["I"][t:t + 3]
+        if all(lo <= i < hi for i in tri):
+            out["I"] += [i - lo for i in tri]
+    return out
+
+
+def cylinder(radius, y0, y1, sides):
+    """Vertical cylinder with flat caps: smooth side normals, separate cap vertices; UV u around, v down."""
+    P, N, UV, I = [], [], [], []
+    for j in range(sides + 1):
+        th = 2 * math.pi * (j % sides) / sides
+        n = (math.sin(th), 0.0, math.cos(th))
+        for y, v in ((y1, 0.0), (y0, 1.0)):
+            P.append((radius * n[0], y, radius * n[2]))
+            N.append(n)
+            UV.append((j / sides, v))
+    for j in range(sides):
+        a, b, c, d = 2 * j, 2 * j + 1, 2 * j + 3, 2 * j + 2
+        I += [a, b, c, a, c, d]
+    for y, up in ((y1, 1.0), (y0, -1.0)):
+        base = len(P)
+        P.append((0.0, y, 0.0))
+        N.append((0.0, up, 0.0))
+        UV.append((0.5, 0.5))
+        for j in range(sides):
+            th = 2 * math.pi * j / sides
+            P.append((radius * math.sin(th), y, radius * math.cos(th)))
+            N.append((0.0, up, 0.0))
+            UV.append((0.5 + 0.5 * math.sin(th), 0.5 - 0.5 * math.cos(th)))
+        for j in range(sides):
+            k0, k1 = base + 1 + j, base + 1 + (j + 1) % sides
+            I += [base, k0, k1] if up > 0 else [base, k1, k0]
+    return {"P": P, "N": N, "UV": UV, "T": [], "I": I}
+
+
+def transform_geometry(g, q, t):
+    """Rotates (quaternion q) and then translates (t) positions, normals and tangents."""
+    out = dict(g)
+    out["P"] = [add(quat_rotate(q, p), t) for p in g["P"]]
+    out["N"] = [normalize(quat_rotate(q, n)) for n in g["N"]]
+    out["T"] = [quat_rotate(q, tt[:3]) + (tt[3],) for tt in g["T"]]
+    return out
+
+
+ASSET_KNOT_SCALE = 0.1           # the (2, 3) knot's curve spans x, z in [-0.3, 0.3]
+ASSET_KNOT_TUBE = 0.05
+ASSET_KNOT_RINGS, ASSET_KNOT_SIDES = 192, 12
+ASSET_KNOT_TILT = math.radians(62)   # about +X: the knot's plane stands up from the horizontal
+ASSET_KNOT_YAW = math.radians(25)
+ASSET_PLINTH_TOP = 0.16          # y of the plinth's top face; the plinth stands on y = 0
+ASSET_STEM_TOP = 0.26
+ASSET_CAMERA_DIR = (0.55, 0.42, 1.0)  # from the object's centre towards the camera
+ASSET_CAMERA_DIST = 2.5
+ASSET_YFOV = 0.6
+
+
+def make_asset():
+    g = Gltf()
+    smp = g.sampler()
+
+    def png_texture(name, rows, srgb):
+        g.textures_rows[name] = rows
+        png = encode_png(len(rows[0]) // 3, len(rows), rows, srgb, vary_filters=True)
+        return g.texture(name, g.image_png(name, png), smp)
+
+    layers = asset_layers()
+    base = png_texture("WornPaintBaseColor128_sRGB", asset_base_color_rows(layers), True)
+    mr = png_texture("WornPaintMetalRough128_linear", asset_metal_rough_rows(layers), False)
+    nrm = png_texture("WornPaintNormals128_linear", asset_normal_rows(layers), False)
+    m_knot = g.material("WornPaintedSteel", (1, 1, 1), 1.0, 1.0, base_tex=base, mr_tex=mr, normal_tex=nrm)
+    m_plinth = g.material("PlinthDarkStone", (0.1, 0.1, 0.11), 0.0, 0.4)
+    m_stem = g.material("StemDarkSteel", (0.35, 0.35, 0.37), 1.0, 0.35)
+
+    # The knot: tilted and yawed, then lifted so that its lowest tube centre sits on the stem's top.
+    knot, tiles = torus_knot(ASSET_KNOT_SCALE, ASSET_KNOT_TUBE, ASSET_KNOT_RINGS, ASSET_KNOT_SIDES)
+    q = quat_mul(quat_axis_angle((0, 1, 0), ASSET_KNOT_YAW), quat_axis_angle((1, 0, 0), ASSET_KNOT_TILT))
+    knot = transform_geometry(knot, q, (0.0, 0.0, 0.0))
+    low = min(knot["P"], key=lambda p: p[1])
+    lift = (-low[0], ASSET_STEM_TOP + ASSET_KNOT_TUBE * 0.5 - low[1], -low[2])
+    knot = transform_geometry(knot, (0.0, 0.0, 0.0, 1.0), lift)
+    # Two primitives of one material: the first half of the rings with TANGENT, the second half without (the
+    # loader generates it); the halves meet at rings 0 and 96, which both hold, so they should shade seamlessly.
+    half = ASSET_KNOT_RINGS // 2
+    attrs_a, idx_a = g.geometry(sub_rings(knot, ASSET_KNOT_SIDES, 0, half), USHORT, tangents=True)
+    attrs_b, idx_b = g.geometry(sub_rings(knot, ASSET_KNOT_SIDES, half, ASSET_KNOT_RINGS), USHORT)
+    roots = [g.node("TorusKnot", g.mesh("TorusKnotWornPaint", [(attrs_a, idx_a, m_knot), (attrs_b, idx_b, m_knot)]))]
+
+    # A two-step plinth (a slab and a narrower block) and a steel stem up into the knot's lowest tube.
+    slab_h, block_h = 0.05, ASSET_PLINTH_TOP - 0.05
+    plinth = merge(box((0.23, slab_h / 2, 0.23), (0.0, slab_h / 2, 0.0)),
+                   box((0.18, block_h / 2, 0.18), (0.0, slab_h + block_h / 2, 0.0)))
+    attrs, idx = g.geometry(plinth, UBYTE, uv=False)
+    roots.append(g.node("Plinth", g.mesh("PlinthTwoStep", [(attrs, idx, m_plinth)])))
+    attrs, idx = g.geometry(cylinder(0.018, ASSET_PLINTH_TOP, ASSET_STEM_TOP, 16), UBYTE, uv=False)
+    roots.append(g.node("Stem", g.mesh("StemCylinder", [(attrs, idx, m_stem)])))
+
+    sun = g.light({"name": "Sun", "type": "directional", "color": [1.0, 0.96, 0.88], "intensity": 4.0})
+    roots.append(g.node("Sun", r=quat_look_at((0.0, 0.0, 0.0), (-0.5, -1.0, -0.35)), light=sun))
+    rim = g.light({"name": "RimLight", "type": "directional", "color": [0.8, 0.88, 1.0], "intensity": 2.0})
+    roots.append(g.node("RimLight", r=quat_look_at((0.0, 0.0, 0.0), (0.6, -0.5, 0.8)), light=rim))
+
+    # The camera looks at the centre of everything's bounds, the point an orbit turns about.
+    allp = knot["P"] + plinth["P"]
+    centre = tuple((min(p[a] for p in allp) + max(p[a] for p in allp)) / 2 for a in range(3))
+    eye = add(centre, mul(normalize(ASSET_CAMERA_DIR), ASSET_CAMERA_DIST))
+    cam = g.camera("AssetCamera", ASSET_YFOV, 4.0 / 3.0, 0.05, 100.0)
+    roots.append(g.node("Camera", camera=cam, t=eye, r=quat_look_at(eye, centre)))
+    g.scene("Asset", roots)
+    g.notes = {"asset_knot_tiles": tiles, "asset_centre": centre, "asset_eye": eye}
+    return g
+
+
 SCENES = (
     ("cornell_box.gltf", make_cornell_box),
     ("cornell_dynamic.gltf", make_cornell_dynamic),
     ("cornell_lightstep.gltf", make_cornell_lightstep),
     ("materials.gltf", make_materials),
     ("sky_sphere.gltf", make_sky_sphere),
+    ("asset.gltf", make_asset),
 )
 
 
