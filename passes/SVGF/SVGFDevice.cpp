@@ -72,6 +72,16 @@ void antilag(DeviceKind device, ImageView<const glm::vec2> gradient, ImageView<g
     });
 }
 
+void neighbourhood(DeviceKind device, const TemporalViews& v, bool split, ImageView<const glm::vec4> albedo,
+                   ImageView<const glm::vec4> specAlbedo, ImageView<glm::vec4> box) {
+    const TemporalViews views = v;
+    launch2D(device, box.width, box.height, [=] LOOM_HD(uint32_t x, uint32_t y) {
+        box.at(x, y) = neighbourhoodPixel(views, split, x, y, [&](uint32_t qx, uint32_t qy) {
+            return specAlbedo.data ? albedoPlusSpecular(albedo.at(qx, qy), specAlbedo.at(qx, qy)) : albedo.at(qx, qy);
+        });
+    });
+}
+
 uint64_t temporal(DeviceKind device, TemporalViews v, const TemporalParams& p, ImageView<const glm::vec4> albedo,
                   ImageView<const glm::vec4> specAlbedo) {
     const TemporalParams params = p;

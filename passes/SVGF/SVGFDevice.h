@@ -24,6 +24,12 @@ void passThrough(DeviceKind device, ImageView<const glm::vec4> color, ImageView<
 void antilag(DeviceKind device, ImageView<const glm::vec2> gradient, ImageView<glm::vec2> samples,
              ImageView<glm::vec2> change);
 
+/// The history clamp's box (neighbourhoodPixel) of every pixel into `box`, with the demodulation albedo albedo (+
+/// specAlbedo when given), formed per pixel as `temporal` forms it. v's colour, direct, indirect, emission and
+/// linearZ are read; `box` must not alias them.
+void neighbourhood(DeviceKind device, const TemporalViews& v, bool split, ImageView<const glm::vec4> albedo,
+                   ImageView<const glm::vec4> specAlbedo, ImageView<glm::vec4> box);
+
 /// Stage 1 (temporalPixel) for every pixel. With `specAlbedo`, the demodulation albedo albedo + specAlbedo is formed
 /// per pixel in v.integrated0, which temporalPixel reads (v.albedo is ignored) before it writes its result there.
 /// Returns how many colour samples were not finite (and rejected).

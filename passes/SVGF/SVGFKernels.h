@@ -85,7 +85,35 @@ struct TemporalParams {
     /// prevDepth.x + z * ((prevDepth.y + prevDepth.z * x) + prevDepth.w * y) (expectedPrevDepthPlane). The default
     /// is z itself (no camera).
     glm::vec4 prevDepth{0.f, 1.f, 0.f, 0.f};
+    /// Firefly clamp: where the history holds at least kOutlierMinFrames frames, a new sample whose luminance lies
+    /// above the history's mean + outlierSigma standard deviations (its luminance moments) is scaled down to that
+    /// bound before it is blended, moments included. 0: off.
+    float outlierSigma = 3.f;
+    /// History clamp (FidelityFX's and GAMES202's defence against stale history): where TemporalViews::neighbourhood
+    /// is given, the reprojected history's luminance is brought within this frame's neighbourhood mean +-
+    /// clampSigma standard deviations (neighbourhoodPixel), the history scaled as a whole, moments included.
+    float clampSigma = 1.f;
 };
+
+/// The factor that brings a history of luminance lum within [max(mean - sigmas sigma, 0), mean + sigmas sigma]; 1
+/// when it lies within, or when it is 0 (nothing to scale).
+LOOM_HD inline float historyClampScale(float lum, float mean, float sigma, float sigmas) {
+    const float lo = maxf(mean - sigmas * sigma, 0.f), hi = mean + sigmas * sigma;
+    if (lum > hi) return hi / lum;
+    if (lum < lo && lum > 0.f) return lo / lum;
+    return 1.f;
+}
+
+/// History shorter than this leaves the new sample alone (its moments say too little yet).
+inline constexpr float kOutlierMinFrames = 4.f;
+
+/// The factor (at most 1) that brings a sample of luminance lum within mean + sigmas standard deviations of moments
+/// (m1, m2). 1 when the clamp is off (sigmas 0) or lum is within the bound.
+LOOM_HD inline float outlierScale(float lum, float m1, float m2, float sigmas) {
+    if (!(sigmas > 0.f)) return 1.f;
+    const float bound = m1 + sigmas * sqrtf(maxf(m2 - m1 * m1, 0.f));
+    return lum > bound && bound >= 0.f ? bound / lum : 1.f;
+}
 
 /// TemporalParams::prevDepth at pixel (x, y) for view depth z, in this order of operations (TemporalSimd.cpp does
 /// the same, so both round alike).
@@ -114,6 +142,9 @@ struct TemporalViews {
     /// Optional: how the shading changed since last frame, on last frame's pixel grid (antilagChange of the path
     /// tracer's temporal gradients): (lambda in [0, 1], luminance ratio now / then); reprojected like the history.
     ImageView<const glm::vec2> prevChange;
+    /// Optional: the history clamp's box, this frame's (mean, standard deviation) of each signal's demodulated
+    /// luminance around each pixel (neighbourhoodPixel). Null: no clamp.
+    ImageView<const glm::vec4> neighbourhood;
     // This frame's history (moments, length, guides) and the integrated signals (rgb, a = temporal variance).
     ImageView<glm::vec4> integrated0, integrated1, curNormW;
     ImageView<glm::vec2> curMoments0, curMoments1, curLinearZ;  // moments1: split only
@@ -219,6 +250,51 @@ LOOM_HD inline Reprojected reproject(const TemporalViews& v, const TemporalParam
     return r;
 }
 
+/// The demodulated luminance of both signals of pixel (x, y) whose demodulation albedo is `albedoIn`, as
+/// temporalPixel computes them (emission out, divided by the guarded albedo, clamped). False for a miss or a sample
+/// that is not finite.
+LOOM_HD inline bool demodulatedLuminance(const TemporalViews& v, bool split, uint32_t x, uint32_t y,
+                                         const glm::vec4& albedoIn, float& lum0, float& lum1) {
+    if (!(v.linearZ.at(x, y).x >= 0.f)) return false;
+    const glm::vec4 c0 = split ? v.direct.at(x, y) : v.color.at(x, y);
+    const glm::vec4 c1 = split ? v.indirect.at(x, y) : glm::vec4(0.f);
+    if (!isFinite(glm::vec3(c0)) || !isFinite(glm::vec3(c1))) return false;
+    const glm::vec3 emission = v.emission.data ? finiteOrZero(glm::vec3(v.emission.at(x, y))) : glm::vec3(0.f);
+    const glm::vec3 albedo = guardedAlbedo(albedoIn);
+    lum0 = luminance(clampIllumination((glm::vec3(c0) - emission) / albedo));
+    lum1 = luminance(clampIllumination(glm::vec3(c1) / albedo));
+    return true;
+}
+
+/// Side of the history clamp's window: the (2 kClampRadius + 1)^2 pixels around a pixel.
+inline constexpr int kClampRadius = 1;
+
+/// The history clamp's box of pixel (x, y) (TemporalViews::neighbourhood): the mean and standard deviation of the
+/// demodulated luminance of each signal over the hits of the window around it, in frame (zeros where it has none).
+/// albedoAt(x, y) gives a pixel's demodulation albedo.
+template <class AlbedoAt>
+LOOM_HD inline glm::vec4 neighbourhoodPixel(const TemporalViews& v, bool split, uint32_t x, uint32_t y,
+                                            const AlbedoAt& albedoAt) {
+    const int w = int(v.color.width), h = int(v.color.height);
+    float n = 0.f, s0 = 0.f, q0 = 0.f, s1 = 0.f, q1 = 0.f;
+    for (int j = -kClampRadius; j <= kClampRadius; ++j)
+        for (int i = -kClampRadius; i <= kClampRadius; ++i) {
+            const int qx = int(x) + i, qy = int(y) + j;
+            if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
+            float l0, l1;
+            if (!demodulatedLuminance(v, split, uint32_t(qx), uint32_t(qy), albedoAt(uint32_t(qx), uint32_t(qy)), l0, l1))
+                continue;
+            n += 1.f;
+            s0 += l0;
+            q0 += l0 * l0;
+            s1 += l1;
+            q1 += l1 * l1;
+        }
+    if (n == 0.f) return glm::vec4(0.f);
+    const float m0 = s0 / n, m1 = s1 / n;
+    return glm::vec4(m0, sqrtf(maxf(q0 / n - m0 * m0, 0.f)), m1, sqrtf(maxf(q1 / n - m1 * m1, 0.f)));
+}
+
 /// Stage 1 for pixel (x, y). Returns true when this pixel's colour sample was not finite (and was rejected).
 LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y, const TemporalParams& p) {
     const glm::vec2 z = v.linearZ.at(x, y);
@@ -274,13 +350,29 @@ LOOM_HD inline bool temporalPixel(const TemporalViews& v, uint32_t x, uint32_t y
         r.illum1 = glm::vec4(glm::vec3(r.illum1) * ratio, r.illum1.a);
         const float ratio2 = ratio * ratio;
         r.moments = glm::vec4(r.moments.x * ratio, r.moments.y * ratio2, r.moments.z * ratio, r.moments.w * ratio2);
+        if (v.neighbourhood.data) {
+            // Stale history (a light that changed, a reflection that moved) brought within what this frame's
+            // neighbourhood holds.
+            const glm::vec4 box = v.neighbourhood.at(x, y);
+            const float h0 = historyClampScale(luminance(glm::vec3(r.illum0)), box.x, box.y, p.clampSigma);
+            const float h1 = historyClampScale(luminance(glm::vec3(r.illum1)), box.z, box.w, p.clampSigma);
+            r.illum0 = glm::vec4(glm::vec3(r.illum0) * h0, r.illum0.a);
+            r.illum1 = glm::vec4(glm::vec3(r.illum1) * h1, r.illum1.a);
+            r.moments = glm::vec4(r.moments.x * h0, r.moments.y * (h0 * h0), r.moments.z * h1, r.moments.w * (h1 * h1));
+        }
         length = minf(r.length * (1.f - change) + 1.f, float(p.maxHistory));
         // Paper eq. 1 with Falcor's max(alpha, 1 / n): a plain mean until the history is 1 / alpha long.
         const float a = maxf(p.alpha + change * (1.f - p.alpha), 1.f / length);
         const float am = maxf(p.momentsAlpha + change * (1.f - p.momentsAlpha), 1.f / length);
-        i0 = glm::vec4(glm::mix(glm::vec3(r.illum0), l0, a), 0.f);
-        i1 = glm::vec4(glm::mix(glm::vec3(r.illum1), l1, a), 0.f);
-        m = glm::mix(r.moments, moments, am);
+        // Fireflies: a sample far above what the (rescaled) history expects is brought down to its bound.
+        const bool settled = r.length >= kOutlierMinFrames;
+        const float s0 = settled ? outlierScale(lum0, r.moments.x, r.moments.y, p.outlierSigma) : 1.f;
+        const float s1 = settled ? outlierScale(lum1, r.moments.z, r.moments.w, p.outlierSigma) : 1.f;
+        const float c0 = lum0 * s0, c1 = lum1 * s1;
+        const glm::vec4 clamped(c0, c0 * c0, c1, c1 * c1);
+        i0 = glm::vec4(glm::mix(glm::vec3(r.illum0), l0 * s0, a), 0.f);
+        i1 = glm::vec4(glm::mix(glm::vec3(r.illum1), l1 * s1, a), 0.f);
+        m = glm::mix(r.moments, clamped, am);
     } else {
         length = 1.f;
         i0 = glm::vec4(l0, 0.f);

@@ -53,6 +53,7 @@ const char kIntegratedIndirect[] = "integratedIndirect";
 const char kEstimate[] = "estimate";
 const char kEstimateIndirect[] = "estimateIndirect";
 const char kChange[] = "shadingChange";
+const char kClampBox[] = "clampBox";
 
 // Frame stats.
 const char kStatNonFinite[] = "nonFinite";
@@ -68,6 +69,7 @@ const char kStatAtrous[] = "ms.atrous";
 const char kStatSkippedTiles[] = "atrousSkippedTiles";
 const char kStatModulate[] = "ms.modulate";
 const char kStatAntilag[] = "ms.antilag";
+const char kStatNeighbourhood[] = "ms.neighbourhood";
 
 // Tiles of the streaming stages: wider than the default so each row of a tile is a long contiguous run in each of
 // the ~20 textures the temporal stage touches (hardware prefetch, fewer pages per tile).
@@ -220,6 +222,11 @@ void SVGFPass::reflect(Reflection& r, const CompileInfo& info) const {
             .doc(
                 "shading change on last frame's grid, what the anti-lag reprojects: lambda in [0, 1] and the "
                 "luminance ratio now / then (gradient only)");
+    if (!info.wired || !info.isInputConnected(kGradient))
+        r.internal(kClampBox, Format::RGBA32F)
+            .doc(
+                "the history clamp's box: this frame's 3x3 mean and standard deviation of each signal's demodulated "
+                "luminance (without gradient only)");
 }
 
 void SVGFPass::declareParams(ParamList& p) {
@@ -239,6 +246,20 @@ void SVGFPass::declareParams(ParamList& p) {
     p.add("momentsAlpha", &mTemporalParams.momentsAlpha, temporal.momentsAlpha)
         .range(0.0, 1.0)
         .doc("temporal blend factor of the luminance moments (at least 1 / history)");
+    p.add("historyClamp", &mHistoryClamp, true)
+        .doc(
+            "without a gradient input (frames of other renderers): clamp the reprojected history's luminance to this "
+            "frame's 3x3 neighbourhood mean +- clampSigma standard deviations (demodulated), against stale history. "
+            "With gradients the anti-lag does that job and the clamp is not used");
+    p.add("clampSigma", &mTemporalParams.clampSigma, temporal.clampSigma)
+        .range(0.0, 100.0)
+        .doc("width of the history clamp's box, in standard deviations of the neighbourhood's luminance");
+    p.add("outlierSigma", &mTemporalParams.outlierSigma, temporal.outlierSigma)
+        .range(0.0, 100.0)
+        .doc(
+            "firefly clamp: where the history holds 4 frames or more, a sample brighter than its mean + this many "
+            "standard deviations (luminance moments) is scaled down to that bound before blending (biased: the "
+            "energy above it is lost); 0: off");
     const svgf::AtrousParams edgeStopping;
     p.add("phiColor", &mEdgeStopping.phiColor, edgeStopping.phiColor)
         .min(0.0)
@@ -468,6 +489,19 @@ void SVGFPass::antilagStage(Frame& f) {
     f.tv.prevChange = shadingChange(f.ctx);
 }
 
+ImageView<glm::vec4> SVGFPass::clampBox(PassContext& ctx) const {
+    // Declared only where no gradient input is connected (reflect).
+    Texture* box = mHistoryClamp && !ctx.input(kGradient) ? ctx.internal(kClampBox) : nullptr;
+    return box ? pixels<glm::vec4>(ctx, *box) : ImageView<glm::vec4>{};
+}
+
+void SVGFPass::neighbourhoodStage(Frame& f) {
+    const ImageView<glm::vec4> box = clampBox(f.ctx);
+    if (!f.tp.temporal || !box.data) return;
+    svgf::device::neighbourhood(f.ctx.device(), f.tv, f.split, f.tv.albedo, {}, box);
+    f.tv.neighbourhood = asConst(box);
+}
+
 void SVGFPass::temporalStage(Frame& f) {
     const uint32_t w = f.w, h = f.h;
     if (!f.pipe.fusedTemporal) {
@@ -638,6 +672,7 @@ void SVGFPass::execute(PassContext& ctx) {
     // The stages, each timed under its stat.
     using Stage = void (SVGFPass::*)(Frame&);
     const std::pair<const char*, Stage> stages[] = {{kStatAntilag, &SVGFPass::antilagStage},
+                                                    {kStatNeighbourhood, &SVGFPass::neighbourhoodStage},
                                                     {kStatReproject, &SVGFPass::temporalStage},
                                                     {kStatVariance, &SVGFPass::varianceStage},
                                                     {nullptr, &SVGFPass::atrousStage},  // times its levels itself
@@ -682,6 +717,13 @@ void SVGFPass::executeOnDevice(PassContext& ctx) {
         f.tv.prevChange = asConst(change);
     }
     stats.set(kStatAntilag, msSince(t0));
+
+    t0 = Clock::now();
+    if (const ImageView<glm::vec4> box = clampBox(ctx); f.tp.temporal && box.data) {
+        dev::neighbourhood(device, f.tv, f.split, albedo, specAlbedo, box);
+        f.tv.neighbourhood = asConst(box);
+    }
+    stats.set(kStatNeighbourhood, msSince(t0));
 
     t0 = Clock::now();
     f.nonFinite = dev::temporal(device, f.tv, f.tp, albedo, specAlbedo);

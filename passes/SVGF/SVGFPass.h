@@ -43,6 +43,10 @@ private:
     // The stages of a frame, in order (execute).
     void bindFrame(Frame& f);
     void antilagStage(Frame& f);
+    /// The history clamp's box of every pixel (svgf::neighbourhoodPixel), when it is on.
+    void neighbourhoodStage(Frame& f);
+    /// The clamp box's view, empty when the clamp is off or the field is not declared (a gradient input).
+    ImageView<glm::vec4> clampBox(PassContext& ctx) const;
     void temporalStage(Frame& f);
     void varianceStage(Frame& f);
     void atrousStage(Frame& f);
@@ -65,6 +69,8 @@ private:
     svgf::TemporalParams mTemporalParams;  ///< alpha, momentsAlpha, maxHistory: the kernel's struct holds the defaults
     svgf::AtrousParams mEdgeStopping;  ///< phiColor, phiNormal, phiDepth: the kernel's struct holds the defaults
     bool mMeanVariance = true;
+    /// The history clamp (TemporalParams::clampSigma), where no gradient input is connected.
+    bool mHistoryClamp = true;
     bool mReferenceAtrous = false;
     bool mReferenceStages = false;
 

@@ -385,25 +385,69 @@ LaneBits vectorPixels(const RowJob& j, uint32_t x, uint32_t y, bool& anyShort, u
     rm[1] = hn::Mul(rm[1], rq2);
     rm[2] = hn::Mul(rm[2], rq);
     rm[3] = hn::Mul(rm[3], rq2);
+    if (v.neighbourhood.data) {
+        // The history clamp (temporalPixel, historyClampScale): the history scaled into this frame's neighbourhood.
+        V b[4];
+        hn::LoadInterleaved4(d, &v.neighbourhood.at(x, y).x, b[0], b[1], b[2], b[3]);
+        const V sigmas = hn::Set(d, p.clampSigma);
+        auto clampScale = [&](V lumV, V mean, V sd) HWY_ATTR {
+            const V lo = maxOf(hn::Sub(mean, hn::Mul(sigmas, sd)), zero), hi = hn::Add(mean, hn::Mul(sigmas, sd));
+            const V up = hn::IfThenElse(hn::And(hn::Lt(lumV, lo), hn::Gt(lumV, zero)), hn::Div(lo, lumV), one);
+            return hn::IfThenElse(hn::Gt(lumV, hi), hn::Div(hi, lumV), up);
+        };
+        // One signal's history (rgb, moments m1 and m2) scaled by its clamp factor.
+        auto clampSignal = [&](V& r, V& g, V& bl, V& m1, V& m2, V mean, V sd) HWY_ATTR {
+            const V h = clampScale(luminanceSum(d, r, g, bl), mean, sd);
+            r = hn::Mul(r, h);
+            g = hn::Mul(g, h);
+            bl = hn::Mul(bl, h);
+            m1 = hn::Mul(m1, h);
+            m2 = hn::Mul(m2, hn::Mul(h, h));
+        };
+        clampSignal(rr, rg, rb, rm[0], rm[1], b[0], b[1]);
+        if (split) clampSignal(sr, sg, sb, rm[2], rm[3], b[2], b[3]);
+    }
     const V length = hn::IfThenElse(
         valid, minOf(hn::Add(hn::Mul(rl, hn::Sub(one, change)), one), hn::Set(d, float(p.maxHistory))), one);
     const V invLength = hn::Div(one, length);
     const V a = maxOf(hn::Add(hn::Set(d, p.alpha), hn::Mul(change, hn::Set(d, 1.f - p.alpha))), invLength);
     const V am =
         maxOf(hn::Add(hn::Set(d, p.momentsAlpha), hn::Mul(change, hn::Set(d, 1.f - p.momentsAlpha))), invLength);
-    V ir = hn::IfThenElse(valid, mixOf(d, rr, lr, a), lr);
-    V ig = hn::IfThenElse(valid, mixOf(d, rg, lg, a), lg);
-    V ib = hn::IfThenElse(valid, mixOf(d, rb, lb, a), lb);
+    // The firefly clamp (outlierScale) where the history is settled: the samples blended into it, moments included.
+    V s0 = one, s1 = one;
+    V blended[4] = {moments[0], moments[1], moments[2], moments[3]};
+    if (p.outlierSigma > 0.f) {
+        const M settled = hn::Ge(rl, hn::Set(d, kOutlierMinFrames));
+        const V sigmas = hn::Set(d, p.outlierSigma);
+        auto scale = [&](V lumV, V m1, V m2) HWY_ATTR {
+            const V bound = hn::Add(m1, hn::Mul(sigmas, hn::Sqrt(maxOf(hn::Sub(m2, hn::Mul(m1, m1)), zero))));
+            const M over = hn::And(settled, hn::And(hn::Gt(lumV, bound), hn::Ge(bound, zero)));
+            return hn::IfThenElse(over, hn::Div(bound, lumV), one);
+        };
+        s0 = scale(lum, rm[0], rm[1]);
+        const V c0 = hn::Mul(lum, s0);
+        blended[0] = c0;
+        blended[1] = hn::Mul(c0, c0);
+        if (split) {
+            s1 = scale(lum1, rm[2], rm[3]);
+            const V c1 = hn::Mul(lum1, s1);
+            blended[2] = c1;
+            blended[3] = hn::Mul(c1, c1);
+        }
+    }
+    V ir = hn::IfThenElse(valid, mixOf(d, rr, hn::Mul(lr, s0), a), lr);
+    V ig = hn::IfThenElse(valid, mixOf(d, rg, hn::Mul(lg, s0), a), lg);
+    V ib = hn::IfThenElse(valid, mixOf(d, rb, hn::Mul(lb, s0), a), lb);
     V m[4] = {zero, zero, zero, zero};
-    for (int c = 0; c < momentCount; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], moments[c], am), moments[c]);
+    for (int c = 0; c < momentCount; ++c) m[c] = hn::IfThenElse(valid, mixOf(d, rm[c], blended[c], am), moments[c]);
     // The variance of the accumulated mean: max(1 / n, varianceFloor) of the per-sample variance (n >= 1 here).
     const V meanScale = maxOf(invLength, hn::Set(d, p.varianceFloor));
     V ia = hn::Mul(maxOf(zero, hn::Sub(m[1], hn::Mul(m[0], m[0]))), meanScale);
     V jr = zero, jg = zero, jb = zero, ja = zero;
     if (split) {
-        jr = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sr, kr, a), kr));
-        jg = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sg, kg, a), kg));
-        jb = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sb, kb, a), kb));
+        jr = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sr, hn::Mul(kr, s1), a), kr));
+        jg = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sg, hn::Mul(kg, s1), a), kg));
+        jb = hn::IfThenElseZero(hit, hn::IfThenElse(valid, mixOf(d, sb, hn::Mul(kb, s1), a), kb));
         ja = hn::IfThenElseZero(hit, hn::Mul(maxOf(zero, hn::Sub(m[3], hn::Mul(m[2], m[2]))), meanScale));
     }
     // Misses: no history, zero signal.

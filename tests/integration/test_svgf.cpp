@@ -519,10 +519,13 @@ TEST(SVGF, ConvergesTowardsReferenceOnCornellBox) {
                     ref[size_t(y) * W + x] += glm::dvec3(glm::vec3(c.at(x, y))) / double(frames);
         }
     }
-    auto defaults = sceneGraph(scene, W, H, {{"feedbackTap", 0}});
-    auto noFeedback = sceneGraph(scene, W, H, nlohmann::json::object());
+    // Without the firefly clamp, which is biased (it drops the energy above its bound): SVGF then converges to the
+    // path tracer's expectation. With it (the default), the error stays within a bound.
+    auto defaults = sceneGraph(scene, W, H, {{"feedbackTap", 0}, {"outlierSigma", 0}});
+    auto noFeedback = sceneGraph(scene, W, H, {{"outlierSigma", 0}});
+    auto clamped = sceneGraph(scene, W, H, nlohmann::json::object());
     const int frames = 24;
-    std::vector<double> errDefault, errNoFeedback;
+    std::vector<double> errDefault, errNoFeedback, errClamped;
     double inputError = 0.0;
     for (int f = 0; f < frames; ++f) {
         renderFrame(*defaults, *scene, uint64_t(f), 0.0, W, H);
@@ -530,7 +533,11 @@ TEST(SVGF, ConvergesTowardsReferenceOnCornellBox) {
         inputError += relMSE(*defaults->fieldTexture("PT.color"), ref) / frames;
         renderFrame(*noFeedback, *scene, uint64_t(f), 0.0, W, H);
         errNoFeedback.push_back(relMSE(*noFeedback->fieldTexture("SVGF.filtered"), ref));
+        renderFrame(*clamped, *scene, uint64_t(f), 0.0, W, H);
+        errClamped.push_back(relMSE(*clamped->fieldTexture("SVGF.filtered"), ref));
     }
+    std::printf("relMSE with the default firefly clamp, frame 1 / 4 / 8 / 24: %.4f %.4f %.4f %.4f\n", errClamped[0],
+                errClamped[3], errClamped[7], errClamped[23]);
     std::printf(
         "relMSE: 1 spp input %.4f; SVGF frame 1 / 4 / 8 / 24: feedbackTap 0 %.4f %.4f %.4f %.4f, -1 (default) "
         "%.4f %.4f %.4f %.4f\n",
@@ -615,10 +622,15 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
         return p;
     };
     // Six frames of the fused stages (fast) against the reference stages on the same input.
-    auto compareRuns = [&](const GFn& input, bool split, const Camera* camera = nullptr) {
-        const std::string what = std::string(split ? "split " : "") + (camera ? "moving camera " : "");
-        Harness fast({{"referenceStages", false}}, input, split, 48, 40);
-        Harness ref({{"referenceStages", true}}, input, split, 48, 40);
+    auto compareRuns = [&](const GFn& input, bool split, const Camera* camera = nullptr,
+                           const nlohmann::json& params = nlohmann::json::object()) {
+        const std::string what =
+            std::string(split ? "split " : "") + (camera ? "moving camera " : "") + (params.empty() ? "" : params.dump());
+        nlohmann::json fastParams = params, refParams = params;
+        fastParams["referenceStages"] = false;
+        refParams["referenceStages"] = true;
+        Harness fast(fastParams, input, split, 48, 40);
+        Harness ref(refParams, input, split, 48, 40);
         for (int frame = 0; frame < 6; ++frame) {
             fast.run(1, camera);
             ref.run(1, camera);
@@ -666,6 +678,10 @@ TEST(SVGF, FusedStagesMatchTheReferenceStages) {
         return p;
     };
     compareRuns(splitFn, true);
+    // The firefly clamp, on both signals: the noise's bright tail lies beyond 1.5 standard deviations of the history
+    // once it is 4 frames long (frames 4 and 5 here), so samples are clamped on both paths alike.
+    compareRuns(fn, false, nullptr, {{"outlierSigma", 1.5}});
+    compareRuns(splitFn, true, nullptr, {{"outlierSigma", 1.5}});
 }
 
 // With the G-buffer's @prev outputs connected, SVGF reads last frame's depth, normal and mesh id there instead of
@@ -846,8 +862,9 @@ TEST(SVGF, ExtremeEdgeStoppingParametersStayFinite) {
 }
 
 // Anti-lag (A-SVGF): a lighting step (the illumination falls to a quarter) that the temporal gradients report is
-// followed within a few frames; without them the history takes tens of frames to forget the old light. Where the
-// gradients report no change, the output is bit for bit that of a graph without them.
+// followed within a few frames; without them (and without the history clamp) the history takes tens of frames to
+// forget the old light. Where the gradients report no change, the output is bit for bit that of a graph without
+// them. Without gradients the history clamp is on by default and follows the step too.
 TEST(SVGF, TemporalGradientsFollowALightingStepWithinFourFrames) {
     const uint64_t step = 40;
     const auto light = [&](uint64_t frame) { return frame < step ? 1.f : 0.25f; };
@@ -863,7 +880,7 @@ TEST(SVGF, TemporalGradientsFollowALightingStepWithinFourFrames) {
         }
         return p;
     };
-    Harness with({}, fn, false, 32, 32, "SvgfGradientSource"), without({}, fn);
+    Harness with({}, fn, false, 32, 32, "SvgfGradientSource"), without({{"historyClamp", false}}, fn), clamped({{"clampSigma", 1.0}}, fn);
     auto meanOf = [](const Harness& h) {
         double sum = 0.0;
         for (uint32_t y = 0; y < 32; ++y)
@@ -875,18 +892,24 @@ TEST(SVGF, TemporalGradientsFollowALightingStepWithinFourFrames) {
         without.run();
         ASSERT_EQ(meanOf(with), meanOf(without)) << "frame " << f << ": no change, no difference";
     }
-    int withFrames = -1, withoutFrames = -1;
+    clamped.run(int(step));
+    int withFrames = -1, withoutFrames = -1, clampedFrames = -1;
     for (int k = 0; k < 40; ++k) {
         with.run();
         without.run();
+        clamped.run();
         // Within 10 % of the new level (the noise's mean is 1, so the level is 0.25).
         if (withFrames < 0 && std::abs(meanOf(with) - 0.25) < 0.025) withFrames = k;
         if (withoutFrames < 0 && std::abs(meanOf(without) - 0.25) < 0.025) withoutFrames = k;
+        if (clampedFrames < 0 && std::abs(meanOf(clamped) - 0.25) < 0.025) clampedFrames = k;
     }
-    std::printf("frames to within 10 %% after the step: with gradients %d, without %d\n", withFrames, withoutFrames);
+    std::printf("frames to within 10 %% after the step: with gradients %d, without %d, history clamp %d\n", withFrames,
+                withoutFrames, clampedFrames);
     EXPECT_GE(withFrames, 0);
     EXPECT_LE(withFrames, 3) << "back within 10 % in at most 4 frames (the step's frame included)";
     EXPECT_TRUE(withoutFrames < 0 || withoutFrames > 8) << "without gradients the history lags";
+    EXPECT_GE(clampedFrames, 0);
+    EXPECT_LE(clampedFrames, 3) << "the history clamp: back within 10 % in at most 4 frames";
 }
 
 // With camera jitter the signal of pixel x is sampled at x + jitter and the history where last frame sampled: the

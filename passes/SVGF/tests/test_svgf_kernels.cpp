@@ -74,3 +74,25 @@ TEST(SVGF, AntilagSeparatesRescalingFromChange) {
     EXPECT_EQ(svgf::gradientSample(glm::vec2(std::nanf(""), 1.f)), glm::vec2(0.f));
     EXPECT_EQ(svgf::gradientSample(glm::vec2(1.f, -1.f)), glm::vec2(0.f));
 }
+
+// The firefly clamp's factor: a sample above mean + k sigma of the history's moments is brought exactly to that bound;
+// one within it, any sample with the clamp off (k = 0), and any sample of a history with no bound (non-finite or
+// negative) keep their value.
+TEST(SVGF, OutlierScaleBringsFirefliesToTheBound) {
+    const float mean = 2.f, sigma = 0.5f;
+    const float m1 = mean, m2 = sigma * sigma + mean * mean;
+    for (float k : {1.f, 2.f, 3.f}) {
+        const float bound = mean + k * sigma;
+        for (float lum : {bound * 1.01f, 10.f, 1e6f, 1e30f}) {
+            const float s = svgf::outlierScale(lum, m1, m2, k);
+            EXPECT_LT(s, 1.f) << k << " " << lum;
+            EXPECT_NEAR(lum * s, bound, 1e-5f * bound) << k << " " << lum;
+        }
+        for (float lum : {0.f, 1.f, mean, bound * 0.999f}) EXPECT_EQ(svgf::outlierScale(lum, m1, m2, k), 1.f);
+    }
+    EXPECT_EQ(svgf::outlierScale(1e6f, m1, m2, 0.f), 1.f);
+    // Moments whose variance rounds below zero give sigma 0: the bound is the mean.
+    EXPECT_NEAR(5.f * svgf::outlierScale(5.f, 1.f, 0.999999f, 3.f), 1.f, 1e-5f);
+    EXPECT_EQ(svgf::outlierScale(5.f, -1.f, 1.f, 0.f), 1.f);
+    EXPECT_EQ(svgf::outlierScale(5.f, -10.f, 100.f, 1.f), 1.f);  // bound -10: nothing to clamp to
+}
