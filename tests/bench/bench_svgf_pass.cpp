@@ -1,10 +1,12 @@
 // SVGFPass at 1280x720 on synthetic inputs (noisy colour over a G-buffer of two planes and a moving square, so
 // reprojection, disocclusion and the short-history variance all run): ms per frame of the whole pass, and each
 // stage from the pass's frame stats. Baseline in the same run: temporal = false (the plain edge-avoiding a-trous
-// filter, Dammertz et al. 2010, with spatial variance every frame).
+// filter, Dammertz et al. 2010, with spatial variance every frame). BM_SVGF_Coverage weighs a frame whose hits cover
+// a fifth of it (an object under the sky) against a frame covered in full, the two graphs alternating frame by frame.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <map>
@@ -30,8 +32,11 @@ float hash01(uint64_t frame, uint32_t x, uint32_t y) {
 }
 
 /// The SVGF inputs, filled in parallel (its own cost is not part of the SVGF figures: they come from the stats).
+/// Parameter `coverage`: the fraction of the frame inside a centred ellipse that holds the hits; outside it every
+/// pixel is a miss (sky).
 class SyntheticInputs final : public RenderPass {
 public:
+    void declareParams(ParamList& p) override { p.add("coverage", &mCoverage, 1.f).range(0.0, 1.0); }
     void reflect(Reflection& r, const CompileInfo&) const override {
         r.output("color", Format::RGBA32F);
         r.output("albedo", Format::RGBA32F);
@@ -50,8 +55,22 @@ public:
         const auto mvec = ctx.output("mvec")->view<glm::vec2>();
         const auto meshId = ctx.output("meshId")->view<uint32_t>();
         const uint64_t f = ctx.frameIndex();
-        const uint32_t w = color.width;
-        parallelForPixels(w, color.height, [&](uint32_t x, uint32_t y) {
+        const uint32_t w = color.width, h = color.height;
+        // An ellipse of the frame's aspect with area coverage * w * h: radius sqrt(coverage / pi) in units of the
+        // frame's sides.
+        const float radius = std::sqrt(mCoverage / 3.14159265f);
+        parallelForPixels(w, h, [&](uint32_t x, uint32_t y) {
+            const float u = (float(x) + 0.5f) / float(w) - 0.5f, v = (float(y) + 0.5f) / float(h) - 0.5f;
+            if (mCoverage < 1.f && u * u + v * v > radius * radius) {
+                albedo.at(x, y) = glm::vec4(0.f);
+                emission.at(x, y) = glm::vec4(0.f);
+                color.at(x, y) = glm::vec4(0.4f, 0.5f, 0.7f, 1.f);
+                linearZ.at(x, y) = glm::vec2(-1.f, 0.f);
+                normW.at(x, y) = glm::vec4(0.f);
+                mvec.at(x, y) = glm::vec2(0.f);
+                meshId.at(x, y) = ~0u;
+                return;
+            }
             const uint32_t s = w / 64;  // the square: 10 s wide, moving s / 5 pixels a frame
             const uint32_t x0 = s * 5 + (s * f / 5) % (w / 2);
             const bool square = y >= s * 10 && y < s * 20 && x >= x0 && x < x0 + s * 10;
@@ -66,6 +85,9 @@ public:
             meshId.at(x, y) = square ? 1u : 0u;
         });
     }
+
+private:
+    float mCoverage = 1.f;
 };
 
 PluginRegistry& registry() {
@@ -87,8 +109,9 @@ struct SvgfRun {
     std::map<std::string, double> sums, mins;
     int timed = 0;
 
-    SvgfRun(uint32_t W, bool temporal, bool referenceStages)
-        : graph(parseGraph(R"({"loom_graph": 1, "passes": [{"name": "Inputs", "type": "SyntheticInputs"},
+    SvgfRun(uint32_t W, bool temporal, bool referenceStages, double coverage = 1.0)
+        : graph(parseGraph(R"({"loom_graph": 1, "passes": [{"name": "Inputs", "type": "SyntheticInputs",
+              "params": {"coverage": )" + std::to_string(coverage) + R"(}},
               {"name": "SVGF", "type": "SVGFPass", "params": {"iterations": 4, "temporal": )" +
                            std::string(temporal ? "true" : "false") + R"(, "referenceStages": )" +
                            std::string(referenceStages ? "true" : "false") + R"(}}], "outputs": ["SVGF.filtered"]})"),
@@ -166,6 +189,21 @@ BENCHMARK(BM_SVGF_FusedVsReference)
     ->Arg(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+
+/// A fifth of the frame covered (the rest sky) against all of it, alternating frame by frame at 1280x720: the
+/// counters full.ms and part.ms (means of the whole pass) and ratio = part / full. Arg 0: threads (0 = all).
+void BM_SVGF_Coverage(benchmark::State& state) {
+    ThreadLimit limit(unsigned(state.range(0)));
+    SvgfRun full(1280, true, false, 1.0), part(1280, true, false, 0.2);
+    for (auto _ : state) {
+        full.step();
+        part.step();
+    }
+    state.counters["full.ms"] = full.sums["ms.pass"] / full.timed;
+    state.counters["part.ms"] = part.sums["ms.pass"] / part.timed;
+    state.counters["ratio"] = part.sums["ms.pass"] / full.sums["ms.pass"];
+}
+BENCHMARK(BM_SVGF_Coverage)->ArgNames({"threads"})->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 
