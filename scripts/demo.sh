@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 loom=build/release/bin/loom
 out=out/demo
 rm -rf "$out"
-mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced" "$out/denoised" "$out/sequence"
+mkdir -p "$out/pattern" "$out/gbuffer" "$out/pathtraced" "$out/denoised" "$out/asset" "$out/sequence"
 
 "$loom" check graphs/TestPattern.json --size 512x512 --dot "$out/pattern/graph.dot" > "$out/pattern/plan.txt"
 "$loom" render --graph graphs/TestPattern.json --size 512x512 --frames 8 --out "$out/pattern" \
@@ -46,6 +46,10 @@ frame=$(printf '%04d' "$last")
 "$loom" image montage "$out/denoised/noisy/ToneMap.dst.$frame.png" "$out/denoised/ToneMap.dst.$frame.png" \
   "$out/denoised/reference/ToneMap.dst.$frame.png" -o "$out/denoised/side_by_side.png"
 
+# A small textured, normal-mapped, metallic object under an environment, the orbit camera moving round it.
+"$loom" render --graph graphs/PathTracerSVGF.json --scene data/scenes/asset.gltf --env 0.25,0.3,0.4 \
+  --camera-path orbit --size 320x240 --frames 16 --quiet --out "$out/asset"
+
 # Frames Blender rendered (multilayer EXR), denoised by the same SVGF; the noisy input and Blender's reference go
 # through the same graph with SVGF off, so all three share the tone map.
 seq=(--graph graphs/DenoiseSequence.json --size 64x48 --frames 8 --quiet)
@@ -58,7 +62,7 @@ seq=(--graph graphs/DenoiseSequence.json --size 64x48 --frames 8 --quiet)
 
 echo
 echo "Images written to $out/:"
-for d in pattern gbuffer pathtraced denoised sequence; do
+for d in pattern gbuffer pathtraced denoised asset sequence; do
   echo "  $d/: $(ls "$out/$d" | wc -l) files, e.g. $(ls "$out/$d" | grep -E '\.(png|exr)$' | tail -1)"
 done
 echo "  side by side (1 spp | SVGF | 256 spp reference): $out/denoised/side_by_side.png"
