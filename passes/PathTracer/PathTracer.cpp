@@ -246,6 +246,11 @@ void PathTracer::declareParams(ParamList& p) {
         .doc("direct light by MIS of light and BRDF sampling, light sampling only, or BRDF sampling only");
     p.add("lambertOnly", &mSettings.lambertOnly, defaults.lambertOnly)
         .doc("replace the glTF BRDF by baseColor/pi (validation)");
+    p.add("gradientFromCurrentView", &mSettings.gradientFromCurrentView, defaults.gradientFromCurrentView)
+        .doc(
+            "temporal gradients re-shade last frame's sample from this frame's camera position (A-SVGF), so shading "
+            "that depends on the view (highlights) shows as a change; false: along last frame's camera ray, equal "
+            "bit for bit where only the camera moved");
     p.add("indirectClamp", &mSettings.indirectClamp, defaults.indirectClamp)
         .range(0.f, 1e6f)
         .doc(
@@ -561,6 +566,7 @@ namespace {
 struct GradientSample {
     glm::uvec2 block, pixel;
     RayHit hit;
+    glm::vec3 origin, dir;  ///< the ray it is re-shaded along (pt::gradientRay)
 };
 
 /// Writes a block's gradient value into each of its pixels.
@@ -617,7 +623,9 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
                     hit.primitive = e.y;
                     hit.u = bitsToFloat(e.z);
                     hit.v = bitsToFloat(e.w);
-                    samples.push_back({glm::uvec2(bx, by), q, hit});
+                    GradientSample g{glm::uvec2(bx, by), q, hit, {}, {}};
+                    pt::gradientRay(view, batch.set, prevCam, camera.position(), q.x, q.y, hit, g.origin, g.dir);
+                    samples.push_back(g);
                 }
             // Paths sample-minor, as the colour's: each sample's sums in the same order give the same bits.
             const uint64_t total = uint64_t(samples.size()) * spp;
@@ -629,9 +637,7 @@ uint64_t traceGradients(PassContext& ctx, const BatchContext& batch, const Camer
                     const uint64_t item = first + k;
                     const GradientSample& g = samples[size_t(item / spp)];
                     const uint32_t s = uint32_t(item % spp);
-                    pt::beginPath(ts.paths[k], prevCam.origin,
-                                  glm::normalize(pixelRayDir(prevCam, g.pixel.x, g.pixel.y)),
-                                  pt::PathRng(g.pixel.y * w + g.pixel.x, frame - 1, s));
+                    pt::beginPath(ts.paths[k], g.origin, g.dir, pt::PathRng(g.pixel.y * w + g.pixel.x, frame - 1, s));
                     ts.hits[k] = g.hit;
                 }
                 runPaths(batch, ts, count);

@@ -29,6 +29,9 @@ struct PathTracerSettings {
     bool lambertOnly = false;  ///< f = baseColor / pi, for analytic tests
     bool multiScatter = true;  ///< the BRDF's energy compensation (BrdfInputs::multiScatter)
     float indirectClamp = 0.f;  ///< firefly guard: largest channel of one indirect contribution; 0 = off
+    /// Temporal gradients re-shade last frame's sample from this frame's camera position (view-dependent shading
+    /// that changed with the camera shows in them) instead of along last frame's camera ray.
+    bool gradientFromCurrentView = false;
 };
 
 /// The firefly guard of the real-time graphs: a contribution that reaches the pixel after the first bounce (what

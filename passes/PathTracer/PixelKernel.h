@@ -189,6 +189,22 @@ struct GradientReplay {
     uint64_t prevIndex = 0;   ///< last frame's index (its gradientPixel)
 };
 
+/// The ray along which a gradient sample (last frame's pixel (px, py), its primary hit `hit`) is re-shaded: last
+/// frame's camera ray, or with set.gradientFromCurrentView the ray from this frame's camera position `origin` to
+/// the same surface point.
+LOOM_HD inline void gradientRay(const SceneView& scene, const PathTracerSettings& set, const CameraData& prevCam,
+                                glm::vec3 currentOrigin, uint32_t px, uint32_t py, const RayHit& hit,
+                                glm::vec3& origin, glm::vec3& dir) {
+    origin = prevCam.origin;
+    dir = glm::normalize(pixelRayDir(prevCam, px, py));
+    if (!set.gradientFromCurrentView) return;
+    const glm::vec3 p = evalSurface(scene, hit.instance, hit.primitive, hit.u, hit.v, dir).posW;
+    const glm::vec3 d = p - currentOrigin;
+    if (!(glm::dot(d, d) > 0.f)) return;
+    origin = currentOrigin;
+    dir = glm::normalize(d);
+}
+
 /// Block (bx, by)'s temporal gradient: last frame's sample of the block re-shaded now, at the same surface point
 /// (its hit follows animated instances) along last frame's camera ray with last frame's random numbers, through the
 /// same paths renderPixel traces, next to its luminance then. Where nothing changed both are the same bits. (0, 0)
@@ -205,12 +221,13 @@ LOOM_HD inline uint32_t replayGradient(const FrameKernel& k, const GradientRepla
         hit.primitive = e.y;
         hit.u = bitsToFloat(e.z);
         hit.v = bitsToFloat(e.w);
-        const glm::vec3 dir = glm::normalize(pixelRayDir(g.prevCam, q.x, q.y));
+        glm::vec3 origin, dir;
+        gradientRay(k.scene, k.set, g.prevCam, k.cam.origin, q.x, q.y, hit, origin, dir);
         const BvhTracer tracer{&k.bvh, k.secondaryRules, k.keyed};
         PixelSum acc;
         for (uint32_t s = 0; s < k.spp; ++s) {
             PathRng rng(q.y * w + q.x, g.prevFrame, s);
-            const PathResult r = tracePath(tracer, k.scene, k.lights, k.set, g.prevCam.origin, dir, hit, rng);
+            const PathResult r = tracePath(tracer, k.scene, k.lights, k.set, origin, dir, hit, rng);
             rays += r.rays;
             acc.add(r);
         }

@@ -848,6 +848,50 @@ TEST(PathTracer, TemporalGradientsAreExactlyZeroWhereOnlyTheCameraMoved) {
     for (size_t i = 0; i < one.size(); ++i) EXPECT_EQ(one[i], two[i]);
 }
 
+// gradientFromCurrentView re-shades last frame's sample from this frame's camera position (A-SVGF's choice): under an
+// orbit a view-independent BRDF (lambertOnly) still gives equal pairs, while the glTF BRDF's view-dependent
+// reflections on materials.gltf make blocks differ; along last frame's rays (the default) they are all equal.
+TEST(PathTracer, GradientsFromTheCurrentViewSeeViewDependentShading) {
+    const uint32_t W = 48, H = 32;
+    // The largest relative difference of a pair over frames 1..3, and how many lit blocks were compared.
+    auto worstPair = [&](const std::string& sceneName, bool lambert, bool fromCurrent, size_t& lit) {
+        auto scene = Scene::load(scenePath(sceneName));
+        scene->cameraPath.kind = CameraPathKind::Orbit;
+        nlohmann::json params = {{"samplesPerPixel", 1}, {"lambertOnly", lambert},
+                                 {"gradientFromCurrentView", fromCurrent}};
+        nlohmann::json g = {{"loom_graph", 1},
+                            {"name", "pt"},
+                            {"passes", {{{"name", "PT"}, {"type", "PathTracer"}, {"params", params}}}},
+                            {"outputs", {"PT.color", "PT.gradient"}}};
+        auto graph = test::compiledGraph(g, scene, W, H);
+        double worst = 0.0;
+        lit = 0;
+        for (uint64_t f = 0; f < 4; ++f) {
+            const double time = double(f) / 30.0;  // a small turn: every wall still faces the camera
+            scene->update(time);
+            scene->camera.aspect = float(W) / float(H);
+            scene->camera.beginFrame(f);
+            graph->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+            if (f == 0) continue;
+            const auto gradient = graph->fieldTexture("PT.gradient")->view<glm::vec2>();
+            for (uint32_t y = 0; y < H; y += 3)
+                for (uint32_t x = 0; x < W; x += 3) {
+                    const glm::vec2 v = gradient.at(x, y);
+                    if (!(v.y > 1e-3f)) continue;
+                    ++lit;
+                    worst = std::max(worst, double(std::fabs(v.x - v.y)) / double(v.y));
+                }
+        }
+        return worst;
+    };
+    size_t lit = 0;
+    EXPECT_LT(worstPair("cornell_box.gltf", true, true, lit), 1e-4) << "a Lambertian surface looks the same from anywhere";
+    EXPECT_GT(lit, size_t(W * H / 9));
+    EXPECT_GT(worstPair("materials.gltf", false, true, lit), 0.05) << "glossy reflections move with the view";
+    EXPECT_GT(lit, size_t(W * H / 9));
+    EXPECT_EQ(worstPair("materials.gltf", false, false, lit), 0.0) << "last frame's rays replayed exactly";
+}
+
 // Where the lighting changes, the gradient says by how much: cornell_lightstep dims its only light to a quarter at
 // frame 21 (60 fps); the samples re-shaded then are a quarter of what they were (light is linear in emission, and
 // with one light its selection is unchanged), while the frames around the step have equal pairs.
