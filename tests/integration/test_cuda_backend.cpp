@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "../apps/loom/SceneSetup.h"
 #include "TestUtil.h"
 #include "loom/Error.h"
 #include "loom/RenderGraph.h"
@@ -73,10 +74,7 @@ void expectAgreement(const std::shared_ptr<Scene>& scene, const std::string& dev
     auto other = tracerGraph(device, params, vbuffer, scene);
     for (uint32_t i = 0; i < frames; ++i) {
         const double t = 0.25 * double(i);
-        scene->update(t);
-        scene->camera.aspect = float(kW) / float(kH);
-        scene->camera.beginFrame(i);
-        const FrameInfo info{i, t, scene.get(), &scene->camera};
+        const FrameInfo info = cli::sceneFrameAt(scene.get(), i, t, kW, kH, false);
         cpu->execute(info);
         other->execute(info);
         for (const std::string& o : kOutputs) {

@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "../apps/loom/SceneSetup.h"
 #include "TestUtil.h"
 #include "loom/Graph.h"
 #include "loom/Parallel.h"
@@ -128,10 +129,7 @@ void checkScene(const std::string& name) {
     bool moved = false;
     for (uint64_t f = 0; f < 4; ++f) {
         const double time = 0.25 * double(f);
-        scene->update(time);
-        scene->camera.aspect = float(kW) / float(kH);
-        scene->camera.beginFrame(f);
-        const FrameInfo frame{f, time, scene.get(), &scene->camera};
+        const FrameInfo frame = cli::sceneFrameAt(scene.get(), f, time, kW, kH, false);
         cpu->execute(frame);
         {
             ThreadLimit one(1);

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "../../passes/PathTracer/Lights.h"
+#include "../apps/loom/SceneSetup.h"
 #include "TestUtil.h"
 #include "loom/CameraKernels.h"
 #include "loom/Graph.h"
@@ -822,10 +823,7 @@ TEST(PathTracer, TemporalGradientsAreExactlyZeroWhereOnlyTheCameraMoved) {
         size_t sampled = 0;
         for (uint64_t f = 0; f < 4; ++f) {
             const double time = double(f) / 30.0;
-            scene->update(time);
-            scene->camera.aspect = float(W) / float(H);
-            scene->camera.beginFrame(f);
-            graph->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+            graph->execute(cli::sceneFrameAt(scene.get(), f, time, W, H, false));
             const auto gradient = graph->fieldTexture("PT.gradient")->view<glm::vec2>();
             last.clear();
             for (uint32_t y = 0; y < H; ++y)
@@ -868,10 +866,7 @@ TEST(PathTracer, GradientsFromTheCurrentViewSeeViewDependentShading) {
         lit = 0;
         for (uint64_t f = 0; f < 4; ++f) {
             const double time = double(f) / 30.0;  // a small turn: every wall still faces the camera
-            scene->update(time);
-            scene->camera.aspect = float(W) / float(H);
-            scene->camera.beginFrame(f);
-            graph->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+            graph->execute(cli::sceneFrameAt(scene.get(), f, time, W, H, false));
             if (f == 0) continue;
             const auto gradient = graph->fieldTexture("PT.gradient")->view<glm::vec2>();
             for (uint32_t y = 0; y < H; y += 3)
@@ -905,10 +900,7 @@ TEST(PathTracer, TemporalGradientsMeasureALightingStep) {
     auto graph = test::compiledGraph(g, scene, W, H);
     for (uint64_t f = 19; f <= 22; ++f) {
         const double time = double(f) / 60.0;
-        scene->update(time);
-        scene->camera.aspect = float(W) / float(H);
-        scene->camera.beginFrame(f);
-        graph->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+        graph->execute(cli::sceneFrameAt(scene.get(), f, time, W, H, false));
         if (f == 19) continue;
         const auto gradient = graph->fieldTexture("PT.gradient")->view<glm::vec2>();
         size_t lit = 0;

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "../apps/loom/SceneSetup.h"
 #include "TestUtil.h"
 #include "loom/Device.h"
 #include "loom/Parallel.h"
@@ -92,10 +93,7 @@ void expectPlacementEqualsBackend(const std::string& sceneName, bool vbuffer, ui
         EXPECT_EQ(fields.size(), kOutputs.size() + 2) << sceneName;
         for (uint32_t i = 0; i < frames; ++i) {
             const double t = 0.25 * double(i);
-            scene->update(t);
-            scene->camera.aspect = float(kW) / float(kH);
-            scene->camera.beginFrame(i);
-            const FrameInfo info{i, t, scene.get(), &scene->camera};
+            const FrameInfo info = cli::sceneFrameAt(scene.get(), i, t, kW, kH, false);
             backend->execute(info);
             placed->execute(info);
             const std::string where =
@@ -140,10 +138,7 @@ TEST(PathTracerDevices, StaticSceneGradientsAreEqualPairs) {
     const auto scene = Scene::load(test::dataScene("cornell_box.gltf"));
     auto placed = tracerGraph("emulated", {{"maxBounces", 3}}, false, scene);
     for (uint32_t i = 0; i < 3; ++i) {
-        scene->update(0.0);
-        scene->camera.aspect = float(kW) / float(kH);
-        scene->camera.beginFrame(i);
-        placed->execute(FrameInfo{i, 0.0, scene.get(), &scene->camera});
+        placed->execute(cli::sceneFrameAt(scene.get(), i, 0.0, kW, kH, false));
         const Texture* g = placed->fieldTexture("P.gradient");
         ASSERT_TRUE(g);
         uint32_t lit = 0;

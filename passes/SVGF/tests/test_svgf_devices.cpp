@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "../apps/loom/SceneSetup.h"
 #include "TestUtil.h"
 #include "loom/Parallel.h"
 #include "loom/RenderGraph.h"
@@ -381,10 +382,7 @@ TEST(SvgfDevices, PathTracerSvgfGraphOnEmulatedMatchesTheCpu) {
         std::vector<std::vector<Texture>> frames;
         for (uint64_t f = 0; f < 4; ++f) {
             const double time = 0.5 + double(f) / 30.0;
-            scene->update(time);
-            scene->camera.aspect = float(W) / float(H);
-            scene->camera.beginFrame(f);
-            g->execute(FrameInfo{f, time, scene.get(), &scene->camera});
+            g->execute(cli::sceneFrameAt(scene.get(), f, time, W, H, false));
             std::vector<Texture> out;
             for (const std::string& name : {std::string("ToneMap.dst"), std::string("SVGF.filtered"),
                                             std::string("SVGF.illumination"), std::string("SVGF.moments"),
